@@ -1,0 +1,44 @@
+# Every target creates the virtual environment itself (`.venv`) on first use.
+PYTHON ?= python3.11
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+OUT    ?= reproductions
+
+.PHONY: help install test lint format reproduce bench clean
+
+help:
+	@echo "make test       create .venv if missing, install, run ruff and pytest"
+	@echo "make reproduce  regenerate the paper figures (PNG + JSON + GIF) into $(OUT)/"
+	@echo "make bench      print the physics throughput table"
+	@echo "make format     apply ruff format and autofixes"
+
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+
+$(STAMP): $(BIN)/python pyproject.toml constraints.txt
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e ".[dev]"
+	@touch $(STAMP)
+
+install: $(STAMP)
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+
+format: $(STAMP)
+	$(BIN)/ruff format .
+	$(BIN)/ruff check --fix .
+
+test: lint
+	$(BIN)/python -m pytest $(PYTEST_ARGS)
+
+reproduce: $(STAMP)
+	$(BIN)/swarm-reproduce --out $(OUT)
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/physics.py
+
+clean:
+	rm -rf $(VENV) .pytest_cache .ruff_cache

@@ -1,0 +1,68 @@
+"""Shared checks for parameter dataclasses and state arrays.
+
+Every check raises :class:`ValueError` whose message names the offending field and
+the allowed range, so that a typo in a config or a sign slip never turns into a NaN
+several thousand steps later.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+SUPPORTED_DIMS = (2, 3)
+
+
+def check_real(
+    owner: str,
+    name: str,
+    value: Any,
+    *,
+    low: float,
+    high: float = math.inf,
+    low_inclusive: bool = True,
+    high_inclusive: bool = True,
+) -> float:
+    """Return ``value`` as a float if it is a finite real inside the given interval.
+
+    Raises:
+        ValueError: naming ``owner.name``, the value and the allowed interval.
+    """
+    left = "[" if low_inclusive else "("
+    right = "]" if high_inclusive and math.isfinite(high) else ")"
+    allowed = f"{left}{low:g}, {high:g}{right}" if math.isfinite(high) else f"{left}{low:g}, inf)"
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{owner}.{name} must be a real number in {allowed}, got {value!r}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"{owner}.{name} must be finite and in {allowed}, got {value!r}")
+    too_low = value < low if low_inclusive else value <= low
+    too_high = value > high if high_inclusive else value >= high
+    if too_low or too_high:
+        raise ValueError(f"{owner}.{name} must be in {allowed}, got {value!r}")
+    return value
+
+
+def check_state(x: Any, v: Any | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+    """Validate positions (and velocities) shaped ``(..., N, d)`` with d in {2, 3}.
+
+    Floating arrays keep their dtype (float32 stays float32); anything else becomes
+    float64. Returns the arrays (no copy when already floating).
+    """
+    x = np.asarray(x)
+    if not np.issubdtype(x.dtype, np.floating):
+        x = x.astype(np.float64)
+    if x.ndim < 2 or x.shape[-1] not in SUPPORTED_DIMS:
+        raise ValueError(
+            f"positions must have shape (..., N, d) with d in {SUPPORTED_DIMS}, got {x.shape}"
+        )
+    if v is None:
+        return x, None
+    v = np.asarray(v)
+    if not np.issubdtype(v.dtype, np.floating):
+        v = v.astype(x.dtype)
+    if v.shape != x.shape:
+        raise ValueError(f"velocities shape {v.shape} must equal positions shape {x.shape}")
+    return x, v

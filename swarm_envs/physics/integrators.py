@@ -1,0 +1,148 @@
+"""Time stepping for the second-order force models: ``ṙ = v``, ``m v̇ = F(r, v) + u``.
+
+Two explicit schemes, both one force evaluation per step:
+
+``"semi_implicit_euler"`` (symplectic Euler, the default)
+    ``v_{n+1} = v_n + dt (F(r_n, v_n) + u)/m``, ``r_{n+1} = r_n + dt v_{n+1}``.
+    Symplectic, global error of order 1 in ``dt``; its energy error stays bounded
+    without dissipation instead of drifting.
+
+``"velocity_verlet"``
+    kick–drift–kick: ``v_{n+½} = v_n + ½dt a_n``, ``r_{n+1} = r_n + dt v_{n+½}``,
+    ``a_{n+1} = a(r_{n+1}, 2v_{n+½} − v_n)``, ``v_{n+1} = v_{n+½} + ½dt a_{n+1}``.
+    Symplectic and of order 2 for conservative forces. The velocity-dependent terms
+    (alignment, dissipation) are evaluated at the extrapolated velocity
+    ``2v_{n+½} − v_n = v_{n+1} + O(dt²)``, which keeps the scheme explicit and of
+    order 2; the end-of-step acceleration is reused for the next step's first kick.
+
+Damping is applied per unit of time (``−β v`` inside the force), so halving ``dt``
+converges to the same trajectory. The measured orders are checked in the tests.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from swarm_envs.physics._validation import check_real, check_state
+from swarm_envs.physics.social_potential import SocialPotentialParams, forces
+
+INTEGRATORS = ("semi_implicit_euler", "velocity_verlet")
+
+#: A control is a fixed array broadcastable to ``(..., N, d)`` or a function
+#: ``control(t, x, v) -> array`` evaluated once per step (zero-order hold).
+Control = np.ndarray | Callable[[float, np.ndarray, np.ndarray], np.ndarray] | None
+
+
+def _check_integrator(integrator: str) -> None:
+    if integrator not in INTEGRATORS:
+        raise ValueError(f"integrator must be one of {INTEGRATORS}, got {integrator!r}")
+
+
+def step(
+    x: np.ndarray,
+    v: np.ndarray,
+    params: SocialPotentialParams,
+    *,
+    dt: float,
+    goal: np.ndarray | None = None,
+    control: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One semi-implicit (symplectic) Euler step of the social potential model.
+
+    ``v' = v + dt (F(x, v) + u)/m``, ``x' = x + dt v'``. ``control`` is the force ``u``
+    added to the passive force (``None`` or zeros leave the passive physics untouched).
+    Returns new arrays ``(x', v')``; the inputs are not modified.
+    """
+    accel = forces(x, v, params, goal)
+    if control is not None:
+        accel += control
+    if params.m != 1.0:
+        accel /= params.m
+    v_new = v + dt * accel
+    return x + dt * v_new, v_new
+
+
+def simulate(
+    params: SocialPotentialParams,
+    x0: Any,
+    v0: Any,
+    *,
+    dt: float,
+    steps: int,
+    goal: Any | None = None,
+    control: Control = None,
+    rng: np.random.Generator | None = None,
+    integrator: str = "semi_implicit_euler",
+) -> tuple[np.ndarray, np.ndarray]:
+    """Integrate the model from ``(x0, v0)`` for ``steps`` steps of length ``dt``.
+
+    Args:
+        params: model parameters (its type selects the model).
+        x0, v0: initial positions and velocities ``(..., N, d)``.
+        dt: time step, ``> 0``.
+        steps: number of steps, ``≥ 0``.
+        goal: goal-sink position broadcastable to ``(..., d)`` (used when ``C_g > 0``).
+        control: extra force ``u`` (array, or ``control(t, x, v)``), held over each step.
+        rng: accepted for a uniform signature across models; this model is deterministic.
+        integrator: one of :data:`INTEGRATORS`.
+
+    Returns:
+        ``(xs, vs)``, each shaped ``(steps + 1, ..., N, d)``; index 0 is the start.
+
+    >>> xs, vs = simulate(SocialPotentialParams(), np.zeros((3, 2)), np.zeros((3, 2)),
+    ...                   dt=0.1, steps=4)
+    >>> xs.shape
+    (5, 3, 2)
+    """
+    del rng  # deterministic model
+    if not isinstance(params, SocialPotentialParams):
+        raise ValueError(
+            f"simulate: unsupported parameter type {type(params).__name__}; "
+            "expected SocialPotentialParams"
+        )
+    check_real("simulate", "dt", dt, low=0.0, low_inclusive=False)
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
+        raise ValueError(f"simulate.steps must be an integer >= 0, got {steps!r}")
+    _check_integrator(integrator)
+    x, v = check_state(x0, v0)
+    if goal is not None:
+        goal = np.asarray(goal, dtype=x.dtype)
+        if goal.shape[-1:] != x.shape[-1:]:
+            raise ValueError(f"goal must have shape (..., {x.shape[-1]}), got {goal.shape}")
+    dt = float(dt)
+    xs = np.empty((steps + 1, *x.shape), dtype=x.dtype)
+    vs = np.empty_like(xs)
+    xs[0], vs[0] = x, v
+
+    def control_at(n: int, xn: np.ndarray, vn: np.ndarray) -> np.ndarray | None:
+        if control is None:
+            return None
+        u = control(n * dt, xn, vn) if callable(control) else control
+        return np.asarray(u, dtype=x.dtype)
+
+    if integrator == "semi_implicit_euler":
+        for n in range(steps):
+            x, v = step(x, v, params, dt=dt, goal=goal, control=control_at(n, x, v))
+            xs[n + 1], vs[n + 1] = x, v
+        return xs, vs
+
+    def accel(xn: np.ndarray, vn: np.ndarray, u: np.ndarray | None) -> np.ndarray:
+        a = forces(xn, vn, params, goal)
+        if u is not None:
+            a += u
+        return a / params.m
+
+    u = control_at(0, x, v)
+    a = accel(x, v, u)
+    for n in range(steps):
+        v_half = v + (0.5 * dt) * a
+        x_new = x + dt * v_half
+        u = control_at(n + 1, x_new, 2.0 * v_half - v) if callable(control) else u
+        a = accel(x_new, 2.0 * v_half - v, u)
+        v = v_half + (0.5 * dt) * a
+        x = x_new
+        xs[n + 1], vs[n + 1] = x, v
+    return xs, vs
