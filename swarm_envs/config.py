@@ -1,0 +1,275 @@
+"""Strict configuration: YAML → frozen dataclasses.
+
+Unknown keys, missing sections of the wrong type, and out-of-range values raise
+:class:`ValueError` naming the key (with its dotted path) and what is allowed. VMAS
+only warns on unknown keys, so typos there go unnoticed; here they stop the run.
+
+>>> cfg = config_from_mapping(SwarmConfig, {"n_agents": 31, "physics": {"C_o": 0.7}})
+>>> cfg.n_agents, cfg.physics.C_o
+(31, 0.7)
+>>> config_from_mapping(SwarmConfig, {"n_agent": 31})
+Traceback (most recent call last):
+...
+ValueError: unknown config key 'n_agent'; allowed keys: ...
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any, TypeVar
+
+import numpy as np
+
+from swarm_envs.physics import INTEGRATORS, SocialPotentialParams
+from swarm_envs.physics._validation import SUPPORTED_DIMS, check_real
+
+T = TypeVar("T")
+
+#: Where the shipped YAML files live (``configs/`` at the repository root).
+CONFIG_ROOT = Path(__file__).resolve().parent.parent / "configs"
+
+
+def _check_int(owner: str, name: str, value: Any, *, low: int, high: int | None = None) -> int:
+    allowed = f"[{low}, {high}]" if high is not None else f">= {low}"
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{owner}.{name} must be an integer {allowed}, got {value!r}")
+    if value < low or (high is not None and value > high):
+        raise ValueError(f"{owner}.{name} must be an integer {allowed}, got {value!r}")
+    return int(value)
+
+
+@dataclass(frozen=True)
+class RewardWeights:
+    """Weights of the cooperative navigation reward, one per documented term.
+
+    ``r_t = progress · (d_{t−1} − d_t)/d_0 + arrival · (newly arrived fraction)
+    + success (once, on success) − collision · (colliding pairs)/N
+    − effort · mean_i |a_i|² − time`` (see the SwarmNav docstring for the exact terms).
+    """
+
+    progress: float = 10.0
+    """Scale of the reduction of the mean agent-to-goal distance, normalised by the start."""
+    arrival: float = 1.0
+    """Bonus for the fraction of agents newly inside the goal radius."""
+    success: float = 5.0
+    """One-off bonus when the episode succeeds."""
+    collision: float = 0.5
+    """Penalty per colliding pair, divided by N."""
+    effort: float = 0.01
+    """Penalty on the mean squared action (action units, in [0, d])."""
+    time: float = 0.01
+    """Penalty per step, so that arriving earlier pays."""
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = check_real(type(self).__name__, f.name, getattr(self, f.name), low=0.0)
+            object.__setattr__(self, f.name, value)
+
+
+@dataclass(frozen=True)
+class SwarmConfig:
+    """A swarm scenario: the physics, the start, and the goal-sink navigation task.
+
+    The reproductions read the physics and start fields; the SwarmNav environments read
+    all of them. Field names are also the environments' keyword arguments.
+    """
+
+    n_agents: int = 10
+    """Number of agents N, ``≥ 1``."""
+    dim: int = 2
+    """Spatial dimension d, 2 or 3."""
+    dt: float = 0.1
+    """Integration time step (the paper gives none; chosen and documented)."""
+    integrator: str = "semi_implicit_euler"
+    """One of ``swarm_envs.physics.INTEGRATORS``."""
+    physics: SocialPotentialParams = field(default_factory=SocialPotentialParams.navigation)
+    """Social potential parameters; the goal sink ``C_g, l_g`` defines the task."""
+    init_radius: float = 1.5
+    """Agents start uniformly in a disc (ball) of this radius around the origin."""
+    init_speed: float = 0.1
+    """Initial velocities uniform in a disc (ball) of this speed."""
+    goal_distance_min: float = 8.0
+    """Goal placed at a random bearing, at a distance drawn uniformly from [min, max]."""
+    goal_distance_max: float = 12.0
+    """Upper end of the goal distance range, ``≥ goal_distance_min``."""
+    goal_radius: float = 1.5
+    """An agent within this distance of the goal has arrived."""
+    success_fraction: float = 1.0
+    """Fraction of agents that must have arrived (at once) for success, in (0, 1]."""
+    max_steps: int = 400
+    """Episode length before truncation."""
+    u_max: float = 3.0
+    """Action bound: the control force is ``u_i = u_max · a_i`` with ``a_i ∈ [−1, 1]^d``.
+
+    The default 3 equals the largest goal-sink force ``C_g / l_g`` of the navigation set,
+    so the analytic controller is never clipped."""
+    goal_in_physics: bool = False
+    """If true the sink also acts passively (paper eq. 21) and actions are residuals."""
+    n_neighbors: int = 6
+    """k nearest neighbours in each agent's observation (padded and masked if N − 1 < k)."""
+    collision_radius: float = 0.1
+    """Two agents closer than this collide (counted, penalised)."""
+    obs_scale: float = 10.0
+    """Length scale for normalising observed offsets (offsets are divided by it)."""
+    reward: RewardWeights = field(default_factory=RewardWeights)
+    """Reward weights."""
+
+    def __post_init__(self) -> None:
+        owner = type(self).__name__
+        _check_int(owner, "n_agents", self.n_agents, low=1)
+        if self.dim not in SUPPORTED_DIMS or isinstance(self.dim, bool):
+            raise ValueError(f"{owner}.dim must be one of {SUPPORTED_DIMS}, got {self.dim!r}")
+        if self.integrator not in INTEGRATORS:
+            raise ValueError(
+                f"{owner}.integrator must be one of {INTEGRATORS}, got {self.integrator!r}"
+            )
+        if not isinstance(self.physics, SocialPotentialParams):
+            raise ValueError(f"{owner}.physics must be SocialPotentialParams")
+        if not isinstance(self.reward, RewardWeights):
+            raise ValueError(f"{owner}.reward must be RewardWeights")
+        if not isinstance(self.goal_in_physics, bool):
+            raise ValueError(f"{owner}.goal_in_physics must be true or false")
+        reals = {
+            "dt": dict(low=0.0, low_inclusive=False),
+            "init_radius": dict(low=0.0),
+            "init_speed": dict(low=0.0),
+            "goal_distance_min": dict(low=0.0),
+            "goal_distance_max": dict(low=0.0),
+            "goal_radius": dict(low=0.0, low_inclusive=False),
+            "success_fraction": dict(low=0.0, high=1.0, low_inclusive=False),
+            "u_max": dict(low=0.0, low_inclusive=False),
+            "collision_radius": dict(low=0.0),
+            "obs_scale": dict(low=0.0, low_inclusive=False),
+        }
+        for name, bounds in reals.items():
+            object.__setattr__(self, name, check_real(owner, name, getattr(self, name), **bounds))
+        if self.goal_distance_max < self.goal_distance_min:
+            raise ValueError(
+                f"{owner}.goal_distance_max ({self.goal_distance_max}) must be >= "
+                f"goal_distance_min ({self.goal_distance_min})"
+            )
+        _check_int(owner, "max_steps", self.max_steps, low=1)
+        _check_int(owner, "n_neighbors", self.n_neighbors, low=0)
+
+    @property
+    def k_observed(self) -> int:
+        """Neighbour slots in the observation: ``n_neighbors`` (padded when N − 1 < k)."""
+        return self.n_neighbors
+
+
+def _field_types(cls: type) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
+
+
+def _is_dataclass_type(tp: Any) -> bool:
+    return isinstance(tp, type) and dataclasses.is_dataclass(tp)
+
+
+def config_from_mapping(cls: type[T], data: Mapping[str, Any] | T, *, path: str = "") -> T:
+    """Build dataclass ``cls`` from a mapping, strictly.
+
+    Nested dataclass fields accept a mapping (built recursively) or an instance. Unknown
+    keys raise ``ValueError`` naming the dotted key and the allowed keys; a value the
+    dataclass rejects is re-raised with its dotted key in front.
+    """
+    if isinstance(data, cls):
+        return data
+    if not isinstance(data, Mapping):
+        where = path or cls.__name__
+        raise ValueError(f"config section '{where}' must be a mapping, got {type(data).__name__}")
+    names = {f.name for f in fields(cls)}  # type: ignore[arg-type]
+    hints = _field_types(cls)
+    kwargs: dict[str, Any] = {}
+    for key, value in data.items():
+        dotted = f"{path}.{key}" if path else str(key)
+        if key not in names:
+            raise ValueError(
+                f"unknown config key '{dotted}'; allowed keys: {', '.join(sorted(names))}"
+            )
+        tp = hints[key]
+        if _is_dataclass_type(tp) and not isinstance(value, tp):
+            value = config_from_mapping(tp, value, path=dotted)
+        kwargs[key] = value
+    try:
+        return cls(**kwargs)
+    except ValueError as err:
+        raise ValueError(f"{path + ': ' if path else ''}{err}") from None
+    except TypeError as err:  # e.g. a list where a number belongs, caught by the dataclass
+        raise ValueError(f"{path + ': ' if path else ''}{err}") from None
+
+
+def load_yaml(path: str | Path) -> dict[str, Any]:
+    """Read a YAML file that must hold a mapping at top level."""
+    import yaml
+
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"config file not found: {p}")
+    with p.open() as fh:
+        data = yaml.safe_load(fh)
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise ValueError(f"config file {p} must hold a mapping, got {type(data).__name__}")
+    return data
+
+
+def resolve_config_path(path: str | Path) -> Path:
+    """Find a config by path, or by a path relative to the shipped ``configs/``.
+
+    ``"configs/env/paper_navigation.yaml"``, ``"env/paper_navigation.yaml"`` and
+    ``"paper_navigation"`` (looked up in ``configs/env``) all resolve to the same file.
+    """
+    p = Path(path)
+    candidates = [p, CONFIG_ROOT / p, CONFIG_ROOT / "env" / p, CONFIG_ROOT / "env" / f"{p}.yaml"]
+    if p.parts and p.parts[0] == "configs":
+        candidates.append(CONFIG_ROOT.joinpath(*p.parts[1:]))
+    for c in candidates:
+        if c.is_file():
+            return c
+    raise ValueError(f"config file not found: {path} (looked in . and {CONFIG_ROOT})")
+
+
+def load_swarm_config(
+    path: str | Path | None = None, overrides: Mapping[str, Any] | None = None
+) -> SwarmConfig:
+    """Load a :class:`SwarmConfig` from YAML, then apply keyword ``overrides`` strictly.
+
+    Overrides replace top-level keys; a nested section given as a mapping is merged
+    into the file's section (``physics={"C_o": 0.7}`` changes only ``C_o``).
+    """
+    data: dict[str, Any] = load_yaml(resolve_config_path(path)) if path is not None else {}
+    for key, value in (overrides or {}).items():
+        if isinstance(value, Mapping) and isinstance(data.get(key), Mapping):
+            data[key] = {**data[key], **value}
+        else:
+            data[key] = value
+    return config_from_mapping(SwarmConfig, data)
+
+
+def as_dict(obj: Any) -> Any:
+    """A dataclass config as plain, YAML/JSON-ready Python data (non-finite as strings)."""
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return {f.name: as_dict(getattr(obj, f.name)) for f in fields(obj)}
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return str(obj)
+    if isinstance(obj, (list, tuple)):
+        return [as_dict(o) for o in obj]
+    return obj
+
+
+__all__ = [
+    "CONFIG_ROOT",
+    "RewardWeights",
+    "SwarmConfig",
+    "as_dict",
+    "config_from_mapping",
+    "load_swarm_config",
+    "load_yaml",
+    "resolve_config_path",
+]
