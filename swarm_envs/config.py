@@ -62,7 +62,7 @@ class RewardWeights:
     """Penalty per colliding pair, divided by N."""
     effort: float = 0.01
     """Penalty on the mean squared action (action units, in [0, d])."""
-    time: float = 0.01
+    time: float = 0.05
     """Penalty per step, so that arriving earlier pays."""
 
     def __post_init__(self) -> None:
@@ -114,8 +114,12 @@ class SwarmConfig:
     """k nearest neighbours in each agent's observation (padded and masked if N − 1 < k)."""
     collision_radius: float = 0.1
     """Two agents closer than this collide (counted, penalised)."""
-    obs_scale: float = 10.0
-    """Length scale for normalising observed offsets (offsets are divided by it)."""
+    obs_goal_scale: float = 10.0
+    """The observed goal offset is divided by this length."""
+    obs_neighbor_scale: float = 1.0
+    """Observed neighbour offsets are divided by this length."""
+    obs_velocity_scale: float = 2.0
+    """Observed velocities (own and relative) are divided by this speed."""
     reward: RewardWeights = field(default_factory=RewardWeights)
     """Reward weights."""
 
@@ -144,7 +148,9 @@ class SwarmConfig:
             "success_fraction": dict(low=0.0, high=1.0, low_inclusive=False),
             "u_max": dict(low=0.0, low_inclusive=False),
             "collision_radius": dict(low=0.0),
-            "obs_scale": dict(low=0.0, low_inclusive=False),
+            "obs_goal_scale": dict(low=0.0, low_inclusive=False),
+            "obs_neighbor_scale": dict(low=0.0, low_inclusive=False),
+            "obs_velocity_scale": dict(low=0.0, low_inclusive=False),
         }
         for name, bounds in reals.items():
             object.__setattr__(self, name, check_real(owner, name, getattr(self, name), **bounds))
@@ -155,11 +161,6 @@ class SwarmConfig:
             )
         _check_int(owner, "max_steps", self.max_steps, low=1)
         _check_int(owner, "n_neighbors", self.n_neighbors, low=0)
-
-    @property
-    def k_observed(self) -> int:
-        """Neighbour slots in the observation: ``n_neighbors`` (padded when N − 1 < k)."""
-        return self.n_neighbors
 
 
 def _field_types(cls: type) -> dict[str, Any]:

@@ -6,7 +6,7 @@ imported here.
 """
 
 from swarm_envs.physics.initial import random_swarm, uniform_ball
-from swarm_envs.physics.integrators import INTEGRATORS, simulate, step
+from swarm_envs.physics.integrators import INTEGRATORS, simulate, step, verlet_step
 from swarm_envs.physics.social_potential import (
     RHO_FLOOR,
     SocialPotentialParams,
@@ -15,6 +15,7 @@ from swarm_envs.physics.social_potential import (
     goal_force,
     goal_potential,
     kinetic_energy,
+    pair_geometry,
     pair_potential,
     potential_energy,
 )
@@ -28,10 +29,12 @@ __all__ = [
     "goal_force",
     "goal_potential",
     "kinetic_energy",
+    "pair_geometry",
     "pair_potential",
     "potential_energy",
     "random_swarm",
     "simulate",
     "step",
     "uniform_ball",
+    "verlet_step",
 ]

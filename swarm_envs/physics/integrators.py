@@ -13,7 +13,8 @@ Two explicit schemes, both one force evaluation per step:
     Symplectic and of order 2 for conservative forces. The velocity-dependent terms
     (alignment, dissipation) are evaluated at the extrapolated velocity
     ``2v_{n+½} − v_n = v_{n+1} + O(dt²)``, which keeps the scheme explicit and of
-    order 2; the end-of-step acceleration is reused for the next step's first kick.
+    order 2; the end-of-step passive force is reused for the next step's first kick.
+    A control ``u`` is held constant over each step (zero-order hold).
 
 Damping is applied per unit of time (``−β v`` inside the force), so halving ``dt``
 converges to the same trajectory. The measured orders are checked in the tests.
@@ -27,7 +28,9 @@ from typing import Any
 import numpy as np
 
 from swarm_envs.physics._validation import check_real, check_state
-from swarm_envs.physics.social_potential import SocialPotentialParams, forces
+from swarm_envs.physics.social_potential import SocialPotentialParams, forces, pair_geometry
+
+Geometry = tuple[list[np.ndarray], np.ndarray]
 
 INTEGRATORS = ("semi_implicit_euler", "velocity_verlet")
 
@@ -49,20 +52,49 @@ def step(
     dt: float,
     goal: np.ndarray | None = None,
     control: np.ndarray | None = None,
+    geometry: Geometry | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """One semi-implicit (symplectic) Euler step of the social potential model.
 
     ``v' = v + dt (F(x, v) + u)/m``, ``x' = x + dt v'``. ``control`` is the force ``u``
     added to the passive force (``None`` or zeros leave the passive physics untouched).
-    Returns new arrays ``(x', v')``; the inputs are not modified.
+    ``geometry`` is ``pair_geometry(x)`` when the caller has it. Returns new arrays
+    ``(x', v')``; the inputs are not modified.
     """
-    accel = forces(x, v, params, goal)
+    accel = forces(x, v, params, goal, geometry=geometry)
     if control is not None:
         accel += control
     if params.m != 1.0:
         accel /= params.m
     v_new = v + dt * accel
     return x + dt * v_new, v_new
+
+
+def verlet_step(
+    x: np.ndarray,
+    v: np.ndarray,
+    f: np.ndarray,
+    params: SocialPotentialParams,
+    *,
+    dt: float,
+    goal: np.ndarray | None = None,
+    control: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, Geometry]:
+    """One velocity-Verlet step; ``f`` is the passive force carried from the last step.
+
+    The control ``u`` is held over the step (both half-kicks). Returns
+    ``(x', v', f', geometry')`` where ``f'`` is the passive force at ``x'`` and the
+    extrapolated velocity ``2v_{n+½} − v_n`` (carry it into the next call), and
+    ``geometry' = pair_geometry(x')``. Start with ``f = forces(x0, v0, params, goal)``.
+    """
+    a = f if control is None else f + control
+    v_half = v + (0.5 * dt / params.m) * a
+    x_new = x + dt * v_half
+    geometry = pair_geometry(x_new)
+    f_new = forces(x_new, 2.0 * v_half - v, params, goal, geometry=geometry)
+    a_new = f_new if control is None else f_new + control
+    v_new = v_half + (0.5 * dt / params.m) * a_new
+    return x_new, v_new, f_new, geometry
 
 
 def simulate(
@@ -129,20 +161,8 @@ def simulate(
             xs[n + 1], vs[n + 1] = x, v
         return xs, vs
 
-    def accel(xn: np.ndarray, vn: np.ndarray, u: np.ndarray | None) -> np.ndarray:
-        a = forces(xn, vn, params, goal)
-        if u is not None:
-            a += u
-        return a / params.m
-
-    u = control_at(0, x, v)
-    a = accel(x, v, u)
+    f = forces(x, v, params, goal)
     for n in range(steps):
-        v_half = v + (0.5 * dt) * a
-        x_new = x + dt * v_half
-        u = control_at(n + 1, x_new, 2.0 * v_half - v) if callable(control) else u
-        a = accel(x_new, 2.0 * v_half - v, u)
-        v = v_half + (0.5 * dt) * a
-        x = x_new
+        x, v, f, _ = verlet_step(x, v, f, params, dt=dt, goal=goal, control=control_at(n, x, v))
         xs[n + 1], vs[n + 1] = x, v
     return xs, vs

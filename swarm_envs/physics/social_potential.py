@@ -138,11 +138,28 @@ def goal_force(x: np.ndarray, params: SocialPotentialParams, goal: np.ndarray) -
     return offset * scale[..., None]
 
 
+def pair_geometry(x: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+    """Pairwise offsets and distances: ``([r_ij[..., k] for k < d], ρ_ij)``.
+
+    ``r_ij = r_j − r_i`` per component, each ``(..., N, N)``; ``ρ`` is ``(..., N, N)``
+    with zeros on the diagonal. Components are kept as separate contiguous arrays, which
+    is faster than one ``(..., N, N, d)`` array for the reductions in :func:`forces`.
+    """
+    d = x.shape[-1]
+    dx = [x[..., None, :, k] - x[..., :, None, k] for k in range(d)]
+    rho2 = dx[0] * dx[0]
+    for k in range(1, d):
+        rho2 += dx[k] * dx[k]
+    return dx, np.sqrt(rho2, out=rho2)
+
+
 def forces(
     x: np.ndarray,
     v: np.ndarray,
     params: SocialPotentialParams,
     goal: np.ndarray | None = None,
+    *,
+    geometry: tuple[list[np.ndarray], np.ndarray] | None = None,
 ) -> np.ndarray:
     """Total passive force on every agent (eq. 14, plus eq. 20's goal term).
 
@@ -159,6 +176,7 @@ def forces(
         v: velocities, same shape.
         params: model parameters.
         goal: goal position broadcastable to ``(..., d)``, or ``None`` for no sink.
+        geometry: ``pair_geometry(x)`` if the caller has it already (saves recomputing).
 
     Returns:
         Forces shaped like ``x`` (not divided by the mass).
@@ -171,13 +189,8 @@ def forces(
     x, v = check_state(x, v)
     p = params
     d = x.shape[-1]
-    # dx[k][..., i, j] = x_j[k] − x_i[k] = r_ij[k]
-    dx = [x[..., None, :, k] - x[..., :, None, k] for k in range(d)]
-    rho2 = dx[0] * dx[0]
-    for k in range(1, d):
-        rho2 += dx[k] * dx[k]
-    rho = np.sqrt(rho2)
-    inv_rho = np.maximum(rho, RHO_FLOOR, out=rho2)
+    dx, rho = pair_geometry(x) if geometry is None else geometry
+    inv_rho = np.maximum(rho, RHO_FLOOR)
     np.reciprocal(inv_rho, out=inv_rho)
 
     # Scalar pair magnitude along u_ij (eq. 10).

@@ -1,0 +1,260 @@
+"""The batched SwarmNav core: B swarms of N agents stepped in one array call.
+
+Every API of the package is a thin adapter over :class:`SwarmNavCore`: the PettingZoo
+``ParallelEnv`` (B = 1, a dict per agent), the Gymnasium env (B = 1, one flat vector)
+and the SB3 ``VecEnv`` (B swarms, one slot per agent). The core knows nothing of
+those APIs; it holds state arrays and returns arrays.
+
+One step, for all swarms at once:
+
+1. the action ``a ∈ [−1, 1]^{B×N×d}`` becomes the control force ``u = u_max · a``;
+2. the physics advances ``(x, v)`` by ``dt`` with the passive social-potential force
+   plus ``u`` (``swarm_envs.physics.step`` or ``verlet_step``, unchanged: zero action is
+   exactly the passive model; the goal sink acts passively only if ``goal_in_physics``);
+3. pairwise distances of the new positions are computed once and shared by the
+   observations (k nearest neighbours), the collision count, the nearest-neighbour
+   statistic and the next step's forces;
+4. reward, termination and statistics are computed per swarm.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from swarm_envs import metrics
+from swarm_envs.config import SwarmConfig
+from swarm_envs.physics import forces, pair_geometry, step, uniform_ball, verlet_step
+
+#: Every observation component is clipped into ``[−OBS_BOUND, OBS_BOUND]``.
+OBS_BOUND = 10.0
+
+#: Statistics reported per swarm in ``info`` (and by :meth:`SwarmNavCore.stats`).
+STAT_KEYS = (
+    "polarization",
+    "angular_momentum",
+    "expanse",
+    "nearest_neighbor_distance",
+    "energy",
+    "fraction_arrived",
+    "collisions",
+    "centroid_distance",
+    "mean_goal_distance",
+    "success",
+)
+
+
+def observation_size(cfg: SwarmConfig) -> int:
+    """``2d + k (2d + 1)``: goal offset, own velocity, k × (offset, velocity, mask)."""
+    d = cfg.dim
+    return 2 * d + cfg.n_neighbors * (2 * d + 1)
+
+
+def check_actions(actions: Any, shape: tuple[int, ...]) -> np.ndarray:
+    """Actions as a float array of exactly ``shape``; NaN/inf or wrong shape → ValueError.
+
+    Finite values outside [−1, 1] are clipped (the Box convention of SB3 and RLlib).
+    """
+    a = np.asarray(actions)
+    if a.dtype == object or not (
+        np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)
+    ):
+        raise ValueError(f"actions must be a numeric array of shape {shape}, got dtype {a.dtype}")
+    if a.shape != shape:
+        if a.size == int(np.prod(shape)) and a.ndim != len(shape):
+            a = a.reshape(shape)
+        else:
+            raise ValueError(f"actions must have shape {shape}, got {a.shape}")
+    if not np.isfinite(a).all():
+        raise ValueError("actions must be finite (got NaN or inf); allowed range [-1, 1]")
+    return np.clip(a, -1.0, 1.0)
+
+
+class SwarmNavCore:
+    """State and dynamics of ``batch`` independent SwarmNav swarms.
+
+    Arrays: positions ``x`` and velocities ``v`` ``(B, N, d)``, goals ``(B, d)``,
+    step counters ``(B,)``. All randomness comes from the generator passed to
+    :meth:`reset`.
+    """
+
+    def __init__(self, cfg: SwarmConfig, batch: int = 1, dtype: type = np.float64) -> None:
+        self.cfg = cfg
+        self.batch = int(batch)
+        self.dtype = np.dtype(dtype)
+        B, N, d = self.batch, cfg.n_agents, cfg.dim
+        self.obs_dim = observation_size(cfg)
+        self.x = np.zeros((B, N, d), self.dtype)
+        self.v = np.zeros((B, N, d), self.dtype)
+        self.goal = np.zeros((B, d), self.dtype)
+        self.t = np.zeros(B, np.int64)
+        self.start_distance = np.ones(B, self.dtype)
+        self.prev_distance = np.ones(B, self.dtype)
+        self.prev_arrived = np.zeros(B, self.dtype)
+        self._f_passive: np.ndarray | None = None  # velocity Verlet carries the force
+        self._geometry: tuple[list[np.ndarray], np.ndarray] | None = None
+        self._physics_goal = cfg.physics.C_g > 0 and cfg.goal_in_physics
+
+    # ------------------------------------------------------------------ reset
+    def reset(self, rng: np.random.Generator, which: np.ndarray | None = None) -> None:
+        """Draw new starts for the swarms in ``which`` (bool mask ``(B,)``; all if None).
+
+        Agents uniform in a disc (ball) of ``init_radius`` around the origin, velocities
+        uniform in a disc of ``init_speed``; the goal at a uniform random bearing and a
+        distance uniform in ``[goal_distance_min, goal_distance_max]``.
+        """
+        cfg = self.cfg
+        idx = np.arange(self.batch) if which is None else np.flatnonzero(which)
+        if idx.size == 0:
+            return
+        n, N, d = idx.size, cfg.n_agents, cfg.dim
+        self.x[idx] = uniform_ball(rng, (n, N, d), cfg.init_radius)
+        self.v[idx] = uniform_ball(rng, (n, N, d), cfg.init_speed)
+        bearing = rng.standard_normal((n, d))
+        bearing /= np.maximum(np.linalg.norm(bearing, axis=-1, keepdims=True), 1e-12)
+        dist = rng.uniform(cfg.goal_distance_min, cfg.goal_distance_max, size=(n, 1))
+        self.goal[idx] = bearing * dist
+        self.t[idx] = 0
+        self._geometry = pair_geometry(self.x)
+        mean_dist = self._goal_distances().mean(axis=-1)
+        self.start_distance[idx] = np.maximum(mean_dist[idx], 1e-6)
+        self.prev_distance[idx] = mean_dist[idx]
+        self.prev_arrived[idx] = self._arrived_fraction()[idx]
+        if cfg.integrator == "velocity_verlet":
+            f = forces(self.x, self.v, cfg.physics, self._goal_for_physics(), geometry=None)
+            if self._f_passive is None:
+                self._f_passive = f
+            else:
+                self._f_passive[idx] = f[idx]
+
+    # ------------------------------------------------------------------ step
+    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+        """Advance every swarm by one step.
+
+        Args:
+            actions: ``(B, N, d)`` in [−1, 1] (validated by :func:`check_actions`).
+
+        Returns:
+            ``(reward (B,), terminated (B,), truncated (B,), stats)`` where ``stats``
+            maps each of :data:`STAT_KEYS` to a ``(B,)`` array.
+        """
+        cfg = self.cfg
+        a = check_actions(actions, self.x.shape)
+        control = cfg.u_max * a if a.any() else None
+        goal = self._goal_for_physics()
+        if cfg.integrator == "velocity_verlet":
+            assert self._f_passive is not None
+            self.x, self.v, self._f_passive, self._geometry = verlet_step(
+                self.x, self.v, self._f_passive, cfg.physics, dt=cfg.dt, goal=goal, control=control
+            )
+        else:
+            self.x, self.v = step(
+                self.x,
+                self.v,
+                cfg.physics,
+                dt=cfg.dt,
+                goal=goal,
+                control=control,
+                geometry=self._geometry,
+            )
+            self._geometry = pair_geometry(self.x)
+        self.t += 1
+
+        stats = self.stats()
+        distance = stats["mean_goal_distance"]
+        arrived = stats["fraction_arrived"]
+        success = stats["success"].astype(bool)
+        w = cfg.reward
+        reward = (
+            w.progress * (self.prev_distance - distance) / self.start_distance
+            + w.arrival * (arrived - self.prev_arrived)
+            + w.success * success
+            - w.collision * stats["collisions"] / cfg.n_agents
+            - w.effort * np.einsum("bik,bik->b", a, a) / cfg.n_agents
+            - w.time
+        )
+        self.prev_distance = distance
+        self.prev_arrived = arrived
+        truncated = (self.t >= cfg.max_steps) & ~success
+        return reward, success, truncated, stats
+
+    # ------------------------------------------------------------------ views
+    def _goal_for_physics(self) -> np.ndarray | None:
+        return self.goal if self._physics_goal else None
+
+    def _goal_distances(self) -> np.ndarray:
+        return np.linalg.norm(self.goal[:, None, :] - self.x, axis=-1)
+
+    def _arrived_fraction(self) -> np.ndarray:
+        return (self._goal_distances() <= self.cfg.goal_radius).mean(axis=-1)
+
+    def _distances(self) -> np.ndarray:
+        """Pairwise distances ``(B, N, N)`` with ``inf`` on the diagonal (a fresh array)."""
+        assert self._geometry is not None
+        rho = self._geometry[1].copy()
+        diag = np.arange(self.cfg.n_agents)
+        rho[:, diag, diag] = np.inf
+        return rho
+
+    def stats(self) -> dict[str, np.ndarray]:
+        """Group statistics and task measures per swarm, each ``(B,)``."""
+        cfg = self.cfg
+        rho = self._distances()
+        goal_dist = self._goal_distances()
+        arrived = (goal_dist <= cfg.goal_radius).mean(axis=-1)
+        n = cfg.n_agents
+        nnd = rho.min(axis=-1).mean(axis=-1) if n > 1 else np.zeros(self.batch)
+        collisions = np.count_nonzero(rho < cfg.collision_radius, axis=(-2, -1)) // 2
+        centroid = self.x.mean(axis=-2)
+        return {
+            "polarization": metrics.polarization(self.v),
+            "angular_momentum": metrics.angular_momentum(self.x, self.v),
+            "expanse": metrics.expanse(self.x),
+            "nearest_neighbor_distance": nnd,
+            "energy": metrics.total_energy(self.x, self.v, cfg.physics, self.goal),
+            "fraction_arrived": arrived,
+            "collisions": collisions.astype(np.float64),
+            "centroid_distance": np.linalg.norm(centroid - self.goal, axis=-1),
+            "mean_goal_distance": goal_dist.mean(axis=-1),
+            "success": (arrived >= cfg.success_fraction - 1e-9).astype(np.float64),
+        }
+
+    def observe(self) -> np.ndarray:
+        """Local observations ``(B, N, obs_dim)``, float32, inside ``[−OBS_BOUND, OBS_BOUND]``.
+
+        Per agent i: ``(r_g − r_i)/obs_goal_scale`` (d), ``v_i/obs_velocity_scale`` (d),
+        then for each of the k nearest neighbours j, nearest first:
+        ``(r_j − r_i)/obs_neighbor_scale`` (d), ``(v_j − v_i)/obs_velocity_scale`` (d)
+        and a mask (1 = real neighbour, 0 = padding when N − 1 < k; padded slots are 0).
+        """
+        cfg = self.cfg
+        B, N, d = self.x.shape
+        k = cfg.n_neighbors
+        parts = [
+            (self.goal[:, None, :] - self.x) / cfg.obs_goal_scale,
+            self.v / cfg.obs_velocity_scale,
+        ]
+        if k > 0:
+            k_real = min(k, N - 1)
+            nbr_pos = np.zeros((B, N, k, d), self.dtype)
+            nbr_vel = np.zeros((B, N, k, d), self.dtype)
+            mask = np.zeros((B, N, k, 1), self.dtype)
+            if k_real > 0:
+                rho = self._distances()
+                if k_real < N - 1:
+                    cand = np.argpartition(rho, k_real - 1, axis=-1)[..., :k_real]
+                    order = np.argsort(np.take_along_axis(rho, cand, axis=-1), axis=-1)
+                    nbr = np.take_along_axis(cand, order, axis=-1)
+                else:
+                    nbr = np.argsort(rho, axis=-1)[..., :k_real]
+                flat = (nbr + (np.arange(B) * N)[:, None, None]).reshape(-1)
+                xj = self.x.reshape(B * N, d)[flat].reshape(B, N, k_real, d)
+                vj = self.v.reshape(B * N, d)[flat].reshape(B, N, k_real, d)
+                nbr_pos[:, :, :k_real] = (xj - self.x[:, :, None, :]) / cfg.obs_neighbor_scale
+                nbr_vel[:, :, :k_real] = (vj - self.v[:, :, None, :]) / cfg.obs_velocity_scale
+                mask[:, :, :k_real] = 1.0
+            parts.append(np.concatenate([nbr_pos, nbr_vel, mask], axis=-1).reshape(B, N, -1))
+        obs = np.concatenate(parts, axis=-1)
+        np.clip(obs, -OBS_BOUND, OBS_BOUND, out=obs)
+        return obs.astype(np.float32, copy=False)

@@ -1,0 +1,310 @@
+"""SwarmNav: goal-sink navigation of a social-potential swarm (PettingZoo and Gymnasium).
+
+Both classes are thin adapters over :class:`swarm_envs.envs.core.SwarmNavCore` with one
+swarm (B = 1). The shared docstring below follows Gymnasium's sections.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from pettingzoo import ParallelEnv
+
+from swarm_envs.config import SwarmConfig, load_swarm_config
+from swarm_envs.envs.core import OBS_BOUND, SwarmNavCore, check_actions
+
+RENDER_MODES = ("rgb_array", "human")
+
+SWARM_NAV_DOC = """
+    ## Description
+
+    A swarm of ``N`` agents obeys the social potential model of Mabrouk & McInnes
+    (Morse cohesion eqs. 9–10, alignment eq. 11, dissipation eq. 12; MODELS.md §1) and
+    must gather inside a goal radius around a goal sink ``G``. The passive physics is
+    always on; each agent's action is a bounded force added to its passive force, so a
+    zero action leaves the paper's model untouched. The sink ``C_g, l_g`` (eq. 19)
+    defines the task and what the analytic baseline controller applies; with
+    ``goal_in_physics=True`` it also acts passively (the paper's eq. 21) and actions
+    are residuals on top of it.
+
+    ## Action Space
+
+    Per agent ``Box(-1, 1, (d,), float32)``; the control force is ``u_i = u_max · a_i``.
+    Finite actions outside the box are clipped; NaN/inf or a wrong shape raise
+    ``ValueError``. The Gymnasium env takes all agents' actions as one flat
+    ``Box(-1, 1, (N·d,))`` (agent-major).
+
+    ## Observation Space
+
+    Per agent ``Box(-10, 10, (2d + k(2d + 1),), float32)``; every entry is clipped to
+    [−10, 10]. The Gymnasium env concatenates all agents' observations (agent-major).
+
+    | index (d = 2, k neighbours)   | observation                                        |
+    |-------------------------------|----------------------------------------------------|
+    | 0 – 1                         | goal offset ``(r_g − r_i) / obs_goal_scale``        |
+    | 2 – 3                         | own velocity ``v_i / obs_velocity_scale``           |
+    | 4 + 5m – 5 + 5m               | m-th nearest neighbour ``(r_j − r_i) / obs_neighbor_scale`` |
+    | 6 + 5m – 7 + 5m               | its relative velocity ``(v_j − v_i) / obs_velocity_scale``  |
+    | 8 + 5m                        | mask: 1 for a real neighbour, 0 for padding (N − 1 < k) |
+
+    ## Rewards
+
+    Cooperative: every agent receives the same reward each step,
+
+    ``r = w_progress (D_{t−1} − D_t)/D_0 + w_arrival (A_t − A_{t−1}) + w_success 1[success]
+    − w_collision C_t/N − w_effort mean_i |a_i|² − w_time``
+
+    with ``D`` the mean agent-to-goal distance (``D_0`` at the start), ``A`` the fraction
+    of agents within ``goal_radius``, ``C_t`` the number of pairs closer than
+    ``collision_radius``. Weights: ``reward`` in the config (defaults 10, 1, 5, 0.5,
+    0.01, 0.05).
+
+    ## Starting State
+
+    Positions uniform in a disc (ball) of radius ``init_radius`` about the origin,
+    velocities uniform in a disc of radius ``init_speed``; the goal at a uniform random
+    bearing, at a distance uniform in ``[goal_distance_min, goal_distance_max]``.
+
+    ## Episode End
+
+    Terminated (success) when at least ``success_fraction`` of the agents are within
+    ``goal_radius`` of the goal at once; truncated after ``max_steps`` steps
+    (``max_cycles`` in PettingZoo; ``gym.make`` also adds ``TimeLimit`` at the registered
+    ``max_episode_steps`` = 400: pass ``max_episode_steps`` to ``gym.make`` with a
+    different ``max_steps``).
+
+    ## Arguments
+
+    Every field of :class:`swarm_envs.config.SwarmConfig` is a keyword argument
+    (``n_agents``, ``dim``, ``dt``, ``physics={...}``, ``reward={...}``, ...), and
+    ``config="configs/env/paper_navigation.yaml"`` loads a YAML first (keywords then
+    override it). Unknown keywords and invalid values raise ``ValueError`` naming them.
+    ``render_mode`` is ``None``, ``"rgb_array"`` or ``"human"``.
+
+    Info (per agent in PettingZoo, one dict in Gymnasium): ``polarization``,
+    ``angular_momentum`` (unit-heading forms), ``expanse``,
+    ``nearest_neighbor_distance``, ``energy`` (eq. 16 with the sink), ``fraction_arrived``,
+    ``collisions`` (this step), ``centroid_distance``, ``mean_goal_distance``, ``success``.
+
+    ## Version History
+
+    * v0: initial release.
+"""
+
+
+def make_config(
+    config: str | None = None, overrides: Mapping[str, Any] | None = None
+) -> SwarmConfig:
+    """Merge a YAML config (optional) and keyword overrides into a validated config."""
+    return load_swarm_config(config, dict(overrides or {}))
+
+
+def _check_render_mode(render_mode: str | None) -> str | None:
+    if render_mode is not None and render_mode not in RENDER_MODES:
+        raise ValueError(f"render_mode must be None or one of {RENDER_MODES}, got {render_mode!r}")
+    return render_mode
+
+
+class _Rendering:
+    """Lazy rendering shared by both adapters (drawing libraries load on first use)."""
+
+    core: SwarmNavCore
+    render_mode: str | None
+    _renderer: Any = None
+
+    def _render_frame(self) -> np.ndarray:
+        if self._renderer is None:
+            from swarm_envs.render import SwarmRenderer
+
+            self._renderer = SwarmRenderer()
+            self._renderer.record(self.core.x[0])
+        return self._renderer.frame(
+            self.core.x[0],
+            goal=self.core.goal[0],
+            goal_radius=self.core.cfg.goal_radius,
+            velocities=self.core.v[0],
+        )
+
+    def _after_reset_render(self) -> None:
+        if self._renderer is not None:
+            self._renderer.reset()
+            self._renderer.record(self.core.x[0])
+        if self.render_mode == "human":
+            self.render()
+
+    def _after_step_render(self) -> None:
+        if self._renderer is not None:
+            self._renderer.record(self.core.x[0])
+        if self.render_mode == "human":
+            self.render()
+
+    def render(self) -> np.ndarray | None:
+        """``rgb_array``: uint8 (H, W, 3) frame; ``human``: draw in a window."""
+        if self.render_mode is None:
+            gymnasium.logger.warn("render() called without a render_mode; returning None")
+            return None
+        frame = self._render_frame()
+        if self.render_mode == "human":
+            self._renderer.show(frame)
+            return None
+        return frame
+
+    def close(self) -> None:
+        """Release the window, if any; safe to call twice."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+class SwarmNavParallelEnv(_Rendering, ParallelEnv):
+    __doc__ = "PettingZoo ParallelEnv of SwarmNav (the source of truth).\n" + SWARM_NAV_DOC
+
+    metadata: ClassVar[dict[str, Any]] = {
+        "name": "swarm_nav_v0",
+        "render_modes": list(RENDER_MODES),
+        "render_fps": 20,
+        "is_parallelizable": True,
+    }
+
+    def __init__(
+        self,
+        config: str | None = None,
+        render_mode: str | None = None,
+        max_cycles: int | None = None,
+        **kwargs: Any,
+    ) -> None:
+        if max_cycles is not None:
+            kwargs["max_steps"] = max_cycles
+        self.cfg = make_config(config, kwargs)
+        self.render_mode = _check_render_mode(render_mode)
+        self.core = SwarmNavCore(self.cfg, batch=1)
+        n, d = self.cfg.n_agents, self.cfg.dim
+        self.possible_agents = [f"agent_{i}" for i in range(n)]
+        self.agents: list[str] = []
+        self._agent_index = {a: i for i, a in enumerate(self.possible_agents)}
+        obs_space = spaces.Box(-OBS_BOUND, OBS_BOUND, (self.core.obs_dim,), np.float32)
+        act_space = spaces.Box(-1.0, 1.0, (d,), np.float32)
+        self.observation_spaces = dict.fromkeys(self.possible_agents, obs_space)
+        self.action_spaces = dict.fromkeys(self.possible_agents, act_space)
+        self._np_random, _ = seeding.np_random(None)
+        self._needs_reset = True
+
+    @property
+    def max_cycles(self) -> int:
+        """Episode length before truncation (``max_steps`` of the config)."""
+        return self.cfg.max_steps
+
+    @max_cycles.setter
+    def max_cycles(self, value: int) -> None:
+        self.cfg = dataclasses.replace(self.cfg, max_steps=value)
+        self.core.cfg = self.cfg
+
+    def observation_space(self, agent: str) -> spaces.Box:
+        return self.observation_spaces[agent]
+
+    def action_space(self, agent: str) -> spaces.Box:
+        return self.action_spaces[agent]
+
+    def reset(
+        self, seed: int | None = None, options: dict | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
+        if seed is not None:
+            self._np_random, _ = seeding.np_random(seed)
+        self.core.reset(self._np_random)
+        self.agents = list(self.possible_agents)
+        self._needs_reset = False
+        obs = self.core.observe()[0]
+        stats = {k: float(v[0]) for k, v in self.core.stats().items()}
+        self._after_reset_render()
+        return (
+            {a: obs[i] for i, a in enumerate(self.agents)},
+            {a: dict(stats) for a in self.agents},
+        )
+
+    def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+        if self._needs_reset or not self.agents:
+            raise RuntimeError("step() called before reset() or after the episode ended")
+        unknown = set(actions) - set(self.agents)
+        missing = set(self.agents) - set(actions)
+        if unknown or missing:
+            raise ValueError(
+                f"actions must hold exactly the live agents; missing {sorted(missing)}, "
+                f"unknown {sorted(unknown)}"
+            )
+        d = self.cfg.dim
+        stacked = np.stack([check_actions(actions[a], (d,)) for a in self.possible_agents]).reshape(
+            1, -1, d
+        )
+        reward, terminated, truncated, stats = self.core.step(stacked)
+        obs = self.core.observe()[0]
+        r, term, trunc = float(reward[0]), bool(terminated[0]), bool(truncated[0])
+        info = {k: float(v[0]) for k, v in stats.items()}
+        agents = self.agents
+        result = (
+            {a: obs[self._agent_index[a]] for a in agents},
+            dict.fromkeys(agents, r),
+            dict.fromkeys(agents, term),
+            dict.fromkeys(agents, trunc),
+            {a: dict(info) for a in agents},
+        )
+        if term or trunc:
+            self.agents = []
+            self._needs_reset = True
+        self._after_step_render()
+        return result
+
+    def state(self) -> np.ndarray:
+        """Global state: every agent's observation, concatenated (float32)."""
+        return self.core.observe()[0].reshape(-1)
+
+
+class SwarmNavEnv(_Rendering, gymnasium.Env):
+    __doc__ = "Gymnasium SwarmNav with one central controller for the whole swarm.\n" + (
+        SWARM_NAV_DOC
+    )
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": list(RENDER_MODES), "render_fps": 20}
+
+    def __init__(self, config: str | None = None, render_mode: str | None = None, **kwargs: Any):
+        self.cfg = make_config(config, kwargs)
+        self.render_mode = _check_render_mode(render_mode)
+        self.core = SwarmNavCore(self.cfg, batch=1)
+        n, d = self.cfg.n_agents, self.cfg.dim
+        self.observation_space = spaces.Box(
+            -OBS_BOUND, OBS_BOUND, (n * self.core.obs_dim,), np.float32
+        )
+        self.action_space = spaces.Box(-1.0, 1.0, (n * d,), np.float32)
+        self._needs_reset = True
+
+    def reset(
+        self, *, seed: int | None = None, options: dict | None = None
+    ) -> tuple[np.ndarray, dict]:
+        super().reset(seed=seed)
+        self.core.reset(self.np_random)
+        self._needs_reset = False
+        self._after_reset_render()
+        return self.core.observe().reshape(-1), {
+            k: float(v[0]) for k, v in self.core.stats().items()
+        }
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
+        if self._needs_reset:
+            raise RuntimeError("step() called before reset()")
+        n, d = self.cfg.n_agents, self.cfg.dim
+        a = check_actions(action, (n * d,)).reshape(1, n, d)
+        reward, terminated, truncated, stats = self.core.step(a)
+        obs = self.core.observe().reshape(-1)
+        self._after_step_render()
+        return (
+            obs,
+            float(reward[0]),
+            bool(terminated[0]),
+            bool(truncated[0]),
+            {k: float(v[0]) for k, v in stats.items()},
+        )

@@ -1,0 +1,158 @@
+"""A native batched Stable-Baselines3 ``VecEnv``: B swarms × N agents, one slot per agent.
+
+All agents of all swarms share one policy (parameter sharing): slot ``b·N + i`` is agent
+i of swarm b, with that agent's local observation, action and the swarm's cooperative
+reward. All swarms step in one array call on :class:`SwarmNavCore`; no Python loop over
+envs or agents (SuperSuit's ``pettingzoo_env_to_vec_env_v1`` + ``concat_vec_envs``
+would loop, and never sets ``TimeLimit.truncated``).
+
+A swarm whose episode ends is reset on its own within the same ``step_wait``. Its
+slots' infos carry ``terminal_observation`` (the last observation of that episode) and
+``TimeLimit.truncated`` (true when it ended by the step limit, not by success), which
+SB3 uses to bootstrap the value of truncated episodes.
+
+Infos: every slot's info dict is fresh. The swarm's statistics
+(:data:`swarm_envs.envs.core.STAT_KEYS`) are in the info of the swarm's first slot
+(``b·N``) only, which keeps the step cheap; :attr:`SwarmNavVecEnv.last_stats` holds
+them as ``(B,)`` arrays.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
+
+from swarm_envs.envs.core import OBS_BOUND, SwarmNavCore
+from swarm_envs.envs.swarm_nav import make_config
+
+
+class SwarmNavVecEnv(VecEnv):
+    """``n_swarms`` SwarmNav swarms as one SB3 VecEnv with ``n_swarms × n_agents`` slots."""
+
+    def __init__(
+        self,
+        n_swarms: int,
+        config: str | None = None,
+        render_mode: str | None = None,
+        **kwargs: Any,
+    ) -> None:
+        if isinstance(n_swarms, bool) or not isinstance(n_swarms, (int, np.integer)):
+            raise ValueError(f"n_swarms must be an integer >= 1, got {n_swarms!r}")
+        if n_swarms < 1:
+            raise ValueError(f"n_swarms must be an integer >= 1, got {n_swarms!r}")
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(
+                f"vec_env render_mode must be None or 'rgb_array', got {render_mode!r}"
+            )
+        self.cfg = make_config(config, kwargs)
+        self.n_swarms = int(n_swarms)
+        self.n_agents = self.cfg.n_agents
+        self.core = SwarmNavCore(self.cfg, batch=self.n_swarms)
+        obs_space = spaces.Box(-OBS_BOUND, OBS_BOUND, (self.core.obs_dim,), np.float32)
+        act_space = spaces.Box(-1.0, 1.0, (self.cfg.dim,), np.float32)
+        super().__init__(self.n_swarms * self.n_agents, obs_space, act_space)
+        self.render_mode = render_mode
+        self._rng = np.random.default_rng()
+        self._actions: np.ndarray | None = None
+        self.last_stats: dict[str, np.ndarray] = {}
+        self.episode_returns = np.zeros(self.n_swarms)
+        self.episode_lengths = np.zeros(self.n_swarms, np.int64)
+
+    # ------------------------------------------------------------------ VecEnv API
+    def reset(self) -> np.ndarray:
+        """Reset every swarm. Uses the seed of :meth:`seed` once, if one was set."""
+        seed = self._seeds[0]
+        if seed is not None:
+            self._rng = np.random.default_rng(seed)
+        self._reset_seeds()
+        self.core.reset(self._rng)
+        self.episode_returns[:] = 0.0
+        self.episode_lengths[:] = 0
+        self.last_stats = self.core.stats()
+        self.reset_infos = [{} for _ in range(self.num_envs)]
+        return self.core.observe().reshape(self.num_envs, -1)
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = np.asarray(actions)
+
+    def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict]]:
+        if self._actions is None:
+            raise RuntimeError("step_wait() called without step_async()")
+        B, N, d = self.n_swarms, self.n_agents, self.cfg.dim
+        actions = self._actions
+        if actions.shape != (self.num_envs, d):
+            raise ValueError(f"actions must have shape {(self.num_envs, d)}, got {actions.shape}")
+        self._actions = None
+        reward, terminated, truncated, stats = self.core.step(actions.reshape(B, N, d))
+        obs = self.core.observe()
+        self.last_stats = stats
+        self.episode_returns += reward
+        self.episode_lengths += 1
+        done = terminated | truncated
+        infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
+        for b in range(B):  # one small dict per swarm, not per agent
+            infos[b * N].update({k: float(v[b]) for k, v in stats.items()})
+        if done.any():
+            for b in np.flatnonzero(done):  # only the swarms that just ended
+                episode = {
+                    "r": float(self.episode_returns[b]),
+                    "l": int(self.episode_lengths[b]),
+                }
+                time_limit = bool(truncated[b] and not terminated[b])
+                for i in range(N):
+                    info = infos[b * N + i]
+                    info["terminal_observation"] = obs[b, i]
+                    info["TimeLimit.truncated"] = time_limit
+                    info["swarm_episode"] = episode
+            self.core.reset(self._rng, which=done)
+            self.episode_returns[done] = 0.0
+            self.episode_lengths[done] = 0
+            obs = self.core.observe()
+        rewards = np.repeat(reward, N).astype(np.float32)
+        dones = np.repeat(done, N)
+        return obs.reshape(self.num_envs, -1), rewards, dones, infos
+
+    def close(self) -> None:
+        return None
+
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        from swarm_envs.render import draw_swarm
+
+        return [
+            draw_swarm(
+                self.core.x[b],
+                goal=self.core.goal[b],
+                goal_radius=self.cfg.goal_radius,
+                velocities=self.core.v[b],
+            )
+            for b in range(self.n_swarms)
+        ]
+
+    # ------------------------------------------------------------------ attributes
+    def _indices(self, indices: VecEnvIndices) -> Iterable[int]:
+        return self._get_indices(indices)
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        value = getattr(self, attr_name)
+        return [value for _ in self._indices(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        raise ValueError(
+            f"set_attr({attr_name!r}) is not supported: every slot shares one batched core"
+        )
+
+    def env_method(
+        self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **kwargs: Any
+    ) -> list[Any]:
+        method = getattr(self, method_name)
+        return [method(*method_args, **kwargs) for _ in self._indices(indices)]
+
+    def env_is_wrapped(
+        self, wrapper_class: type[gymnasium.Wrapper], indices: VecEnvIndices = None
+    ) -> list[bool]:
+        return [False for _ in self._indices(indices)]

@@ -1,0 +1,487 @@
+"""Group statistics of a swarm (MODELS.md §2), over arrays with leading batch dimensions.
+
+Sources: M. H. Mabrouk and C. R. McInnes, *Social potential model to simulate emergent
+behaviour for swarm robots*, §1.2 (seed ``001``, eqs. 1–6, and eq. 16 for the energy);
+Naterop, Petrides & Prasad, *Implementing two mathematical swarm models…*, §4.1.4
+(seed ``003``, eqs. 8–12 and the response time); Couzin et al., J. theor. Biol. 218
+(2002) 1–11, for the unit-heading forms.
+
+Statistics (``r_ic = r_i − r_c``, ``â = a / |a|``):
+
+- :func:`centroid` — ``r_c = (1/N) Σ r_i`` (Mabrouk & McInnes eq. 1; Naterop eq. 9).
+- :func:`polarization` — ``|Σ v̂_i| / N ∈ [0, 1]``, unit headings (Couzin; Naterop eq. 8).
+- :func:`velocity_polarization` — ``|Σ v_i| / N``, depends on speed (Mabrouk & McInnes eq. 2).
+- :func:`angular_momentum` — ``|Σ r̂_ic × v̂_i| / N ∈ [0, 1]``, unit headings (Couzin).
+- :func:`velocity_angular_momentum` — ``|Σ r̂_ic × v_i| / N`` (Mabrouk & McInnes eq. 3).
+- :func:`raw_angular_momentum` — ``|Σ r_ic × v_i| / N`` (Naterop eq. 10 and table 3).
+- :func:`spherical_variance` — ``1 − polarization``, unit headings (Mabrouk & McInnes eq. 4).
+- :func:`nearest_neighbor_distance` — ``(1/N) Σ_i min_{j≠i} |r_i − r_j|`` (eq. 5).
+- :func:`expanse` — ``(1/N) Σ_i |r_i − r_c|`` (eq. 6 as the text defines it; Naterop eq. 11).
+- :func:`packing_density` — ``expanse / N`` (Naterop eq. 12).
+- :func:`total_energy` — total energy φ of the social-potential model (Mabrouk & McInnes eq. 16).
+- :func:`fraction_within` — fraction of agents with ``|r_i − r_g| ≤ R`` (MODELS.md §2).
+- :func:`first_passage_time` — first time a series crosses a threshold: Naterop's response
+  time, time until the centroid or a fraction of the agents is within the goal radius.
+
+Naterop's eq. 10 writes ``r_ic = r_c − r_i``; the sign does not matter under the norm.
+The cross product ``×`` is, in 2-D, the scalar ``z``-component ``a_x b_y − a_y b_x`` (the
+statistic takes the absolute value of the sum) and, in 3-D, the vector (the statistic
+takes the norm of the sum).
+
+Shapes and dtypes: every statistic takes positions ``x`` and/or velocities ``v`` shaped
+``(..., N, d)`` — any leading batch dimensions, ``N ≥ 1`` agents, ``d = 2`` or ``3`` —
+and returns an array shaped ``(...)`` (0-d when there is no batch dimension). A floating
+input keeps its dtype (float32 stays float32); integer input is computed in float64.
+Nothing loops over agents or pairs in Python; the nearest-neighbour distance builds an
+``(..., N, N)`` array of squared distances.
+
+Degenerate cases never produce NaN (for finite input):
+
+- an agent with zero speed has no heading; its unit heading is taken as the zero vector,
+  so it adds nothing to the unit-heading sums but still counts in ``N`` (a swarm at rest
+  has polarization 0 and spherical variance 1);
+- an agent at the group centre has no direction ``r̂_ic``; it is taken as the zero vector
+  (distances to the centre below the rounding level of the coordinates count as zero,
+  so an agent that sits at the centre by symmetry stays there after a translation);
+- coincident agents have nearest-neighbour distance 0; a single agent (``N = 1``) has
+  nearest-neighbour distance 0 and expanse 0;
+- ``N = 0`` raises :class:`ValueError`.
+
+The unit-heading forms are clipped to ``[0, 1]`` to absorb rounding (a sum of ``N``
+unit vectors can come out as ``N (1 + ε)``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from swarm_envs.physics import SocialPotentialParams, energy
+from swarm_envs.physics._validation import SUPPORTED_DIMS
+
+__all__ = [
+    "angular_momentum",
+    "centroid",
+    "expanse",
+    "first_passage_time",
+    "fraction_within",
+    "nearest_neighbor_distance",
+    "packing_density",
+    "polarization",
+    "raw_angular_momentum",
+    "spherical_variance",
+    "total_energy",
+    "velocity_angular_momentum",
+    "velocity_polarization",
+]
+
+#: A distance to the group centre counts as zero below
+#: ``CENTRE_RTOL · eps(dtype) · √N · max_i |r_i|_∞`` (the rounding level of the centroid).
+CENTRE_RTOL = 4.0
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _as_state(name: str, a: Any) -> np.ndarray:
+    """``a`` as a floating array shaped ``(..., N, d)``, ``N ≥ 1``, ``d`` in {2, 3}."""
+    a = np.asarray(a)
+    if not np.issubdtype(a.dtype, np.floating):
+        a = a.astype(np.float64)
+    if a.ndim < 2 or a.shape[-1] not in SUPPORTED_DIMS:
+        raise ValueError(
+            f"{name} must have shape (..., N, d) with d in {SUPPORTED_DIMS}, got {a.shape}"
+        )
+    if a.shape[-2] < 1:
+        raise ValueError(f"{name} must hold at least one agent (N >= 1), got shape {a.shape}")
+    return a
+
+
+def _as_pair(x: Any, v: Any) -> tuple[np.ndarray, np.ndarray]:
+    x = _as_state("positions", x)
+    v = _as_state("velocities", v)
+    if v.shape != x.shape:
+        raise ValueError(f"velocities shape {v.shape} must equal positions shape {x.shape}")
+    return x, v
+
+
+def _norm(a: np.ndarray) -> np.ndarray:
+    """Euclidean norm over the last axis, shape ``a.shape[:-1]``."""
+    return np.sqrt(np.einsum("...k,...k->...", a, a))
+
+
+def _unit(a: np.ndarray, norm: np.ndarray, keep: np.ndarray | None = None) -> np.ndarray:
+    """``a / |a|`` with the zero vector wherever ``keep`` is false (default ``norm > 0``)."""
+    if keep is None:
+        keep = norm > 0
+    safe = np.where(keep, norm, np.ones_like(norm))
+    return np.where(keep[..., None], a / safe[..., None], np.zeros_like(a))
+
+
+def _relative(x: np.ndarray) -> np.ndarray:
+    """``r_ic = r_i − r_c``, shaped like ``x``."""
+    return x - x.mean(axis=-2, keepdims=True)
+
+
+def _unit_relative(x: np.ndarray) -> np.ndarray:
+    """``r̂_ic``, with the zero vector for an agent at the centre (to rounding)."""
+    r = _relative(x)
+    dist = _norm(r)
+    n = x.shape[-2]
+    scale = np.max(np.abs(x), axis=(-2, -1), keepdims=True)[..., 0]  # (..., 1)
+    tol = CENTRE_RTOL * np.finfo(x.dtype).eps * np.sqrt(n) * scale
+    return _unit(r, dist, dist > tol)
+
+
+def _cross_sum_norm(r: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``|Σ_i r_i × v_i|`` over the agent axis: scalar z-component in 2-D, vector in 3-D."""
+    if r.shape[-1] == 2:
+        z = r[..., 0] * v[..., 1] - r[..., 1] * v[..., 0]
+        return np.abs(z.sum(axis=-1))
+    return _norm(np.cross(r, v).sum(axis=-2))
+
+
+def _result(value: Any, dtype: np.dtype) -> np.ndarray:
+    return np.asarray(value, dtype=dtype)
+
+
+# --------------------------------------------------------------------------- statistics
+
+
+def centroid(x: ArrayLike) -> np.ndarray:
+    """Group centre ``r_c = (1/N) Σ_i r_i`` (Mabrouk & McInnes eq. 1; Naterop eq. 9).
+
+    Args:
+        x: positions ``(..., N, d)``.
+
+    Returns:
+        ``r_c`` shaped ``(..., d)``, in the dtype of ``x``.
+
+    >>> centroid(np.array([[0.0, 0.0], [2.0, 0.0], [1.0, 3.0]]))
+    array([1., 1.])
+    """
+    x = _as_state("positions", x)
+    return x.mean(axis=-2)
+
+
+def polarization(v: ArrayLike) -> np.ndarray:
+    """Unit-heading polarization ``|Σ_i v̂_i| / N ∈ [0, 1]`` (Couzin 2002; Naterop eq. 8).
+
+    1 when every agent heads the same way, near 0 when the headings cancel. It does not
+    depend on the speeds. An agent with zero speed has no heading and contributes the
+    zero vector (it still counts in ``N``), so a swarm at rest has polarization 0.
+    For the speed-weighted eq. 2 of Mabrouk & McInnes use :func:`velocity_polarization`.
+
+    Args:
+        v: velocities ``(..., N, d)``.
+
+    Returns:
+        Shape ``(...)``, in the dtype of ``v``.
+
+    >>> float(polarization(np.array([[1.0, 0.0], [3.0, 0.0]])))
+    1.0
+    >>> float(polarization(np.array([[1.0, 0.0], [-3.0, 0.0]])))
+    0.0
+    >>> float(polarization(np.array([[2.0, 0.0], [0.0, 0.0]])))  # resting agent adds 0
+    0.5
+    """
+    v = _as_state("velocities", v)
+    n = v.shape[-2]
+    heading = _unit(v, _norm(v))
+    return _result(np.minimum(_norm(heading.sum(axis=-2)) / n, 1), v.dtype)
+
+
+def velocity_polarization(v: ArrayLike) -> np.ndarray:
+    """Group polarization ``φ_G = |Σ_i v_i| / N`` (Mabrouk & McInnes eq. 2).
+
+    The paper's form: the speed of the mean velocity, so it scales with the speeds and
+    is not bounded by 1 (for unit speeds it equals :func:`polarization`).
+
+    Args:
+        v: velocities ``(..., N, d)``.
+
+    Returns:
+        Shape ``(...)``, in the dtype of ``v``.
+
+    >>> float(velocity_polarization(np.array([[1.0, 0.0], [3.0, 0.0]])))
+    2.0
+    """
+    v = _as_state("velocities", v)
+    n = v.shape[-2]
+    return _result(_norm(v.sum(axis=-2)) / n, v.dtype)
+
+
+def spherical_variance(v: ArrayLike) -> np.ndarray:
+    """Spherical variance ``σ = 1 − |Σ_i v̂_i| / N ∈ [0, 1]`` (Mabrouk & McInnes eq. 4).
+
+    Mardia's circular/spherical variance needs unit vectors, so this is
+    ``1 − polarization(v)`` with the unit-heading :func:`polarization` (the paper writes
+    ``1 − φ_G`` with its speed-weighted eq. 2). Resting agents contribute zero headings,
+    so a swarm at rest has ``σ = 1``.
+
+    Args:
+        v: velocities ``(..., N, d)``.
+
+    Returns:
+        Shape ``(...)``, in the dtype of ``v``.
+
+    >>> float(spherical_variance(np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])))
+    1.0
+    """
+    p = polarization(v)
+    return _result(1 - p, p.dtype)
+
+
+def angular_momentum(x: ArrayLike, v: ArrayLike) -> np.ndarray:
+    """Unit-heading angular momentum ``|Σ_i r̂_ic × v̂_i| / N ∈ [0, 1]`` (Couzin 2002).
+
+    ``r_ic = r_i − r_c`` with ``r_c`` the :func:`centroid`. 1 for a ring of agents
+    circling its centre (either way round), 0 for a translating or radially moving swarm.
+    In 2-D the cross product is the scalar ``z``-component and the absolute value of the
+    sum is taken; in 3-D the norm of the vector sum. An agent at rest or at the centre
+    contributes 0.
+
+    Args:
+        x: positions ``(..., N, d)``.
+        v: velocities, same shape.
+
+    Returns:
+        Shape ``(...)``, in the common dtype of ``x`` and ``v``.
+
+    >>> theta = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+    >>> ring = np.stack([np.cos(theta), np.sin(theta)], axis=-1)
+    >>> tangent = np.stack([-np.sin(theta), np.cos(theta)], axis=-1)
+    >>> round(float(angular_momentum(ring + 5.0, 0.3 * tangent)), 12)
+    1.0
+    >>> round(float(angular_momentum(ring, 0.3 * ring)), 12)  # expanding radially
+    0.0
+    """
+    x, v = _as_pair(x, v)
+    n = x.shape[-2]
+    heading = _unit(v, _norm(v))
+    value = np.minimum(_cross_sum_norm(_unit_relative(x), heading) / n, 1)
+    return _result(value, np.result_type(x, v))
+
+
+def velocity_angular_momentum(x: ArrayLike, v: ArrayLike) -> np.ndarray:
+    """Group angular momentum ``m_G = |Σ_i r̂_ic × v_i| / N`` (Mabrouk & McInnes eq. 3).
+
+    The paper's form: unit radial direction, raw velocity, so it scales with the speeds.
+    An agent at the centre contributes 0. Cross product as in :func:`angular_momentum`.
+
+    Args:
+        x: positions ``(..., N, d)``.
+        v: velocities, same shape.
+
+    Returns:
+        Shape ``(...)``, in the common dtype of ``x`` and ``v``.
+    """
+    x, v = _as_pair(x, v)
+    n = x.shape[-2]
+    value = _cross_sum_norm(_unit_relative(x), v) / n
+    return _result(value, np.result_type(x, v))
+
+
+def raw_angular_momentum(x: ArrayLike, v: ArrayLike) -> np.ndarray:
+    """Angular momentum per agent ``|Σ_i r_ic × v_i| / N`` (Naterop eq. 10, table 3).
+
+    The mechanical angular momentum about the centroid (unit masses) divided by ``N``:
+    it scales with both the size of the swarm and the speeds (Naterop's table 3 values
+    above 1, e.g. 2.71 for the torus, are in this form). Cross product as in
+    :func:`angular_momentum`.
+
+    Args:
+        x: positions ``(..., N, d)``.
+        v: velocities, same shape.
+
+    Returns:
+        Shape ``(...)``, in the common dtype of ``x`` and ``v``.
+
+    >>> x = np.array([[2.0, 0.0], [-2.0, 0.0]]); v = np.array([[0.0, 3.0], [0.0, -3.0]])
+    >>> float(raw_angular_momentum(x, v)), float(velocity_angular_momentum(x, v))
+    (6.0, 3.0)
+    """
+    x, v = _as_pair(x, v)
+    n = x.shape[-2]
+    value = _cross_sum_norm(_relative(x), v) / n
+    return _result(value, np.result_type(x, v))
+
+
+def nearest_neighbor_distance(x: ArrayLike) -> np.ndarray:
+    """Average nearest-neighbour distance ``(1/N) Σ_i min_{j≠i} |r_i − r_j|`` (eq. 5).
+
+    Mabrouk & McInnes eq. 5. Coincident agents have nearest-neighbour distance 0. A
+    single agent has no neighbour; by convention ``N = 1`` gives 0. Memory is
+    ``O(N²)`` per batch element (squared distances, square root taken after the min).
+
+    Args:
+        x: positions ``(..., N, d)``.
+
+    Returns:
+        Shape ``(...)``, in the dtype of ``x``.
+
+    >>> square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    >>> float(nearest_neighbor_distance(square))
+    1.0
+    >>> float(nearest_neighbor_distance(np.zeros((1, 2))))  # N = 1
+    0.0
+    """
+    x = _as_state("positions", x)
+    n, d = x.shape[-2:]
+    if n == 1:
+        return np.zeros(x.shape[:-2], dtype=x.dtype)
+    diff = x[..., None, :, 0] - x[..., :, None, 0]
+    rho2 = diff * diff
+    for k in range(1, d):
+        diff = x[..., None, :, k] - x[..., :, None, k]
+        rho2 += diff * diff
+    idx = np.arange(n)
+    rho2[..., idx, idx] = np.inf
+    return _result(np.sqrt(rho2.min(axis=-1)).mean(axis=-1), x.dtype)
+
+
+def expanse(x: ArrayLike) -> np.ndarray:
+    """Group expanse ``ε_G = (1/N) Σ_i |r_i − r_c|`` (Mabrouk & McInnes §1.2; Naterop eq. 11).
+
+    The mean distance of the agents from the :func:`centroid`, as the paper's text
+    defines it. The extracted eq. 6, ``(1/N) Σ_i sqrt((|r_i| − |r_c|)²)``, compares
+    distances *from the origin* and so changes when the swarm is translated; that is a
+    typo (MODELS.md §2), not the statistic. ``N = 1`` gives 0.
+
+    Args:
+        x: positions ``(..., N, d)``.
+
+    Returns:
+        Shape ``(...)``, in the dtype of ``x``.
+
+    >>> square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    >>> bool(np.isclose(expanse(square + 10.0), np.sqrt(2) / 2))
+    True
+    """
+    x = _as_state("positions", x)
+    return _result(_norm(_relative(x)).mean(axis=-1), x.dtype)
+
+
+def packing_density(x: ArrayLike) -> np.ndarray:
+    """Packing density ``ρ = expanse / N`` (Naterop eq. 12).
+
+    Naterop's population-normalised expanse (despite the name, larger means *less*
+    densely packed).
+
+    Args:
+        x: positions ``(..., N, d)``.
+
+    Returns:
+        Shape ``(...)``, in the dtype of ``x``.
+    """
+    x = _as_state("positions", x)
+    return _result(expanse(x) / x.shape[-2], x.dtype)
+
+
+def total_energy(
+    x: ArrayLike,
+    v: ArrayLike,
+    params: SocialPotentialParams,
+    goal: ArrayLike | None = None,
+) -> np.ndarray:
+    """Total energy φ (Mabrouk & McInnes eq. 16) of the social-potential model.
+
+    ``φ = Σ_i ½ m |v_i|² + Σ_{i<j} U(ρ_ij) + Σ_i V_goal(r_i)``; a thin wrapper around
+    :func:`swarm_envs.physics.energy` (MODELS.md §1), listed here so that every group
+    statistic of §1.2 lives in one module. The goal term is included when ``goal`` is
+    given and ``params.C_g > 0``.
+
+    Args:
+        x: positions ``(..., N, d)``.
+        v: velocities, same shape.
+        params: model parameters.
+        goal: goal position broadcastable to ``(..., d)``, or ``None``.
+
+    Returns:
+        Shape ``(...)``.
+    """
+    x, v = _as_pair(x, v)
+    g = None if goal is None else np.asarray(goal)
+    return np.asarray(energy(x, v, params, g))
+
+
+def fraction_within(x: ArrayLike, goal: ArrayLike, radius: ArrayLike) -> np.ndarray:
+    """Fraction of agents with ``|r_i − r_g| ≤ radius`` (MODELS.md §2, navigation).
+
+    Args:
+        x: positions ``(..., N, d)``.
+        goal: goal position broadcastable to ``(..., d)``.
+        radius: goal radius ``≥ 0`` (``inf`` allowed), a scalar or broadcastable to
+            ``(...)``.
+
+    Returns:
+        Values in ``{0, 1/N, …, 1}``, shape ``(...)``, in the dtype of ``x``.
+
+    Raises:
+        ValueError: if ``radius`` is negative or NaN.
+
+    >>> x = np.array([[0.0, 0.0], [1.0, 0.0], [3.0, 0.0], [0.0, -0.5]])
+    >>> float(fraction_within(x, [0.0, 0.0], 1.0))
+    0.75
+    """
+    x = _as_state("positions", x)
+    radius = np.asarray(radius)
+    if np.any(np.isnan(radius)) or np.any(radius < 0):
+        raise ValueError(f"fraction_within: radius must be >= 0, got {radius!r}")
+    goal = np.asarray(goal, dtype=x.dtype)
+    dist = _norm(x - goal[..., None, :])
+    inside = dist <= radius[..., None]
+    return _result(inside.mean(axis=-1, dtype=x.dtype), x.dtype)
+
+
+def first_passage_time(
+    values: ArrayLike, dt: float, threshold: ArrayLike, *, below: bool = True
+) -> np.ndarray:
+    """First time a time series reaches a threshold; ``inf`` where it never does.
+
+    For ``values`` shaped ``(T, ...)`` (time first, ``values[t]`` at time ``t·dt``, as
+    :func:`swarm_envs.physics.simulate` returns its trajectories), returns ``t*·dt``
+    with ``t*`` the first index where ``values[t] ≤ threshold`` (``below=True``) or
+    ``values[t] ≥ threshold`` (``below=False``), shaped ``(...)``. A series that is
+    already there at ``t = 0`` gives 0; one that never gets there gives ``np.inf`` (not
+    NaN). NaN entries count as not reached.
+
+    Uses (``xs`` shaped ``(T, ..., N, d)``, goal ``g``, goal radius ``R``):
+
+    - Naterop's *response time*, the time until the first member reaches the food:
+      ``first_passage_time(np.linalg.norm(xs - g, axis=-1).min(axis=-1), dt, R)``;
+    - time until the centroid is within the goal radius (MODELS.md §2):
+      ``first_passage_time(np.linalg.norm(centroid(xs) - g, axis=-1), dt, R)``;
+    - time until a fraction ``q`` of the agents is within it:
+      ``first_passage_time(fraction_within(xs, g, R), dt, q, below=False)``.
+
+    Args:
+        values: time series shaped ``(T, ...)``, ``T ≥ 1``.
+        dt: time between samples, ``> 0``.
+        threshold: scalar or broadcastable against ``values[0]``.
+        below: look for ``values ≤ threshold`` (default) or ``values ≥ threshold``.
+
+    Returns:
+        Shape ``(...)``: the dtype of ``values`` if floating, else float64.
+
+    >>> d = np.array([5.0, 3.0, 0.8, 0.2, 0.9])
+    >>> float(first_passage_time(d, 0.1, 1.0))
+    0.2
+    >>> float(first_passage_time(d, 0.1, 0.0))
+    inf
+    >>> float(first_passage_time(d, 0.1, 3.0, below=False))
+    0.0
+    """
+    values = np.asarray(values)
+    if values.ndim < 1 or values.shape[0] < 1:
+        raise ValueError(f"values must be shaped (T, ...) with T >= 1, got {values.shape}")
+    if not np.isfinite(dt) or dt <= 0:
+        raise ValueError(f"first_passage_time: dt must be finite and > 0, got {dt!r}")
+    dtype = values.dtype if np.issubdtype(values.dtype, np.floating) else np.dtype(np.float64)
+    hit = values <= threshold if below else values >= threshold
+    reached = hit.any(axis=0)
+    index = hit.argmax(axis=0)
+    time = index.astype(dtype) * dtype.type(dt)
+    return np.where(reached, time, dtype.type(np.inf)).astype(dtype, copy=False)
