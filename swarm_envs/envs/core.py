@@ -25,7 +25,7 @@ import numpy as np
 
 from swarm_envs import metrics
 from swarm_envs.config import SwarmConfig
-from swarm_envs.physics import forces, pair_geometry, step, uniform_ball, verlet_step
+from swarm_envs.physics import energy, forces, pair_geometry, step, uniform_ball, verlet_step
 
 #: Every observation component is clipped into ``[−OBS_BOUND, OBS_BOUND]``.
 OBS_BOUND = 10.0
@@ -94,6 +94,7 @@ class SwarmNavCore:
         self.prev_arrived = np.zeros(B, self.dtype)
         self._f_passive: np.ndarray | None = None  # velocity Verlet carries the force
         self._geometry: tuple[list[np.ndarray], np.ndarray] | None = None
+        self._masked: tuple[Any, np.ndarray] | None = None
         self._physics_goal = cfg.physics.C_g > 0 and cfg.goal_in_physics
 
     # ------------------------------------------------------------------ reset
@@ -190,12 +191,17 @@ class SwarmNavCore:
         return (self._goal_distances() <= self.cfg.goal_radius).mean(axis=-1)
 
     def _distances(self) -> np.ndarray:
-        """Pairwise distances ``(B, N, N)`` with ``inf`` on the diagonal (a fresh array)."""
+        """Pairwise distances ``(B, N, N)`` with ``inf`` on the diagonal (cached per state).
+
+        Read-only for callers: it is shared by the observations and the statistics.
+        """
         assert self._geometry is not None
-        rho = self._geometry[1].copy()
-        diag = np.arange(self.cfg.n_agents)
-        rho[:, diag, diag] = np.inf
-        return rho
+        if self._masked is None or self._masked[0] is not self._geometry:
+            rho = self._geometry[1].copy()
+            diag = np.arange(self.cfg.n_agents)
+            rho[:, diag, diag] = np.inf
+            self._masked = (self._geometry, rho)
+        return self._masked[1]
 
     def stats(self) -> dict[str, np.ndarray]:
         """Group statistics and task measures per swarm, each ``(B,)``."""
@@ -212,7 +218,7 @@ class SwarmNavCore:
             "angular_momentum": metrics.angular_momentum(self.x, self.v),
             "expanse": metrics.expanse(self.x),
             "nearest_neighbor_distance": nnd,
-            "energy": metrics.total_energy(self.x, self.v, cfg.physics, self.goal),
+            "energy": energy(self.x, self.v, cfg.physics, self.goal, geometry=self._geometry),
             "fraction_arrived": arrived,
             "collisions": collisions.astype(np.float64),
             "centroid_distance": np.linalg.norm(centroid - self.goal, axis=-1),
@@ -231,30 +237,35 @@ class SwarmNavCore:
         cfg = self.cfg
         B, N, d = self.x.shape
         k = cfg.n_neighbors
-        parts = [
-            (self.goal[:, None, :] - self.x) / cfg.obs_goal_scale,
-            self.v / cfg.obs_velocity_scale,
-        ]
+        obs = np.empty((B, N, self.obs_dim), np.float32)
+        obs[..., :d] = (self.goal[:, None, :] - self.x) / cfg.obs_goal_scale
+        obs[..., d : 2 * d] = self.v / cfg.obs_velocity_scale
         if k > 0:
+            nb = obs[..., 2 * d :].reshape(B, N, k, 2 * d + 1)  # a view into obs
+            nb[...] = 0.0
             k_real = min(k, N - 1)
-            nbr_pos = np.zeros((B, N, k, d), self.dtype)
-            nbr_vel = np.zeros((B, N, k, d), self.dtype)
-            mask = np.zeros((B, N, k, 1), self.dtype)
             if k_real > 0:
-                rho = self._distances()
-                if k_real < N - 1:
-                    cand = np.argpartition(rho, k_real - 1, axis=-1)[..., :k_real]
-                    order = np.argsort(np.take_along_axis(rho, cand, axis=-1), axis=-1)
-                    nbr = np.take_along_axis(cand, order, axis=-1)
-                else:
-                    nbr = np.argsort(rho, axis=-1)[..., :k_real]
+                nbr = self._nearest(k_real)  # (B, N, k_real), nearest first
                 flat = (nbr + (np.arange(B) * N)[:, None, None]).reshape(-1)
-                xj = self.x.reshape(B * N, d)[flat].reshape(B, N, k_real, d)
-                vj = self.v.reshape(B * N, d)[flat].reshape(B, N, k_real, d)
-                nbr_pos[:, :, :k_real] = (xj - self.x[:, :, None, :]) / cfg.obs_neighbor_scale
-                nbr_vel[:, :, :k_real] = (vj - self.v[:, :, None, :]) / cfg.obs_velocity_scale
-                mask[:, :, :k_real] = 1.0
-            parts.append(np.concatenate([nbr_pos, nbr_vel, mask], axis=-1).reshape(B, N, -1))
-        obs = np.concatenate(parts, axis=-1)
+                xv = np.concatenate([self.x, self.v], axis=-1).reshape(B * N, 2 * d)
+                rel = np.take(xv, flat, axis=0).reshape(B, N, k_real, 2 * d)
+                rel -= xv.reshape(B, N, 1, 2 * d)
+                nb[:, :, :k_real, :d] = rel[..., :d] / cfg.obs_neighbor_scale
+                nb[:, :, :k_real, d : 2 * d] = rel[..., d:] / cfg.obs_velocity_scale
+                nb[:, :, :k_real, 2 * d] = 1.0
         np.clip(obs, -OBS_BOUND, OBS_BOUND, out=obs)
-        return obs.astype(np.float32, copy=False)
+        return obs
+
+    def _nearest(self, k: int) -> np.ndarray:
+        """Indices ``(B, N, k)`` of each agent's k nearest other agents, nearest first.
+
+        A full argsort of each row is faster than ``argpartition`` + sort for N ≲ 64;
+        above that, partition first. Ties break deterministically (same input, same order).
+        """
+        rho = self._distances()
+        n = rho.shape[-1]
+        if n <= 64 or k >= n - 1:
+            return np.argsort(rho, axis=-1)[..., :k]
+        cand = np.argpartition(rho, k - 1, axis=-1)[..., :k]
+        order = np.argsort(np.take_along_axis(rho, cand, axis=-1), axis=-1)
+        return np.take_along_axis(cand, order, axis=-1)

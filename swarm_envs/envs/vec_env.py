@@ -15,6 +15,9 @@ Infos: every slot's info dict is fresh. The swarm's statistics
 (:data:`swarm_envs.envs.core.STAT_KEYS`) are in the info of the swarm's first slot
 (``b·N``) only, which keeps the step cheap; :attr:`SwarmNavVecEnv.last_stats` holds
 them as ``(B,)`` arrays.
+
+The state is float32 by default (``dtype=np.float64`` for exact agreement with the
+float64 single-swarm envs); observations are float32 either way.
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ class SwarmNavVecEnv(VecEnv):
         n_swarms: int,
         config: str | None = None,
         render_mode: str | None = None,
+        dtype: type = np.float32,
         **kwargs: Any,
     ) -> None:
         if isinstance(n_swarms, bool) or not isinstance(n_swarms, (int, np.integer)):
@@ -52,11 +56,13 @@ class SwarmNavVecEnv(VecEnv):
         self.cfg = make_config(config, kwargs)
         self.n_swarms = int(n_swarms)
         self.n_agents = self.cfg.n_agents
-        self.core = SwarmNavCore(self.cfg, batch=self.n_swarms)
+        if np.dtype(dtype) not in (np.dtype(np.float32), np.dtype(np.float64)):
+            raise ValueError(f"dtype must be float32 or float64, got {dtype!r}")
+        self.core = SwarmNavCore(self.cfg, batch=self.n_swarms, dtype=dtype)
         obs_space = spaces.Box(-OBS_BOUND, OBS_BOUND, (self.core.obs_dim,), np.float32)
         act_space = spaces.Box(-1.0, 1.0, (self.cfg.dim,), np.float32)
+        self.render_mode = render_mode  # before VecEnv.__init__, which reads it via get_attr
         super().__init__(self.n_swarms * self.n_agents, obs_space, act_space)
-        self.render_mode = render_mode
         self._rng = np.random.default_rng()
         self._actions: np.ndarray | None = None
         self.last_stats: dict[str, np.ndarray] = {}
@@ -95,8 +101,10 @@ class SwarmNavVecEnv(VecEnv):
         self.episode_lengths += 1
         done = terminated | truncated
         infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
-        for b in range(B):  # one small dict per swarm, not per agent
-            infos[b * N].update({k: float(v[b]) for k, v in stats.items()})
+        keys = list(stats)
+        rows = np.column_stack([stats[k] for k in keys]).tolist()  # (B, n_stats) floats
+        for b, row in enumerate(rows):  # one small dict per swarm, not per agent
+            infos[b * N].update(zip(keys, row, strict=True))
         if done.any():
             for b in np.flatnonzero(done):  # only the swarms that just ended
                 episode = {

@@ -222,12 +222,15 @@ def kinetic_energy(v: np.ndarray, params: SocialPotentialParams) -> np.ndarray:
 
 
 def potential_energy(
-    x: np.ndarray, params: SocialPotentialParams, goal: np.ndarray | None = None
+    x: np.ndarray,
+    params: SocialPotentialParams,
+    goal: np.ndarray | None = None,
+    *,
+    geometry: tuple[list[np.ndarray], np.ndarray] | None = None,
 ) -> np.ndarray:
     """``Σ_{i<j} U(ρ_ij) + Σ_i V_goal(r_i)`` (eqs. 9, 16, 19), shaped ``(...)``."""
     x, _ = check_state(x)
-    diff = x[..., None, :, :] - x[..., :, None, :]
-    rho = np.sqrt(np.einsum("...ijk,...ijk->...ij", diff, diff))
+    _, rho = pair_geometry(x) if geometry is None else geometry
     n = x.shape[-2]
     # Sum over all ordered pairs, remove the N diagonal terms U(0), halve.
     pairs = 0.5 * (pair_potential(rho, params).sum(axis=(-2, -1)) - n * (params.C_r - params.C_a))
@@ -241,6 +244,8 @@ def energy(
     v: np.ndarray,
     params: SocialPotentialParams,
     goal: np.ndarray | None = None,
+    *,
+    geometry: tuple[list[np.ndarray], np.ndarray] | None = None,
 ) -> np.ndarray:
     """Total energy φ (eq. 16): kinetic + pair potential + goal potential, shaped ``(...)``.
 
@@ -254,4 +259,4 @@ def energy(
     True
     """
     x, v = check_state(x, v)
-    return kinetic_energy(v, params) + potential_energy(x, params, goal)
+    return kinetic_energy(v, params) + potential_energy(x, params, goal, geometry=geometry)
