@@ -66,3 +66,18 @@ def check_state(x: Any, v: Any | None = None) -> tuple[np.ndarray, np.ndarray | 
     if v.shape != x.shape:
         raise ValueError(f"velocities shape {v.shape} must equal positions shape {x.shape}")
     return x, v
+
+
+def check_goal(goal: Any, x: np.ndarray) -> np.ndarray:
+    """A goal position as an array of ``x``'s dtype with shape ``(..., d)``.
+
+    Raises:
+        ValueError: if the goal is not finite or its last dimension is not ``d``.
+    """
+    g = np.asarray(goal, dtype=x.dtype)
+    d = x.shape[-1]
+    if g.ndim < 1 or g.shape[-1] != d:
+        raise ValueError(f"goal must have shape (..., {d}) like the positions, got {g.shape}")
+    if not np.isfinite(g).all():
+        raise ValueError("goal must be finite")
+    return g

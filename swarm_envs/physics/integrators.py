@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from swarm_envs.physics._validation import check_real, check_state
+from swarm_envs.physics._validation import check_goal, check_real, check_state
 from swarm_envs.physics.social_potential import SocialPotentialParams, forces, pair_geometry
 
 Geometry = tuple[list[np.ndarray], np.ndarray]
@@ -141,9 +141,7 @@ def simulate(
     _check_integrator(integrator)
     x, v = check_state(x0, v0)
     if goal is not None:
-        goal = np.asarray(goal, dtype=x.dtype)
-        if goal.shape[-1:] != x.shape[-1:]:
-            raise ValueError(f"goal must have shape (..., {x.shape[-1]}), got {goal.shape}")
+        goal = check_goal(goal, x)
     dt = float(dt)
     xs = np.empty((steps + 1, *x.shape), dtype=x.dtype)
     vs = np.empty_like(xs)

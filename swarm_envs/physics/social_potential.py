@@ -23,7 +23,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from swarm_envs.physics._validation import check_real, check_state
+from swarm_envs.physics._validation import check_goal, check_real, check_state
 
 #: Distances are floored at this value before dividing (coincident-agent convention).
 RHO_FLOOR = 1e-12
@@ -121,7 +121,8 @@ def goal_potential(x: np.ndarray, params: SocialPotentialParams, goal: np.ndarra
 
     ``goal`` broadcasts against ``(..., d)``.
     """
-    dist = np.linalg.norm(np.asarray(goal)[..., None, :] - x, axis=-1)
+    x, _ = check_state(x)
+    dist = np.linalg.norm(check_goal(goal, x)[..., None, :] - x, axis=-1)
     return -params.C_g * np.exp(-dist / params.l_g)
 
 
@@ -132,7 +133,8 @@ def goal_force(x: np.ndarray, params: SocialPotentialParams, goal: np.ndarray) -
     for ``l_g`` (MODELS.md §1). An agent exactly on the goal feels no force.
     Shape ``(..., N, d)`` like ``x``.
     """
-    offset = np.asarray(goal, dtype=x.dtype)[..., None, :] - x
+    x, _ = check_state(x)
+    offset = check_goal(goal, x)[..., None, :] - x
     dist = np.sqrt(np.einsum("...k,...k->...", offset, offset))
     scale = (params.C_g / params.l_g) * np.exp(-dist / params.l_g) / np.maximum(dist, RHO_FLOOR)
     return offset * scale[..., None]
@@ -210,8 +212,10 @@ def forces(
     total = np.stack([np.einsum("...ij,...ij->...i", scalar, dx[k]) for k in range(d)], axis=-1)
     if p.beta > 0:
         total -= p.beta * v
-    if goal is not None and p.C_g > 0:
-        total += goal_force(x, p, goal)
+    if goal is not None:
+        goal = check_goal(goal, x)
+        if p.C_g > 0:
+            total += goal_force(x, p, goal)
     return total
 
 
@@ -234,8 +238,10 @@ def potential_energy(
     n = x.shape[-2]
     # Sum over all ordered pairs, remove the N diagonal terms U(0), halve.
     pairs = 0.5 * (pair_potential(rho, params).sum(axis=(-2, -1)) - n * (params.C_r - params.C_a))
-    if goal is not None and params.C_g > 0:
-        pairs = pairs + goal_potential(x, params, goal).sum(axis=-1)
+    if goal is not None:
+        goal = check_goal(goal, x)
+        if params.C_g > 0:
+            pairs = pairs + goal_potential(x, params, goal).sum(axis=-1)
     return pairs
 
 
