@@ -5,10 +5,11 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= reproductions
 
-.PHONY: help install test lint format reproduce bench clean
+.PHONY: help install test test-slow lint format reproduce bench clean
 
 help:
 	@echo "make test       create .venv if missing, install, run ruff and pytest"
+	@echo "make test-slow  the same, plus the slow tests (full training runs)"
 	@echo "make reproduce  regenerate the paper figures (PNG + JSON + GIF) into $(OUT)/"
 	@echo "make bench      print the physics throughput table"
 	@echo "make format     apply ruff format and autofixes"
@@ -34,11 +35,15 @@ format: $(STAMP)
 test: lint
 	$(BIN)/python -m pytest $(PYTEST_ARGS)
 
+test-slow: lint
+	$(BIN)/python -m pytest --runslow $(PYTEST_ARGS)
+
 reproduce: $(STAMP)
 	$(BIN)/swarm-reproduce --out $(OUT)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/physics.py
+	$(BIN)/python benchmarks/envs.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache
