@@ -1,0 +1,315 @@
+"""The evaluation harness (``train.evaluate``) and the ``swarm-eval`` console script."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import gymnasium
+import numpy as np
+import pytest
+
+from agents import PotentialFieldController, RandomController, ZeroController
+from swarm_envs import swarm_nav_v0
+from swarm_envs.config import SwarmConfig
+from swarm_envs.envs import observation_size
+from train.cli_eval import main
+from train.evaluate import (
+    CURVE_KEYS,
+    SpaceMismatchError,
+    _detect_sb3_algorithm,
+    evaluate_policies,
+    format_table,
+    policy_mode,
+    run_episodes,
+)
+
+ROOT = Path(__file__).resolve().parent.parent
+# A short task the goal-sink controller solves in ~40 steps.
+QUICK = {"n_agents": 4, "max_steps": 80, "goal_distance_min": 3.0, "goal_distance_max": 4.0}
+QUICK_ARGS = [f"--set={k}={v}" for k, v in QUICK.items()]
+
+
+@pytest.fixture(scope="module")
+def cfg() -> SwarmConfig:
+    return SwarmConfig(**QUICK)
+
+
+class CentralPotential:
+    """The goal-sink controller seen as a whole-swarm ("central") policy, like an SB3
+    model trained on the Gymnasium env."""
+
+    def __init__(self, cfg: SwarmConfig) -> None:
+        self.inner = PotentialFieldController(cfg)
+        n, k, d = cfg.n_agents, observation_size(cfg), cfg.dim
+        self.observation_space = gymnasium.spaces.Box(-10, 10, (n * k,), np.float32)
+        self.action_space = gymnasium.spaces.Box(-1, 1, (n * d,), np.float32)
+        self.shapes: list[tuple[int, ...]] = []
+
+    def predict(self, obs, state=None, episode_start=None, deterministic=True):
+        self.shapes.append(np.shape(obs))
+        return self.inner.predict(obs, state, episode_start, deterministic)
+
+
+# --------------------------------------------------------------------------- Python API
+
+
+def test_evaluate_policies_measures(cfg):
+    policies = {
+        "potential": PotentialFieldController(cfg),
+        "zero": ZeroController(cfg),
+        "random": RandomController(cfg, seed=0),
+    }
+    res = evaluate_policies(policies, cfg, episodes=3, seed=0, progress=False)
+    assert res["env"] == "swarm_envs/SwarmNav-v0"
+    assert res["episodes"] == 3 and res["seed"] == 0
+    assert res["config"]["n_agents"] == 4
+    json.dumps(res, allow_nan=False)  # JSON-ready
+    pot, zero, rnd = (res["policies"][k] for k in ("potential", "zero", "random"))
+    for m in (pot, zero, rnd):
+        for key in (
+            "mean_return",
+            "std_return",
+            "success_rate",
+            "mean_time_to_goal",
+            "collisions_per_episode",
+            "control_effort",
+            "final_expanse",
+            "final_polarization",
+        ):
+            assert key in m
+    assert pot["success_rate"] == 1.0 and zero["success_rate"] == 0.0
+    steps = np.array(pot["per_episode"]["steps"])
+    assert pot["mean_time_to_goal"] == pytest.approx(steps.mean() * cfg.dt)
+    assert zero["mean_time_to_goal"] is None
+    assert zero["per_episode"]["steps"] == [cfg.max_steps] * 3
+    assert zero["control_effort"] == 0.0 and pot["control_effort"] > 0
+    assert rnd["control_effort_per_step"] == pytest.approx(2 / 3, rel=0.1)  # E|a|² = d/3
+    assert pot["mean_return"] > rnd["mean_return"] and pot["mean_return"] > zero["mean_return"]
+    assert pot["final_centroid_distance"] < zero["final_centroid_distance"]
+
+
+def test_every_policy_sees_the_same_episodes(cfg):
+    a = run_episodes(ZeroController(cfg), cfg, 4, seed=7)
+    b = run_episodes(ZeroController(cfg), cfg, 4, seed=7)
+    c = run_episodes(ZeroController(cfg), cfg, 4, seed=8)
+    assert np.array_equal(a.returns, b.returns)
+    assert np.array_equal(a.trajectory["x"], b.trajectory["x"])
+    assert not np.array_equal(a.trajectory["x"][0], c.trajectory["x"][0])
+    p = run_episodes(PotentialFieldController(cfg), cfg, 4, seed=7)
+    assert np.array_equal(p.trajectory["x"][0], a.trajectory["x"][0])  # same start
+    assert np.array_equal(p.curves["centroid_distance"][0], a.curves["centroid_distance"][0])
+
+
+def test_curves_hold_the_last_value_after_an_episode_ends(cfg):
+    b = run_episodes(PotentialFieldController(cfg), cfg, 3, seed=0)
+    T = b.times.size
+    assert b.times[1] == pytest.approx(cfg.dt)
+    assert T == b.lengths.max() + 1  # stops when the last episode ends
+    for key in CURVE_KEYS:
+        assert b.curves[key].shape == (T, 3)
+        for e, n in enumerate(b.lengths):
+            assert np.all(b.curves[key][n:, e] == b.curves[key][n, e])
+    # the final statistics are the curves' values at each episode's end
+    ends = b.curves["centroid_distance"][b.lengths, np.arange(3)]
+    np.testing.assert_allclose(b.final["centroid_distance"], ends)
+    assert len(b.trajectory["x"]) == b.lengths[0] + 1
+
+
+def test_central_policies_get_whole_swarm_observations(cfg):
+    central = CentralPotential(cfg)
+    assert policy_mode(central, cfg) == "central"
+    assert policy_mode(PotentialFieldController(cfg), cfg) == "shared"
+    res = evaluate_policies(
+        {"central": central, "shared": PotentialFieldController(cfg)},
+        cfg,
+        episodes=3,
+        seed=1,
+        progress=False,
+    )
+    n, k = cfg.n_agents, observation_size(cfg)
+    assert central.shapes[0] == (3, n * k)
+    c, s = res["policies"]["central"], res["policies"]["shared"]
+    assert c["mode"] == "central" and s["mode"] == "shared"
+    assert c["per_episode"] == s["per_episode"]
+    assert c["mean_return"] == s["mean_return"]
+
+
+def test_space_mismatch_is_an_error(cfg):
+    class Wrong:
+        observation_space = gymnasium.spaces.Box(-1, 1, (3,), np.float32)
+        action_space = gymnasium.spaces.Box(-2, 2, (1,), np.float32)
+
+        def predict(self, obs, state=None, episode_start=None, deterministic=True):
+            raise AssertionError("must not run")
+
+    with pytest.raises(SpaceMismatchError, match=r"policy 'wrong': observation space .*\(34,\)"):
+        evaluate_policies({"wrong": Wrong()}, cfg, episodes=1, seed=0, progress=False)
+
+    class WrongBounds(Wrong):
+        observation_space = gymnasium.spaces.Box(-10, 10, (observation_size(cfg),))
+        action_space = gymnasium.spaces.Box(-2, 2, (2,))
+
+    with pytest.raises(SpaceMismatchError, match=r"\[-1, 1\]"):
+        policy_mode(WrongBounds(), cfg)
+    with pytest.raises(ValueError, match="episodes"):
+        run_episodes(ZeroController(cfg), cfg, 0, seed=0)
+
+
+def test_evaluate_accepts_an_env_and_writes_outputs(tmp_path, cfg):
+    env = gymnasium.make("swarm_envs/SwarmNav-v0", **QUICK)
+    res = evaluate_policies(
+        {"potential": PotentialFieldController(env)},
+        env,
+        episodes=2,
+        seed=0,
+        out_dir=tmp_path,
+        progress=False,
+        gif_size=120,
+    )
+    assert json.loads((tmp_path / "results.json").read_text())["policies"].keys() == {"potential"}
+    assert (tmp_path / "curves.png").stat().st_size > 0
+    assert (tmp_path / "episode0_potential.gif").stat().st_size > 0
+    assert "| potential | 100% |" in format_table(res)
+
+
+# --------------------------------------------------------------------------- CLI
+
+
+def test_cli_writes_all_outputs(tmp_path, capsys):
+    out = tmp_path / "eval"
+    argv = ["--policies", "potential", "zero", "random", "--episodes", "2", "--seed", "3"]
+    rc = main([*argv, *QUICK_ARGS, "--out", str(out), "--no-progress", "--gif-size", "160"])
+    assert rc == 0
+    printed = capsys.readouterr().out
+    assert "| potential |" in printed and "results.json" in printed
+    res = json.loads((out / "results.json").read_text())
+    assert set(res) >= {"env", "config", "episodes", "seed", "policies"}
+    assert res["episodes"] == 2 and res["seed"] == 3 and res["config"]["max_steps"] == 80
+    assert list(res["policies"]) == ["potential", "zero", "random"]
+    assert res["policies"]["potential"]["success_rate"] == 1.0
+    summary = (out / "summary.md").read_text()
+    assert summary.count("\n| ") >= 3 and "| zero |" in summary
+    png = (out / "curves.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    for name in ("potential", "zero", "random"):
+        gif = out / f"episode0_{name}.gif"
+        assert gif.read_bytes()[:6] == b"GIF89a"
+        assert gif.stat().st_size < 1_000_000
+
+
+def test_cli_with_config_file_and_overrides(tmp_path):
+    out = tmp_path / "nav"
+    rc = main(
+        [
+            "--config",
+            "configs/env/paper_navigation.yaml",
+            "--set",
+            "n_agents=5",
+            "--set",
+            "physics.C_o=0.5",
+            "--max-steps",
+            "10",
+            "--policies",
+            "zero",
+            "--episodes",
+            "1",
+            "--out",
+            str(out),
+            "--no-progress",
+            "--no-gif",
+            "--no-plots",
+        ]
+    )
+    assert rc == 0
+    res = json.loads((out / "results.json").read_text())
+    cfg = res["config"]
+    assert (cfg["n_agents"], cfg["max_steps"], cfg["physics"]["C_o"]) == (5, 10, 0.5)
+    assert cfg["physics"]["C_g"] == 15.0 and res["config_path"].endswith("paper_navigation.yaml")
+    assert not (out / "curves.png").exists() and not list(out.glob("*.gif"))
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--policies", "potential", "magic"], "unknown policy 'magic'"),
+        (["--policies", "missing/model.zip"], "model file not found: missing/model.zip"),
+        (["--policies", "nothere.zip"], "model file not found"),
+        (["--env", "swarm_envs/Nope-v0"], "cannot make env"),
+        (["--set", "n_agent=3"], "n_agent"),
+        (["--set", "novalue"], "KEY=VALUE"),
+        (["--episodes", "0"], "--episodes"),
+    ],
+)
+def test_cli_errors(tmp_path, capsys, argv, message):
+    rc = main([*argv, "--out", str(tmp_path / "o"), "--no-progress"])
+    assert rc != 0
+    err = capsys.readouterr().err
+    assert err.startswith("swarm-eval: error:") and message in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_cli_rejects_a_file_that_is_not_a_model(tmp_path, capsys):
+    bogus = tmp_path / "bogus.zip"
+    bogus.write_text("not a zip")
+    assert main(["--policies", str(bogus), "--out", str(tmp_path / "o")]) == 2
+    assert "not a Stable-Baselines3 model zip" in capsys.readouterr().err
+
+
+def test_cli_rejects_a_model_with_mismatched_spaces(tmp_path, capsys):
+    from stable_baselines3 import PPO
+
+    path = tmp_path / "pendulum_ppo.zip"
+    PPO("MlpPolicy", gymnasium.make("Pendulum-v1"), n_steps=16, batch_size=16).save(path)
+    rc = main(["--policies", "potential", str(path), "--out", str(tmp_path / "o")])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert "does not fit the env" in err and "(3,)" in err and "(34,)" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_cli_evaluates_sb3_models_in_both_layouts(tmp_path):
+    from stable_baselines3 import PPO, SAC
+
+    shared = tmp_path / "shared_sac.zip"
+    central = tmp_path / "central_ppo.zip"
+    SAC("MlpPolicy", swarm_nav_v0.vec_env(1, **QUICK), buffer_size=64, seed=0).save(shared)
+    PPO(
+        "MlpPolicy",
+        gymnasium.make("swarm_envs/SwarmNav-v0", **QUICK),
+        n_steps=16,
+        batch_size=16,
+        seed=0,
+    ).save(central)
+    out = tmp_path / "o"
+    argv = ["--policies", str(shared), str(central), str(central), "--episodes", "2"]
+    rc = main([*argv, *QUICK_ARGS, "--max-steps", "5", "--out", str(out), "--no-progress"])
+    assert rc == 0
+    res = json.loads((out / "results.json").read_text())["policies"]
+    assert list(res) == ["shared_sac", "central_ppo", "central_ppo_2"]
+    assert res["shared_sac"]["mode"] == "shared" and res["central_ppo"]["mode"] == "central"
+    assert (out / "episode0_central_ppo_2.gif").exists()
+
+
+def test_sb3_algorithm_detection():
+    common = {"policy_class": {"__module__": "stable_baselines3.common.policies"}}
+    assert _detect_sb3_algorithm({**common, "clip_range": 0.2}) == "PPO"
+    assert _detect_sb3_algorithm(common) == "A2C"
+    sac = {"policy_class": {"__module__": "stable_baselines3.sac.policies"}}
+    assert _detect_sb3_algorithm(sac) == "SAC"
+    td3 = {"policy_class": {"__module__": "stable_baselines3.td3.policies"}}
+    assert _detect_sb3_algorithm(td3) == "TD3"
+
+
+def test_console_script_exits_nonzero_on_a_bad_policy():
+    proc = subprocess.run(
+        [sys.executable, "-m", "train.cli_eval", "--policies", "nope"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 2
+    assert "unknown policy 'nope'" in proc.stderr

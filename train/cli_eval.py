@@ -1,0 +1,206 @@
+"""``swarm-eval``: evaluate analytic controllers and SB3 models on SwarmNav.
+
+Usage::
+
+    swarm-eval --env swarm_envs/SwarmNav-v0 [--config configs/env/paper_navigation.yaml] \\
+        --policies potential zero random [path/to/model.zip ...] \\
+        --episodes 20 --seed 0 --out runs/eval
+
+Policies are built-in names (``potential``, ``zero``, ``random``; see
+:data:`agents.CONTROLLERS`) or paths to Stable-Baselines3 model zips (algorithm
+detected from the zip). Every policy runs on the same seeded episodes; the output
+folder receives ``results.json``, ``summary.md``, ``curves.png`` and one
+``episode0_<policy>.gif`` per policy (see :mod:`train.evaluate` and
+``docs/evaluation.md``).
+
+Exit status: 0 on success; 2 with a message on stderr for an unknown policy name, a
+missing or unreadable model file, a model whose spaces do not fit the env, an unknown
+env id or a bad config.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from swarm_envs import ENV_ID
+
+PROG = "swarm-eval"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command-line parser of ``swarm-eval``."""
+    p = argparse.ArgumentParser(
+        prog=PROG,
+        description="Evaluate policies (analytic controllers, SB3 models) on the same seeded "
+        "SwarmNav episodes; write results.json, summary.md, curves.png and GIFs.",
+    )
+    p.add_argument("--env", default=ENV_ID, help=f"Gymnasium env id (default {ENV_ID})")
+    p.add_argument(
+        "--config",
+        default=None,
+        help="env YAML, e.g. configs/env/paper_navigation.yaml (default: the env's defaults)",
+    )
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a config key (YAML value; dotted for sections, e.g. physics.C_o=0.7); "
+        "repeatable",
+    )
+    p.add_argument("--max-steps", type=int, default=None, help="override max_steps")
+    p.add_argument(
+        "--policies",
+        nargs="+",
+        default=["potential", "zero", "random"],
+        metavar="POLICY",
+        help="built-in names (potential, zero, random) and/or SB3 model .zip paths",
+    )
+    p.add_argument("--episodes", type=int, default=20, help="episodes per policy (default 20)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the episodes (default 0)")
+    p.add_argument("--out", default="runs/eval", help="output folder (default runs/eval)")
+    p.add_argument("--device", default="cpu", help="torch device for SB3 models (default cpu)")
+    p.add_argument(
+        "--stochastic", action="store_true", help="sample SB3 actions (default deterministic)"
+    )
+    p.add_argument("--gif-size", type=int, default=300, help="GIF size in pixels (default 300)")
+    p.add_argument("--no-gif", action="store_true", help="do not write GIFs")
+    p.add_argument("--no-plots", action="store_true", help="do not write curves.png")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    return p
+
+
+class CliError(Exception):
+    """A user error: reported as one line on stderr, exit status 2."""
+
+
+def _parse_overrides(items: Sequence[str], max_steps: int | None) -> dict[str, Any]:
+    import yaml
+
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, raw = item.partition("=")
+        if not sep or not key:
+            raise CliError(f"--set expects KEY=VALUE, got {item!r}")
+        value = yaml.safe_load(raw)
+        *sections, leaf = key.split(".")
+        node = out
+        for s in sections:
+            node = node.setdefault(s, {})
+            if not isinstance(node, dict):
+                raise CliError(f"--set {key}: {s} is not a section")
+        node[leaf] = value
+    if max_steps is not None:
+        out["max_steps"] = max_steps
+    return out
+
+
+def _make_config(env_id: str, config: str | None, overrides: dict[str, Any]) -> Any:
+    import gymnasium
+
+    import swarm_envs  # noqa: F401  (registers the env ids)
+    from agents.base import swarm_config_of
+
+    kwargs = dict(overrides)
+    if config is not None:
+        kwargs["config"] = config
+    try:
+        env = gymnasium.make(env_id, **kwargs)
+    except gymnasium.error.Error as err:
+        raise CliError(f"cannot make env {env_id!r}: {err}") from None
+    except (ValueError, TypeError) as err:
+        raise CliError(f"bad config for {env_id}: {err}") from None
+    try:
+        return swarm_config_of(env)
+    except ValueError:
+        raise CliError(f"{env_id} is not a swarm_envs SwarmNav environment") from None
+    finally:
+        env.close()
+
+
+def _unique(name: str, taken: set[str]) -> str:
+    out, i = name, 2
+    while out in taken:
+        out, i = f"{name}_{i}", i + 1
+    return out
+
+
+def _load_policies(specs: Sequence[str], cfg: Any, seed: int, device: str) -> dict[str, Any]:
+    from agents import CONTROLLERS, make_controller
+    from train.evaluate import SpaceMismatchError, load_sb3_model, policy_mode
+
+    policies: dict[str, Any] = {}
+    for spec in specs:
+        if spec in CONTROLLERS:
+            policies[_unique(spec, set(policies))] = make_controller(spec, cfg, seed=seed)
+            continue
+        path = Path(spec)
+        looks_like_path = path.suffix == ".zip" or "/" in spec or "\\" in spec
+        if not path.is_file():
+            if looks_like_path:
+                raise CliError(f"model file not found: {spec}")
+            raise CliError(
+                f"unknown policy {spec!r}; use one of {', '.join(CONTROLLERS)} or a path to "
+                "a Stable-Baselines3 model .zip"
+            )
+        try:
+            model = load_sb3_model(path, device=device)
+        except (ValueError, OSError) as err:
+            raise CliError(str(err)) from None
+        name = _unique(path.stem, set(policies))
+        try:
+            policy_mode(model, cfg)
+        except SpaceMismatchError as err:
+            raise CliError(f"model {spec} does not fit the env: {err}") from None
+        policies[name] = model
+    return policies
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``swarm-eval``; returns the exit status (0 ok, 2 user error)."""
+    args = build_parser().parse_args(argv)
+    try:
+        if args.episodes < 1:
+            raise CliError(f"--episodes must be >= 1, got {args.episodes}")
+        if args.gif_size < 32:
+            raise CliError(f"--gif-size must be >= 32, got {args.gif_size}")
+        cfg = _make_config(args.env, args.config, _parse_overrides(args.overrides, args.max_steps))
+        policies = _load_policies(args.policies, cfg, args.seed, args.device)
+    except CliError as err:
+        print(f"{PROG}: error: {err}", file=sys.stderr)
+        return 2
+
+    from train.evaluate import evaluate_policies, format_table
+
+    out = Path(args.out)
+    results = evaluate_policies(
+        policies,
+        cfg,
+        args.episodes,
+        args.seed,
+        out_dir=out,
+        env_id=args.env,
+        deterministic=not args.stochastic,
+        progress=not args.no_progress,
+        gif=not args.no_gif,
+        plots=not args.no_plots,
+        gif_size=args.gif_size,
+        extra={"config_path": args.config, "overrides": _parse_overrides(args.overrides, None)},
+    )
+    print(format_table(results))
+    print(f"\nwrote {out / 'results.json'}, {out / 'summary.md'}", end="")
+    if not args.no_plots:
+        print(f", {out / 'curves.png'}", end="")
+    if not args.no_gif:
+        print(f" and {len(policies)} GIF(s) in {out}", end="")
+    print()
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
