@@ -5,9 +5,11 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= reproductions
 
-.PHONY: help install test test-slow lint format reproduce bench clean
+.PHONY: help install demo test test-slow lint format reproduce bench clean
 
 help:
+	@echo "make demo       the main job: train a shared PPO policy, evaluate it against the"
+	@echo "                analytic controller, write runs/demo/ (report, plots, GIFs)"
 	@echo "make test       create .venv if missing, install, run ruff and pytest"
 	@echo "make test-slow  the same, plus the slow tests (full training runs)"
 	@echo "make reproduce  regenerate the paper figures (PNG + JSON + GIF) into $(OUT)/"
@@ -37,6 +39,9 @@ test: lint
 
 test-slow: lint
 	$(BIN)/python -m pytest --runslow $(PYTEST_ARGS)
+
+demo: $(STAMP)
+	$(BIN)/swarm-demo --out runs/demo
 
 reproduce: $(STAMP)
 	$(BIN)/swarm-reproduce --out $(OUT)

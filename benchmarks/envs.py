@@ -21,6 +21,7 @@ import numpy as np
 
 import swarm_envs  # noqa: F401  (registers the Gymnasium id)
 from swarm_envs import swarm_nav_v0
+from swarm_envs._malloc import keep_freed_memory
 
 
 def median_rate(fn: Callable[[], None], seconds: float, repeats: int) -> float:
@@ -78,6 +79,7 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=2.0)
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
+    print(f"glibc keep-freed-memory tuning active: {keep_freed_memory()}")
     s, r = args.seconds, args.repeats
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores; numpy {np.__version__}")
     print()

@@ -18,6 +18,7 @@ import time
 
 import numpy as np
 
+from swarm_envs._malloc import keep_freed_memory
 from swarm_envs.physics import SocialPotentialParams, forces, random_swarm
 
 CASES = [((), 10), ((), 30), ((), 100), ((), 300), ((), 1000), ((64,), 32), ((1024,), 32)]
@@ -45,6 +46,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--seconds", type=float, default=0.5)
     args = parser.parse_args()
+    print(f"glibc keep-freed-memory tuning active: {keep_freed_memory()}")
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, {platform.processor() or ''}")
     print(f"numpy {np.__version__}, python {platform.python_version()}")
     print()

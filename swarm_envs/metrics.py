@@ -114,10 +114,9 @@ def _norm(a: np.ndarray) -> np.ndarray:
 
 def _unit(a: np.ndarray, norm: np.ndarray, keep: np.ndarray | None = None) -> np.ndarray:
     """``a / |a|`` with the zero vector wherever ``keep`` is false (default ``norm > 0``)."""
-    if keep is None:
-        keep = norm > 0
-    safe = np.where(keep, norm, np.ones_like(norm))
-    return np.where(keep[..., None], a / safe[..., None], np.zeros_like(a))
+    # Dividing by inf gives exactly the zero vector where the direction is undefined.
+    safe = np.where(norm > 0 if keep is None else keep, norm, np.inf)
+    return a / safe[..., None]
 
 
 def _relative(x: np.ndarray) -> np.ndarray:

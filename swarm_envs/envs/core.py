@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from swarm_envs import metrics
+from swarm_envs._malloc import keep_freed_memory
 from swarm_envs.config import SwarmConfig
 from swarm_envs.physics import energy, forces, pair_geometry, step, uniform_ball, verlet_step
 
@@ -80,6 +81,7 @@ class SwarmNavCore:
     """
 
     def __init__(self, cfg: SwarmConfig, batch: int = 1, dtype: type = np.float64) -> None:
+        keep_freed_memory()  # per-step temporaries stay in the heap (see swarm_envs._malloc)
         self.cfg = cfg
         self.batch = int(batch)
         self.dtype = np.dtype(dtype)
@@ -141,7 +143,8 @@ class SwarmNavCore:
             maps each of :data:`STAT_KEYS` to a ``(B,)`` array.
         """
         cfg = self.cfg
-        a = check_actions(actions, self.x.shape)
+        # In the core's dtype, so that every adapter gives bit-identical results.
+        a = check_actions(actions, self.x.shape).astype(self.dtype, copy=False)
         control = cfg.u_max * a if a.any() else None
         goal = self._goal_for_physics()
         if cfg.integrator == "velocity_verlet":

@@ -237,11 +237,19 @@ class SwarmNavParallelEnv(_Rendering, ParallelEnv):
                 f"actions must hold exactly the live agents; missing {sorted(missing)}, "
                 f"unknown {sorted(unknown)}"
             )
-        d = self.cfg.dim
-        stacked = np.stack([check_actions(actions[a], (d,)) for a in self.possible_agents]).reshape(
-            1, -1, d
-        )
-        reward, terminated, truncated, stats = self.core.step(stacked)
+        n, d = self.cfg.n_agents, self.cfg.dim
+        try:
+            stacked = np.asarray([actions[a] for a in self.possible_agents], dtype=np.float64)
+        except (TypeError, ValueError):
+            stacked = None
+        if stacked is None or stacked.shape != (n, d):
+            for a in self.possible_agents:  # error path only: name the offending agent
+                try:
+                    check_actions(actions[a], (d,))
+                except ValueError as err:
+                    raise ValueError(f"action of {a}: {err}") from None
+            raise ValueError(f"each agent's action must have shape ({d},)")
+        reward, terminated, truncated, stats = self.core.step(stacked.reshape(1, n, d))
         obs = self.core.observe()[0]
         r, term, trunc = float(reward[0]), bool(terminated[0]), bool(truncated[0])
         info = {k: float(v[0]) for k, v in stats.items()}

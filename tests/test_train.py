@@ -1,0 +1,228 @@
+"""Training: strict configs, smoke runs of both modes and both algorithms, reload + evaluate,
+the CLIs, and (slow) the full demo."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from agents import PotentialFieldController
+from swarm_envs.config import CONFIG_ROOT
+from train import cli_train, demo
+from train.config import (
+    TrainConfig,
+    load_train_config,
+    parse_overrides,
+    train_config_from_mapping,
+)
+from train.evaluate import evaluate_policies, load_sb3_model
+from train.train import build_model, make_training_env, train
+
+TRAIN_CONFIGS = sorted((CONFIG_ROOT / "train").glob("*.yaml"))
+
+# A few thousand timesteps on a small swarm: seconds, not minutes.
+SMOKE_ENV = {"n_agents": 3, "max_steps": 30, "n_neighbors": 2}
+
+
+def smoke_config(**kw) -> TrainConfig:
+    base = {
+        "algo": "PPO",
+        "mode": "shared",
+        "env": SMOKE_ENV,
+        "n_swarms": 2,
+        "total_timesteps": 1024,
+        "net_arch": [16, 16],
+        "hyperparams": {"n_steps": 64, "batch_size": 64, "n_epochs": 1},
+    }
+    base.update(kw)
+    return train_config_from_mapping(base)
+
+
+# --------------------------------------------------------------------------- configs
+
+
+def test_shipped_train_configs_exist():
+    names = {p.stem for p in TRAIN_CONFIGS}
+    assert {"demo", "paper_navigation", "central", "sac_shared"} <= names
+
+
+@pytest.mark.parametrize("path", TRAIN_CONFIGS, ids=lambda p: p.stem)
+def test_every_shipped_train_config_validates(path: Path):
+    tc = load_train_config(path)
+    assert tc.swarm_config().n_agents >= 1
+    assert set(yaml.safe_load(path.read_text())) <= set(tc.to_dict())
+
+
+def test_paper_navigation_train_config_uses_the_paper_scenario():
+    tc = load_train_config(CONFIG_ROOT / "train" / "paper_navigation.yaml")
+    assert tc.swarm_config().n_agents == 31
+    assert tc.swarm_config().physics.C_g == 15.0
+
+
+@pytest.mark.parametrize(
+    ("data", "fragment"),
+    [
+        ({"algoo": "PPO"}, "unknown config key 'algoo'"),
+        ({"algo": "DQN"}, "algo must be one of ('PPO', 'SAC')"),
+        ({"mode": "solo"}, "mode must be one of ('shared', 'central')"),
+        ({"n_swarms": 0}, "n_swarms must be an integer >= 1"),
+        ({"total_timesteps": 1.5}, "total_timesteps must be an integer"),
+        ({"net_arch": []}, "net_arch must be a non-empty list"),
+        ({"net_arch": [64, -1]}, "net_arch must be a non-empty list"),
+        ({"hyperparams": {"learning_rat": 1e-3}}, "hyperparams.learning_rat is not a PPO"),
+        ({"algo": "SAC", "hyperparams": {"n_epochs": 3}}, "hyperparams.n_epochs is not a SAC"),
+        ({"hyperparams": {"seed": 3}}, "hyperparams.seed is not a PPO"),
+        ({"env": {"n_agent": 3}}, "unknown config key 'n_agent'"),
+        ({"env": {"dt": -1.0}}, "dt must be in (0, inf)"),
+        ({"env_config": "no/such.yaml"}, "config file not found"),
+        ({"torch_threads": 0}, "torch_threads must be null or an integer >= 1"),
+    ],
+)
+def test_bad_train_configs_name_the_key(data, fragment):
+    with pytest.raises(ValueError) as info:
+        train_config_from_mapping(data)
+    assert fragment in str(info.value)
+
+
+def test_overrides_parse_dotted_keys_and_yaml_values():
+    got = parse_overrides(["total_timesteps=5000", "env.n_agents=4", "hyperparams.gamma=0.9"])
+    assert got == {"total_timesteps": 5000, "env": {"n_agents": 4}, "hyperparams": {"gamma": 0.9}}
+    with pytest.raises(ValueError, match="key=value"):
+        parse_overrides(["total_timesteps"])
+
+
+def test_overrides_merge_into_file_sections(tmp_path: Path):
+    path = tmp_path / "t.yaml"
+    path.write_text(yaml.safe_dump({"env": {"n_agents": 5, "dt": 0.05}, "seed": 1}))
+    tc = load_train_config(path, {"env": {"n_agents": 3}})
+    assert tc.env == {"n_agents": 3, "dt": 0.05}
+    assert tc.seed == 1
+
+
+# --------------------------------------------------------------------------- training
+
+
+@pytest.mark.parametrize(
+    ("algo", "mode", "hyper"),
+    [
+        ("PPO", "shared", {"n_steps": 64, "batch_size": 64, "n_epochs": 1}),
+        ("PPO", "central", {"n_steps": 64, "batch_size": 64, "n_epochs": 1}),
+        ("SAC", "shared", {"learning_starts": 100, "batch_size": 32, "buffer_size": 2000}),
+        ("SAC", "central", {"learning_starts": 100, "batch_size": 32, "buffer_size": 2000}),
+    ],
+)
+def test_smoke_training_writes_a_reloadable_model(tmp_path: Path, algo, mode, hyper):
+    tc = smoke_config(algo=algo, mode=mode, hyperparams=hyper, total_timesteps=400)
+    model_path = train(tc, tmp_path, progress_bar=False, tensorboard=False, verbose=0)
+    assert model_path.is_file()
+    for name in ("train_config.yaml", "env_config.yaml", "meta.json"):
+        assert (tmp_path / name).is_file()
+    meta = json.loads((tmp_path / "meta.json").read_text())
+    assert meta["algo"] == algo and meta["mode"] == mode and meta["swarm_envs"]
+    # The saved config reloads into the same run description.
+    assert load_train_config(tmp_path / "train_config.yaml") == tc
+
+    model = load_sb3_model(model_path)
+    cfg = tc.swarm_config()
+    results = evaluate_policies(
+        {"learned": model, "potential": PotentialFieldController.from_config(cfg)},
+        cfg,
+        episodes=3,
+        seed=5,
+        progress=False,
+    )
+    learned = results["policies"]["learned"]
+    assert np.isfinite(learned["mean_return"])
+    assert learned["mode"] == mode
+
+
+def test_training_is_deterministic_for_a_seed(tmp_path: Path):
+    tc = smoke_config(total_timesteps=256, torch_threads=1)
+    params = []
+    for run in ("a", "b"):
+        train(tc, tmp_path / run, progress_bar=False, tensorboard=False, verbose=0)
+        model = load_sb3_model(tmp_path / run / "model.zip")
+        params.append([p.detach().numpy().copy() for p in model.policy.parameters()])
+    for p, q in zip(params[0], params[1], strict=True):
+        np.testing.assert_array_equal(p, q)
+
+
+def test_shared_mode_uses_one_slot_per_agent():
+    tc = smoke_config(n_swarms=3)
+    venv = make_training_env(tc)
+    assert venv.num_envs == 3 * SMOKE_ENV["n_agents"]
+    model = build_model(tc, venv)
+    assert model.observation_space.shape == venv.observation_space.shape
+    venv.close()
+
+
+def test_periodic_evaluation_logs_and_keeps_the_best_model(tmp_path: Path):
+    tc = smoke_config(total_timesteps=512, eval_freq=256, eval_episodes=2)
+    train(tc, tmp_path, progress_bar=False, tensorboard=True, verbose=0)
+    meta = json.loads((tmp_path / "meta.json").read_text())
+    # SB3 finishes its last rollout past total_timesteps: at least one eval per 256 steps.
+    steps = [e["timesteps"] for e in meta["evaluations"]]
+    assert len(steps) >= 2 and steps == sorted(steps)
+    assert (tmp_path / "best_model.zip").is_file()
+    assert any((tmp_path / "tensorboard").rglob("events.out.tfevents*"))
+
+
+# --------------------------------------------------------------------------- CLIs
+
+
+def test_cli_train_rejects_bad_config_with_exit_2(tmp_path: Path, capsys):
+    path = tmp_path / "t.yaml"
+    path.write_text(yaml.safe_dump({"algo": "PPO", "n_swarm": 2}))
+    assert cli_train.main(["--config", str(path)]) == 2
+    assert "unknown config key 'n_swarm'" in capsys.readouterr().err
+
+
+def test_cli_train_runs_with_overrides(tmp_path: Path):
+    path = tmp_path / "t.yaml"
+    path.write_text(yaml.safe_dump(smoke_config().to_dict()))
+    out = tmp_path / "run"
+    code = cli_train.main(
+        ["--config", str(path), "--out", str(out), "--no-progress", "total_timesteps=128"]
+    )
+    assert code == 0
+    assert load_train_config(out / "train_config.yaml").total_timesteps == 128
+
+
+def test_demo_compare_criteria():
+    base = {
+        "mean_return": 8.0,
+        "success_rate": 1.0,
+        "mean_time_to_goal": 12.0,
+        "collisions_per_episode": 0.1,
+    }
+    better = {**base, "mean_return": 12.0, "mean_time_to_goal": 4.0}
+    assert all(ok for _, ok, _ in demo.compare(better, base))
+    worse = {**better, "success_rate": 0.9}
+    assert [ok for _, ok, _ in demo.compare(worse, base)] == [True, False, True, True]
+    never = {**better, "mean_time_to_goal": None}
+    assert not demo.compare(never, base)[2][1]
+
+
+def test_demo_pipeline_smoke(tmp_path: Path):
+    path = tmp_path / "t.yaml"
+    path.write_text(yaml.safe_dump(smoke_config(total_timesteps=256).to_dict()))
+    code = demo.main(
+        ["--config", str(path), "--out", str(tmp_path / "demo"), "--episodes", "3", "--no-progress"]
+    )
+    assert code in (0, 1)  # an untrained policy may lose; the files must be there
+    for name in ("results.json", "summary.md", "report.md", "curves.png", "model.zip"):
+        assert (tmp_path / "demo" / name).is_file()
+    results = json.loads((tmp_path / "demo" / "results.json").read_text())
+    assert set(results["policies"]) == {"potential", "zero", "random", "learned"}
+
+
+@pytest.mark.slow
+def test_full_demo_learned_policy_beats_the_analytic_controller(tmp_path: Path):
+    """The main job, as `make demo` runs it (about 3-4 minutes on 2 cores)."""
+    code = demo.main(["--out", str(tmp_path / "demo"), "--no-progress"])
+    report = (tmp_path / "demo" / "report.md").read_text()
+    assert code == 0, report
