@@ -98,6 +98,9 @@ class SwarmNavCore:
         self._geometry: tuple[list[np.ndarray], np.ndarray] | None = None
         self._masked: tuple[Any, np.ndarray] | None = None
         self._physics_goal = cfg.physics.C_g > 0 and cfg.goal_in_physics
+        self._neighbor_scale = np.array(
+            [1.0 / cfg.obs_neighbor_scale] * d + [1.0 / cfg.obs_velocity_scale] * d, self.dtype
+        )
 
     # ------------------------------------------------------------------ reset
     def reset(self, rng: np.random.Generator, which: np.ndarray | None = None) -> None:
@@ -253,8 +256,8 @@ class SwarmNavCore:
                 xv = np.concatenate([self.x, self.v], axis=-1).reshape(B * N, 2 * d)
                 rel = np.take(xv, flat, axis=0).reshape(B, N, k_real, 2 * d)
                 rel -= xv.reshape(B, N, 1, 2 * d)
-                nb[:, :, :k_real, :d] = rel[..., :d] / cfg.obs_neighbor_scale
-                nb[:, :, :k_real, d : 2 * d] = rel[..., d:] / cfg.obs_velocity_scale
+                rel *= self._neighbor_scale  # 1/obs_neighbor_scale (d), 1/obs_velocity_scale (d)
+                nb[:, :, :k_real, : 2 * d] = rel
                 nb[:, :, :k_real, 2 * d] = 1.0
         np.clip(obs, -OBS_BOUND, OBS_BOUND, out=obs)
         return obs
