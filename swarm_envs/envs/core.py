@@ -26,7 +26,15 @@ import numpy as np
 from swarm_envs import metrics
 from swarm_envs._malloc import keep_freed_memory
 from swarm_envs.config import SwarmConfig
-from swarm_envs.physics import energy, forces, pair_geometry, step, uniform_ball, verlet_step
+from swarm_envs.physics import (
+    PairGeometry,
+    energy,
+    forces,
+    pair_geometry,
+    step,
+    uniform_ball,
+    verlet_step,
+)
 
 #: Every observation component is clipped into ``[−OBS_BOUND, OBS_BOUND]``.
 OBS_BOUND = 10.0
@@ -95,7 +103,7 @@ class SwarmNavCore:
         self.prev_distance = np.ones(B, self.dtype)
         self.prev_arrived = np.zeros(B, self.dtype)
         self._f_passive: np.ndarray | None = None  # velocity Verlet carries the force
-        self._geometry: tuple[list[np.ndarray], np.ndarray] | None = None
+        self._geometry: PairGeometry | None = None
         self._masked: tuple[Any, np.ndarray] | None = None
         self._physics_goal = cfg.physics.C_g > 0 and cfg.goal_in_physics
         self._neighbor_scale = np.array(
@@ -203,7 +211,7 @@ class SwarmNavCore:
         """
         assert self._geometry is not None
         if self._masked is None or self._masked[0] is not self._geometry:
-            rho = self._geometry[1].copy()
+            rho = self._geometry.rho.copy()
             diag = np.arange(self.cfg.n_agents)
             rho[:, diag, diag] = np.inf
             self._masked = (self._geometry, rho)

@@ -9,6 +9,7 @@ from swarm_envs.physics.initial import random_swarm, uniform_ball
 from swarm_envs.physics.integrators import INTEGRATORS, simulate, step, verlet_step
 from swarm_envs.physics.social_potential import (
     RHO_FLOOR,
+    PairGeometry,
     SocialPotentialParams,
     energy,
     forces,
@@ -23,6 +24,7 @@ from swarm_envs.physics.social_potential import (
 __all__ = [
     "INTEGRATORS",
     "RHO_FLOOR",
+    "PairGeometry",
     "SocialPotentialParams",
     "energy",
     "forces",

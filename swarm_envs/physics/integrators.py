@@ -28,9 +28,12 @@ from typing import Any
 import numpy as np
 
 from swarm_envs.physics._validation import check_goal, check_real, check_state
-from swarm_envs.physics.social_potential import SocialPotentialParams, forces, pair_geometry
-
-Geometry = tuple[list[np.ndarray], np.ndarray]
+from swarm_envs.physics.social_potential import (
+    PairGeometry,
+    SocialPotentialParams,
+    forces,
+    pair_geometry,
+)
 
 INTEGRATORS = ("semi_implicit_euler", "velocity_verlet")
 
@@ -52,7 +55,7 @@ def step(
     dt: float,
     goal: np.ndarray | None = None,
     control: np.ndarray | None = None,
-    geometry: Geometry | None = None,
+    geometry: PairGeometry | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """One semi-implicit (symplectic) Euler step of the social potential model.
 
@@ -79,7 +82,7 @@ def verlet_step(
     dt: float,
     goal: np.ndarray | None = None,
     control: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, Geometry]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, PairGeometry]:
     """One velocity-Verlet step; ``f`` is the passive force carried from the last step.
 
     The control ``u`` is held over the step (both half-kicks). Returns

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
+from typing import NamedTuple
 
 import numpy as np
 
@@ -140,19 +141,37 @@ def goal_force(x: np.ndarray, params: SocialPotentialParams, goal: np.ndarray) -
     return offset * scale[..., None]
 
 
-def pair_geometry(x: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
-    """Pairwise offsets and distances: ``([r_ij[..., k] for k < d], ρ_ij)``.
+class PairGeometry(NamedTuple):
+    """Pairwise offsets, distances and memoised decays of one set of positions.
 
-    ``r_ij = r_j − r_i`` per component, each ``(..., N, N)``; ``ρ`` is ``(..., N, N)``
-    with zeros on the diagonal. Components are kept as separate contiguous arrays, which
-    is faster than one ``(..., N, N, d)`` array for the reductions in :func:`forces`.
+    ``dx[k]`` is ``r_ij[..., k] = x_j[k] − x_i[k]`` and ``rho`` is ``ρ_ij``, each
+    ``(..., N, N)`` (zeros on the diagonal); components are separate contiguous arrays,
+    faster than one ``(..., N, N, d)`` array for the reductions in :func:`forces`.
+    :meth:`decay` caches ``e^{−ρ/l}`` per length ``l``, so that the forces and the
+    energy at the same positions compute each exponential once. Treat as read-only.
     """
+
+    dx: list[np.ndarray]
+    rho: np.ndarray
+    decays: dict[float, np.ndarray]
+
+    def decay(self, length: float) -> np.ndarray:
+        """``e^{−ρ_ij / length}`` (cached; do not modify the returned array)."""
+        out = self.decays.get(length)
+        if out is None:
+            out = np.exp(self.rho * (-1.0 / length))
+            self.decays[length] = out
+        return out
+
+
+def pair_geometry(x: np.ndarray) -> PairGeometry:
+    """The :class:`PairGeometry` of positions ``x`` shaped ``(..., N, d)``."""
     d = x.shape[-1]
     dx = [x[..., None, :, k] - x[..., :, None, k] for k in range(d)]
     rho2 = dx[0] * dx[0]
     for k in range(1, d):
         rho2 += dx[k] * dx[k]
-    return dx, np.sqrt(rho2, out=rho2)
+    return PairGeometry(dx, np.sqrt(rho2, out=rho2), {})
 
 
 def forces(
@@ -161,7 +180,7 @@ def forces(
     params: SocialPotentialParams,
     goal: np.ndarray | None = None,
     *,
-    geometry: tuple[list[np.ndarray], np.ndarray] | None = None,
+    geometry: PairGeometry | None = None,
 ) -> np.ndarray:
     """Total passive force on every agent (eq. 14, plus eq. 20's goal term).
 
@@ -191,21 +210,21 @@ def forces(
     x, v = check_state(x, v)
     p = params
     d = x.shape[-1]
-    dx, rho = pair_geometry(x) if geometry is None else geometry
+    geo = pair_geometry(x) if geometry is None else geometry
+    dx, rho = geo.dx, geo.rho
     inv_rho = np.maximum(rho, RHO_FLOOR)
     np.reciprocal(inv_rho, out=inv_rho)
 
     # Scalar pair magnitude along u_ij (eq. 10).
-    scalar = np.exp(rho * (-1.0 / p.l_a))
-    scalar *= p.C_a / p.l_a
-    scalar -= (p.C_r / p.l_r) * np.exp(rho * (-1.0 / p.l_r))
+    scalar = geo.decay(p.l_a) * (p.C_a / p.l_a)
+    scalar -= (p.C_r / p.l_r) * geo.decay(p.l_r)
     if p.C_o > 0:
         # Alignment (eq. 11): −C_o ((v_i − v_j)·u_ij) e^{−ρ/l_o}.
         proj = (v[..., :, None, 0] - v[..., None, :, 0]) * dx[0]
         for k in range(1, d):
             proj += (v[..., :, None, k] - v[..., None, :, k]) * dx[k]
         proj *= inv_rho
-        proj *= np.exp(rho * (-1.0 / p.l_o))
+        proj *= geo.decay(p.l_o)
         proj *= p.C_o
         scalar -= proj
     scalar *= inv_rho  # now F_i = Σ_j scalar_ij r_ij
@@ -230,14 +249,16 @@ def potential_energy(
     params: SocialPotentialParams,
     goal: np.ndarray | None = None,
     *,
-    geometry: tuple[list[np.ndarray], np.ndarray] | None = None,
+    geometry: PairGeometry | None = None,
 ) -> np.ndarray:
     """``Σ_{i<j} U(ρ_ij) + Σ_i V_goal(r_i)`` (eqs. 9, 16, 19), shaped ``(...)``."""
     x, _ = check_state(x)
-    _, rho = pair_geometry(x) if geometry is None else geometry
+    geo = pair_geometry(x) if geometry is None else geometry
     n = x.shape[-2]
-    # Sum over all ordered pairs, remove the N diagonal terms U(0), halve.
-    pairs = 0.5 * (pair_potential(rho, params).sum(axis=(-2, -1)) - n * (params.C_r - params.C_a))
+    # U(ρ) = C_r e^{−ρ/l_r} − C_a e^{−ρ/l_a} over all ordered pairs, minus the N diagonal
+    # terms U(0), halved.
+    u = params.C_r * geo.decay(params.l_r) - params.C_a * geo.decay(params.l_a)
+    pairs = 0.5 * (u.sum(axis=(-2, -1)) - n * (params.C_r - params.C_a))
     if goal is not None:
         goal = check_goal(goal, x)
         if params.C_g > 0:
@@ -251,7 +272,7 @@ def energy(
     params: SocialPotentialParams,
     goal: np.ndarray | None = None,
     *,
-    geometry: tuple[list[np.ndarray], np.ndarray] | None = None,
+    geometry: PairGeometry | None = None,
 ) -> np.ndarray:
     """Total energy φ (eq. 16): kinetic + pair potential + goal potential, shaped ``(...)``.
 
