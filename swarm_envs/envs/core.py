@@ -105,6 +105,7 @@ class SwarmNavCore:
         self._f_passive: np.ndarray | None = None  # velocity Verlet carries the force
         self._geometry: PairGeometry | None = None
         self._masked: tuple[Any, np.ndarray] | None = None
+        self._nbr: tuple[Any, np.ndarray] | None = None
         self._physics_goal = cfg.physics.C_g > 0 and cfg.goal_in_physics
         self._neighbor_scale = np.array(
             [1.0 / cfg.obs_neighbor_scale] * d + [1.0 / cfg.obs_velocity_scale] * d, self.dtype
@@ -224,7 +225,10 @@ class SwarmNavCore:
         goal_dist = self._goal_distances()
         arrived = (goal_dist <= cfg.goal_radius).mean(axis=-1)
         n = cfg.n_agents
-        nnd = rho.min(axis=-1).mean(axis=-1) if n > 1 else np.zeros(self.batch)
+        if n > 1:  # distance to the nearest neighbour, from the shared neighbour sort
+            nnd = np.take_along_axis(rho, self._nearest()[..., :1], axis=-1)[..., 0].mean(axis=-1)
+        else:
+            nnd = np.zeros(self.batch)
         collisions = np.count_nonzero(rho < cfg.collision_radius, axis=(-2, -1)) // 2
         centroid = self.x.mean(axis=-2)
         return {
@@ -259,7 +263,7 @@ class SwarmNavCore:
             nb[...] = 0.0
             k_real = min(k, N - 1)
             if k_real > 0:
-                nbr = self._nearest(k_real)  # (B, N, k_real), nearest first
+                nbr = self._nearest()[..., :k_real]  # (B, N, k_real), nearest first
                 flat = (nbr + (np.arange(B) * N)[:, None, None]).reshape(-1)
                 xv = np.concatenate([self.x, self.v], axis=-1).reshape(B * N, 2 * d)
                 rel = np.take(xv, flat, axis=0).reshape(B, N, k_real, 2 * d)
@@ -270,16 +274,25 @@ class SwarmNavCore:
         np.clip(obs, -OBS_BOUND, OBS_BOUND, out=obs)
         return obs
 
-    def _nearest(self, k: int) -> np.ndarray:
-        """Indices ``(B, N, k)`` of each agent's k nearest other agents, nearest first.
+    def _nearest(self) -> np.ndarray:
+        """Indices ``(B, N, k)`` of each agent's nearest other agents, nearest first.
 
-        A full argsort of each row is faster than ``argpartition`` + sort for N ≲ 64;
-        above that, partition first. Ties break deterministically (same input, same order).
+        ``k = min(max(n_neighbors, 1), N − 1)``: the observation's neighbours and, in
+        column 0, the nearest neighbour for the NND statistic. Cached per state. A full
+        argsort of each row is faster than ``argpartition`` + sort for N ≲ 64; above
+        that, partition first. Ties break deterministically (same input, same order).
         """
+        assert self._geometry is not None and self.cfg.n_agents > 1
+        if self._nbr is not None and self._nbr[0] is self._geometry:
+            return self._nbr[1]
         rho = self._distances()
         n = rho.shape[-1]
+        k = min(max(self.cfg.n_neighbors, 1), n - 1)
         if n <= 64 or k >= n - 1:
-            return np.argsort(rho, axis=-1)[..., :k]
-        cand = np.argpartition(rho, k - 1, axis=-1)[..., :k]
-        order = np.argsort(np.take_along_axis(rho, cand, axis=-1), axis=-1)
-        return np.take_along_axis(cand, order, axis=-1)
+            nbr = np.argsort(rho, axis=-1)[..., :k]
+        else:
+            cand = np.argpartition(rho, k - 1, axis=-1)[..., :k]
+            order = np.argsort(np.take_along_axis(rho, cand, axis=-1), axis=-1)
+            nbr = np.take_along_axis(cand, order, axis=-1)
+        self._nbr = (self._geometry, nbr)
+        return nbr

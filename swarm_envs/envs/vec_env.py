@@ -16,13 +16,21 @@ Infos: every slot's info dict is fresh. The swarm's statistics
 (``b·N``) only, which keeps the step cheap; :attr:`SwarmNavVecEnv.last_stats` holds
 them as ``(B,)`` arrays.
 
+Large batches are split over worker threads (``n_threads``; default one per 512
+swarms, up to the CPU count), each stepping its own slice of swarms on its own core:
+numpy releases the GIL inside its array loops, so the slices run in parallel. A seed
+gives the same rollout for the same ``n_threads``.
+
 The state is float32 by default (``dtype=np.float64`` for exact agreement with the
 float64 single-swarm envs); observations are float32 either way.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+import itertools
+import os
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import gymnasium
@@ -43,6 +51,7 @@ class SwarmNavVecEnv(VecEnv):
         config: str | None = None,
         render_mode: str | None = None,
         dtype: type = np.float32,
+        n_threads: int | None = None,
         **kwargs: Any,
     ) -> None:
         if isinstance(n_swarms, bool) or not isinstance(n_swarms, (int, np.integer)):
@@ -58,8 +67,14 @@ class SwarmNavVecEnv(VecEnv):
         self.n_agents = self.cfg.n_agents
         if np.dtype(dtype) not in (np.dtype(np.float32), np.dtype(np.float64)):
             raise ValueError(f"dtype must be float32 or float64, got {dtype!r}")
-        self.core = SwarmNavCore(self.cfg, batch=self.n_swarms, dtype=dtype)
-        obs_space = spaces.Box(-OBS_BOUND, OBS_BOUND, (self.core.obs_dim,), np.float32)
+        self.n_threads = self._check_threads(n_threads)
+        bounds = np.linspace(0, self.n_swarms, self.n_threads + 1).round().astype(int)
+        self._slices = [slice(int(lo), int(hi)) for lo, hi in itertools.pairwise(bounds)]
+        self.cores = [
+            SwarmNavCore(self.cfg, batch=sl.stop - sl.start, dtype=dtype) for sl in self._slices
+        ]
+        self._pool: ThreadPoolExecutor | None = None
+        obs_space = spaces.Box(-OBS_BOUND, OBS_BOUND, (self.cores[0].obs_dim,), np.float32)
         act_space = spaces.Box(-1.0, 1.0, (self.cfg.dim,), np.float32)
         self.render_mode = render_mode  # before VecEnv.__init__, which reads it via get_attr
         super().__init__(self.n_swarms * self.n_agents, obs_space, act_space)
@@ -69,19 +84,68 @@ class SwarmNavVecEnv(VecEnv):
         self.episode_returns = np.zeros(self.n_swarms)
         self.episode_lengths = np.zeros(self.n_swarms, np.int64)
 
+    def _check_threads(self, n_threads: int | None) -> int:
+        """Worker threads: given, or 1 per 512 swarms up to the CPU count (at least 1)."""
+        if n_threads is None:
+            return max(1, min(os.cpu_count() or 1, self.n_swarms // 512))
+        if isinstance(n_threads, bool) or not isinstance(n_threads, (int, np.integer)):
+            raise ValueError(
+                f"n_threads must be null or an integer in [1, n_swarms], got {n_threads!r}"
+            )
+        if not 1 <= n_threads <= self.n_swarms:
+            raise ValueError(
+                f"n_threads must be in [1, {self.n_swarms}] (n_swarms), got {n_threads}"
+            )
+        return int(n_threads)
+
+    @property
+    def core(self) -> SwarmNavCore:
+        """The single core (``n_threads == 1``); with several threads use :attr:`cores`."""
+        if len(self.cores) != 1:
+            raise AttributeError(f"this vec_env runs {len(self.cores)} cores; use .cores")
+        return self.cores[0]
+
+    def _map(self, fn: Callable[[SwarmNavCore, slice], Any]) -> list[Any]:
+        """``fn(core, swarm_slice)`` for every core: in worker threads when there are several.
+
+        numpy releases the GIL inside its array loops, so the cores' steps overlap.
+        """
+        if len(self.cores) == 1:
+            return [fn(self.cores[0], self._slices[0])]
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(len(self.cores), thread_name_prefix="swarm_nav")
+        return list(self._pool.map(fn, self.cores, self._slices))
+
+    def _observe(self) -> np.ndarray:
+        return np.concatenate(self._map(lambda core, _: core.observe()), axis=0)
+
+    def _stats(self) -> dict[str, np.ndarray]:
+        parts = [core.stats() for core in self.cores]
+        return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_pool"] = None  # threads do not pickle; recreated on first use
+        return state
+
     # ------------------------------------------------------------------ VecEnv API
     def reset(self) -> np.ndarray:
-        """Reset every swarm. Uses the seed of :meth:`seed` once, if one was set."""
+        """Reset every swarm. Uses the seed of :meth:`seed` once, if one was set.
+
+        Starts are drawn core after core from one generator, so a seed gives the same
+        swarms for the same ``n_threads``.
+        """
         seed = self._seeds[0]
         if seed is not None:
             self._rng = np.random.default_rng(seed)
         self._reset_seeds()
-        self.core.reset(self._rng)
+        for core in self.cores:
+            core.reset(self._rng)
         self.episode_returns[:] = 0.0
         self.episode_lengths[:] = 0
-        self.last_stats = self.core.stats()
+        self.last_stats = self._stats()
         self.reset_infos = [{} for _ in range(self.num_envs)]
-        return self.core.observe().reshape(self.num_envs, -1)
+        return self._observe().reshape(self.num_envs, -1)
 
     def step_async(self, actions: np.ndarray) -> None:
         self._actions = np.asarray(actions)
@@ -94,8 +158,11 @@ class SwarmNavVecEnv(VecEnv):
         if actions.shape != (self.num_envs, d):
             raise ValueError(f"actions must have shape {(self.num_envs, d)}, got {actions.shape}")
         self._actions = None
-        reward, terminated, truncated, stats = self.core.step(actions.reshape(B, N, d))
-        obs = self.core.observe()
+        a = actions.reshape(B, N, d)
+        parts = self._map(lambda core, sl: (*core.step(a[sl]), core.observe()))
+        reward, terminated, truncated = (np.concatenate([p[i] for p in parts]) for i in range(3))
+        stats = {k: np.concatenate([p[3][k] for p in parts]) for k in parts[0][3]}
+        obs = np.concatenate([p[4] for p in parts], axis=0)
         self.last_stats = stats
         self.episode_returns += reward
         self.episode_lengths += 1
@@ -117,28 +184,34 @@ class SwarmNavVecEnv(VecEnv):
                     info["terminal_observation"] = obs[b, i]
                     info["TimeLimit.truncated"] = time_limit
                     info["swarm_episode"] = episode
-            self.core.reset(self._rng, which=done)
+            obs = obs.copy()  # the terminal observations above keep the old rows
+            for core, sl in zip(self.cores, self._slices, strict=True):  # in order: seeded
+                if done[sl].any():
+                    core.reset(self._rng, which=done[sl])
+                    obs[sl] = core.observe()
             self.episode_returns[done] = 0.0
             self.episode_lengths[done] = 0
-            obs = self.core.observe()
         rewards = np.repeat(reward, N).astype(np.float32)
         dones = np.repeat(done, N)
         return obs.reshape(self.num_envs, -1), rewards, dones, infos
 
     def close(self) -> None:
-        return None
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
 
     def get_images(self) -> Sequence[np.ndarray | None]:
         from swarm_envs.render import draw_swarm
 
         return [
             draw_swarm(
-                self.core.x[b],
-                goal=self.core.goal[b],
+                core.x[b],
+                goal=core.goal[b],
                 goal_radius=self.cfg.goal_radius,
-                velocities=self.core.v[b],
+                velocities=core.v[b],
             )
-            for b in range(self.n_swarms)
+            for core in self.cores
+            for b in range(core.batch)
         ]
 
     # ------------------------------------------------------------------ attributes
