@@ -9,7 +9,6 @@ from __future__ import annotations
 import contextlib
 import math
 import pickle
-import random
 import warnings
 from collections.abc import Iterator
 from typing import Any
@@ -18,7 +17,7 @@ import cloudpickle
 import gymnasium as gym
 import numpy as np
 import pytest
-import torch
+from global_rng import assert_same_rng_states, rng_states
 from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
@@ -60,20 +59,6 @@ def assert_info_ok(info: dict[str, Any]) -> None:
         value = info[key]
         assert type(value) is float, f"info[{key!r}] is {type(value).__name__}, not float"
         assert math.isfinite(value), f"info[{key!r}] = {value}"
-
-
-def rng_states() -> tuple[Any, Any, torch.Tensor]:
-    """The global generators' states: numpy's legacy one, Python's and torch's."""
-    return np.random.get_state(), random.getstate(), torch.get_rng_state()  # noqa: NPY002
-
-
-def assert_same_rng_states(a: tuple[Any, Any, torch.Tensor], b: tuple[Any, Any, torch.Tensor]):
-    (np_a, py_a, torch_a), (np_b, py_b, torch_b) = a, b
-    assert np_a[0] == np_b[0]
-    assert np.array_equal(np_a[1], np_b[1])
-    assert np_a[2:] == np_b[2:]
-    assert py_a == py_b
-    assert torch.equal(torch_a, torch_b)
 
 
 # --------------------------------------------------------------------------- checkers

@@ -9,7 +9,6 @@ from __future__ import annotations
 import contextlib
 import math
 import pickle
-import random
 import warnings
 from collections.abc import Iterator
 from typing import Any
@@ -18,7 +17,7 @@ import cloudpickle
 import gymnasium as gym
 import numpy as np
 import pytest
-import torch
+from global_rng import assert_same_rng_states, rng_states
 from pettingzoo.test import (
     api_test,
     max_cycles_test,
@@ -57,20 +56,6 @@ def assert_info_ok(info: dict[str, Any]) -> None:
     for key in STAT_KEYS:
         assert type(info[key]) is float, f"info[{key!r}] is {type(info[key]).__name__}"
         assert math.isfinite(info[key]), f"info[{key!r}] = {info[key]}"
-
-
-def rng_states() -> tuple[Any, Any, torch.Tensor]:
-    """The global generators' states: numpy's legacy one, Python's and torch's."""
-    return np.random.get_state(), random.getstate(), torch.get_rng_state()  # noqa: NPY002
-
-
-def assert_same_rng_states(a: tuple[Any, Any, torch.Tensor], b: tuple[Any, Any, torch.Tensor]):
-    (np_a, py_a, torch_a), (np_b, py_b, torch_b) = a, b
-    assert np_a[0] == np_b[0]
-    assert np.array_equal(np_a[1], np_b[1])
-    assert np_a[2:] == np_b[2:]
-    assert py_a == py_b
-    assert torch.equal(torch_a, torch_b)
 
 
 # --------------------------------------------------------------------------- official tests
