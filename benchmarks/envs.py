@@ -13,6 +13,7 @@ timed in the same run at the same N and the ratio printed.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import platform
 import statistics
@@ -74,7 +75,18 @@ def bench_vmas(n: int, b: int, seconds: float, repeats: int) -> tuple[float, flo
         import vmas
     except ImportError:
         return None
-    env = vmas.make_env("navigation", num_envs=b, device="cpu", n_agents=n, continuous_actions=True)
+    # VMAS spawns agents and goals by rejection sampling at 0.25 spacing in a box of
+    # half-width 1 by default, which never finishes for N = 32: widen it with sqrt(N).
+    half_width = max(1.0, 0.5 * math.sqrt(n))
+    env = vmas.make_env(
+        "navigation",
+        num_envs=b,
+        device="cpu",
+        n_agents=n,
+        continuous_actions=True,
+        world_spawning_x=half_width,
+        world_spawning_y=half_width,
+    )
     env.reset()
     acts = [torch.zeros(b, 2) for _ in range(n)]
     return rates(lambda: env.step(acts), seconds, repeats)
