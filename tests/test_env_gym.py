@@ -6,38 +6,23 @@ TESTING.md items 1–3 (checkers, ``gym.make``), 11–13 (edge separations, seed
 
 from __future__ import annotations
 
-import contextlib
 import math
 import pickle
 import warnings
-from collections.abc import Iterator
 from typing import Any
 
 import cloudpickle
 import gymnasium as gym
 import numpy as np
 import pytest
-from global_rng import assert_same_rng_states, rng_states
 from gymnasium.utils.env_checker import check_env as gym_check_env
+from helpers import assert_same_rng_states, rng_states, strict_warnings
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 from swarm_envs import ENV_ID
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs import OBS_BOUND, STAT_KEYS, SwarmNavEnv, observation_size
 from swarm_envs.physics import simulate
-
-#: The only warning allowed under ``strict_warnings``: ``render_mode="human"`` on a
-#: headless machine (the checkers construct the env in every render mode).
-NO_WINDOW = ".*could not open a window"
-
-
-@contextlib.contextmanager
-def strict_warnings() -> Iterator[None]:
-    """Every warning is an error, except our own headless-window notice."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        warnings.filterwarnings("ignore", message=NO_WINDOW, category=UserWarning)
-        yield
 
 
 def bound_actions(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:

@@ -6,18 +6,15 @@ fresh dicts) and 12, 13, 16 for the parallel and AEC envs.
 
 from __future__ import annotations
 
-import contextlib
 import math
 import pickle
-import warnings
-from collections.abc import Iterator
 from typing import Any
 
 import cloudpickle
 import gymnasium as gym
 import numpy as np
 import pytest
-from global_rng import assert_same_rng_states, rng_states
+from helpers import assert_same_rng_states, rng_states, strict_warnings
 from pettingzoo.test import (
     api_test,
     max_cycles_test,
@@ -29,17 +26,6 @@ from pettingzoo.test import (
 
 from swarm_envs import ENV_ID, swarm_nav_v0
 from swarm_envs.envs import OBS_BOUND, STAT_KEYS, SwarmNavParallelEnv, observation_size
-
-NO_WINDOW = ".*could not open a window"
-
-
-@contextlib.contextmanager
-def strict_warnings() -> Iterator[None]:
-    """Every warning is an error, except our own headless-window notice."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        warnings.filterwarnings("ignore", message=NO_WINDOW, category=UserWarning)
-        yield
 
 
 def zeros(env: SwarmNavParallelEnv) -> dict[str, np.ndarray]:

@@ -6,17 +6,14 @@ reset with ``terminal_observation`` and ``TimeLimit.truncated``; ``seed()``) and
 
 from __future__ import annotations
 
-import contextlib
 import math
 import pickle
-import warnings
-from collections.abc import Iterator
 from typing import Any
 
 import cloudpickle
 import numpy as np
 import pytest
-from global_rng import assert_same_rng_states, rng_states
+from helpers import assert_same_rng_states, rng_states, strict_warnings
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecCheckNan, VecEnv, VecMonitor
 
@@ -26,13 +23,6 @@ from swarm_envs.envs.vec_env import SwarmNavVecEnv
 
 #: Config with which every swarm succeeds on its first step (goal at the start, big radius).
 INSTANT_SUCCESS = {"goal_distance_min": 0.0, "goal_distance_max": 0.0, "goal_radius": 50.0}
-
-
-@contextlib.contextmanager
-def strict_warnings() -> Iterator[None]:
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        yield
 
 
 def bound_actions(rng: np.random.Generator, venv: VecEnv) -> np.ndarray:
