@@ -114,6 +114,11 @@ def simulate(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Integrate the model from ``(x0, v0)`` for ``steps`` steps of length ``dt``.
 
+    The type of ``params`` selects the model: :class:`SocialPotentialParams` (this
+    module), ``ZoneParams`` (:func:`swarm_envs.physics.zone.simulate_zone`),
+    ``PiecewiseParams`` (:func:`swarm_envs.physics.piecewise.simulate_piecewise`) or
+    ``LagrangianParams`` (:func:`swarm_envs.physics.lagrangian.simulate_lagrangian`).
+
     Args:
         params: model parameters (its type selects the model).
         x0, v0: initial positions and velocities ``(..., N, d)``.
@@ -121,7 +126,8 @@ def simulate(
         steps: number of steps, ``≥ 0``.
         goal: goal-sink position broadcastable to ``(..., d)`` (used when ``C_g > 0``).
         control: extra force ``u`` (array, or ``control(t, x, v)``), held over each step.
-        rng: accepted for a uniform signature across models; this model is deterministic.
+        rng: randomness of the stochastic models (zone, piecewise); the social potential
+            model is deterministic and ignores it.
         integrator: one of :data:`INTEGRATORS`.
 
     Returns:
@@ -132,12 +138,15 @@ def simulate(
     >>> xs.shape
     (5, 3, 2)
     """
-    del rng  # deterministic model
     if not isinstance(params, SocialPotentialParams):
-        raise ValueError(
-            f"simulate: unsupported parameter type {type(params).__name__}; "
-            "expected SocialPotentialParams"
-        )
+        other = _model_simulator(params)
+        if control is not None or integrator != "semi_implicit_euler":
+            raise ValueError(
+                f"simulate: control= and integrator= apply to SocialPotentialParams only, "
+                f"not to {type(params).__name__}"
+            )
+        return other(params, x0, v0, dt=dt, steps=steps, goal=goal, rng=rng)
+    del rng  # deterministic model
     check_real("simulate", "dt", dt, low=0.0, low_inclusive=False)
     if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
         raise ValueError(f"simulate.steps must be an integer >= 0, got {steps!r}")
@@ -167,3 +176,23 @@ def simulate(
         x, v, f, _ = verlet_step(x, v, f, params, dt=dt, goal=goal, control=control_at(n, x, v))
         xs[n + 1], vs[n + 1] = x, v
     return xs, vs
+
+
+def _model_simulator(params: Any) -> Callable[..., tuple[np.ndarray, np.ndarray]]:
+    """The ``simulate_*`` function of the model whose parameter type ``params`` has."""
+    from swarm_envs.physics.lagrangian import LagrangianParams, simulate_lagrangian
+    from swarm_envs.physics.piecewise import PiecewiseParams, simulate_piecewise
+    from swarm_envs.physics.zone import ZoneParams, simulate_zone
+
+    table: dict[type, Callable[..., tuple[np.ndarray, np.ndarray]]] = {
+        ZoneParams: simulate_zone,
+        PiecewiseParams: simulate_piecewise,
+        LagrangianParams: simulate_lagrangian,
+    }
+    for cls, fn in table.items():
+        if isinstance(params, cls):
+            return fn
+    known = ", ".join(["SocialPotentialParams", *(c.__name__ for c in table)])
+    raise ValueError(
+        f"simulate: unsupported parameter type {type(params).__name__}; expected one of {known}"
+    )
