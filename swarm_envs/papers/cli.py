@@ -13,11 +13,19 @@ arguments (an unknown figure name, ``--seeds 0``).
 
 Figures (:data:`swarm_envs.papers.mabrouk_mcinnes.FIGURES`): ``fig1``, ``fig4_5``,
 ``fig6_8``, ``fig9``, ``fig10``, ``fig11``.
+
+The other seed papers (``--papers``, all by default) write into ``DIR/<paper>/``:
+``naterop_zone`` (Naterop et al. table 3, zone model), ``naterop_piecewise`` (their
+force model's dispersal and the drag fix) and ``vanualailai_sharma`` (Figs. 1–5 of the
+Lagrangian model). ``--only`` selects Mabrouk & McInnes figures and implies
+``--papers mabrouk_mcinnes``.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
+import inspect
 import json
 import shutil
 import sys
@@ -35,7 +43,50 @@ from swarm_envs.papers.mabrouk_mcinnes import (
     write_fig11_gif,
 )
 
-__all__ = ["main", "parse_only", "run"]
+__all__ = ["PAPERS", "main", "parse_only", "parse_papers", "run", "run_other_paper"]
+
+#: The other seed papers: name → module whose ``run(out_dir, *, quick[, seeds])``
+#: reproduces it and returns a JSON-ready dict with a ``verdict``.
+OTHER_PAPERS = {
+    "naterop_zone": "swarm_envs.papers.naterop.zone",
+    "naterop_piecewise": "swarm_envs.papers.naterop.piecewise",
+    "vanualailai_sharma": "swarm_envs.papers.vanualailai_sharma",
+}
+PAPERS = ("mabrouk_mcinnes", *OTHER_PAPERS)
+
+
+def parse_papers(text: str | None) -> list[str]:
+    """Paper names from a comma-separated list (``None``: all, in order).
+
+    >>> parse_papers("vanualailai_sharma,mabrouk_mcinnes")
+    ['mabrouk_mcinnes', 'vanualailai_sharma']
+    """
+    if text is None or not text.strip():
+        return list(PAPERS)
+    wanted = [w.strip() for w in text.split(",") if w.strip()]
+    unknown = [w for w in wanted if w not in PAPERS]
+    if unknown:
+        raise ValueError(f"unknown paper name(s) {', '.join(unknown)}; known: {', '.join(PAPERS)}")
+    return [name for name in PAPERS if name in wanted]
+
+
+def run_other_paper(
+    name: str, out: str | Path, *, quick: bool = False, seeds: int | None = None, log: Any = print
+) -> dict[str, Any]:
+    """Run one of :data:`OTHER_PAPERS` into ``out/<name>/`` and log its verdict."""
+    module = importlib.import_module(OTHER_PAPERS[name])
+    kwargs: dict[str, Any] = {"quick": quick}
+    if seeds is not None and "seeds" in inspect.signature(module.run).parameters:
+        kwargs["seeds"] = seeds
+    t0 = time.perf_counter()
+    result = module.run(Path(out) / name, **kwargs)
+    verdict = result.get("verdict")
+    if verdict is None:  # per-figure verdicts (Vanualailai & Sharma)
+        verdict = {
+            k: v["verdict"] for k, v in result.items() if isinstance(v, dict) and "verdict" in v
+        }
+    log(f"  {name:18s} {time.perf_counter() - t0:6.1f} s  {json.dumps(to_jsonable(verdict))[:300]}")
+    return result
 
 
 def parse_only(text: str | None) -> list[str]:
@@ -177,7 +228,9 @@ def _parser() -> argparse.ArgumentParser:
         prog="swarm-reproduce",
         description=(
             "Regenerate Mabrouk & McInnes' Figs. 1, 4-5, 6-8, 9, 10 and 11 "
-            "(PNG + JSON, Fig. 11 also as GIF) and print the trends."
+            "(PNG + JSON, Fig. 11 also as GIF) and the other seed papers' reproductions "
+            "(Naterop et al. zone and force models, Vanualailai & Sharma), and print the "
+            "verdicts."
         ),
     )
     parser.add_argument(
@@ -197,6 +250,12 @@ def _parser() -> argparse.ArgumentParser:
         help=f"comma-separated subset of: {', '.join(FIGURES)}",
     )
     parser.add_argument(
+        "--papers",
+        default=None,
+        metavar="PAPERS",
+        help=f"comma-separated subset of: {', '.join(PAPERS)} (default: all)",
+    )
+    parser.add_argument(
         "--docs-img",
         nargs="?",
         const="docs/img",
@@ -213,9 +272,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         figures = parse_only(args.only)
+        papers = ["mabrouk_mcinnes"] if args.only else parse_papers(args.papers)
     except ValueError as err:
         parser.error(str(err))  # exits with status 2
-    run(args.out, figures=figures, seeds=args.seeds, quick=args.quick, docs_img=args.docs_img)
+    if "mabrouk_mcinnes" in papers:
+        run(args.out, figures=figures, seeds=args.seeds, quick=args.quick, docs_img=args.docs_img)
+    for name in papers:
+        if name in OTHER_PAPERS:
+            run_other_paper(name, args.out, quick=args.quick, seeds=args.seeds)
     return 0
 
 
