@@ -23,8 +23,8 @@ from swarm_envs.papers import (
     fig10_amplitude_ratio_sweep,
     fig11_navigation,
 )
+from swarm_envs.papers._io import to_jsonable
 from swarm_envs.papers.cli import main, parse_only
-from swarm_envs.papers.mabrouk_mcinnes import to_jsonable
 
 FIG_NAMES = ["fig1", "fig4_5", "fig6_8", "fig9", "fig10", "fig11"]
 TOP_KEYS = {"figure", "title", "paper", "setup", "claims", "verdict"}

@@ -35,11 +35,11 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from swarm_envs.papers._io import to_jsonable
 from swarm_envs.papers.mabrouk_mcinnes import (
     FIGURES,
     PAPER,
     RunSetup,
-    to_jsonable,
     write_fig11_gif,
 )
 

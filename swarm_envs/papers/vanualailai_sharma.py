@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from swarm_envs.metrics import centroid, nearest_neighbor_distance
-from swarm_envs.papers.mabrouk_mcinnes import to_jsonable
+from swarm_envs.papers._io import to_jsonable
 from swarm_envs.physics.lagrangian import (
     LagrangianParams,
     lagrangian_value,

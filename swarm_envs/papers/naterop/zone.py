@@ -53,7 +53,7 @@ from typing import Any
 import numpy as np
 
 from swarm_envs import metrics
-from swarm_envs.papers.mabrouk_mcinnes import to_jsonable
+from swarm_envs.papers._io import to_jsonable
 from swarm_envs.physics.zone import (
     ZoneAgentParams,
     ZoneParams,

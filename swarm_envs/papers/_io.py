@@ -1,0 +1,34 @@
+"""Shared output helpers of the reproductions (JSON-ready values)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+
+def to_jsonable(obj: Any, digits: int = 6) -> Any:
+    """Nested dicts/lists of numpy values → plain Python, floats to ``digits`` figures.
+
+    Non-finite floats become ``None`` (JSON has no ``inf``/``NaN``).
+
+    >>> to_jsonable({"a": np.float64(1.23456789), "b": [np.inf, 2]})
+    {'a': 1.23457, 'b': [None, 2]}
+    """
+    if isinstance(obj, dict):
+        return {str(k): to_jsonable(v, digits) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [to_jsonable(v, digits) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return to_jsonable(obj.tolist(), digits)
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        value = float(obj)
+        if not math.isfinite(value):
+            return None
+        return float(f"{value:.{digits}g}")
+    return obj
