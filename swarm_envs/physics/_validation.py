@@ -81,3 +81,15 @@ def check_goal(goal: Any, x: np.ndarray) -> np.ndarray:
     if not np.isfinite(g).all():
         raise ValueError("goal must be finite")
     return g
+
+
+def check_run(owner: str, dt: Any, steps: Any) -> tuple[float, int]:
+    """A simulation's step length (``> 0``) and step count (integer ``≥ 0``).
+
+    Raises:
+        ValueError: naming ``owner.dt`` or ``owner.steps`` and what is allowed.
+    """
+    dt = check_real(owner, "dt", dt, low=0.0, low_inclusive=False)
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
+        raise ValueError(f"{owner}.steps must be an integer >= 0, got {steps!r}")
+    return dt, int(steps)

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from swarm_envs.physics._validation import check_goal, check_real, check_state
+from swarm_envs.physics._validation import check_goal, check_run, check_state
 from swarm_envs.physics.social_potential import (
     PairGeometry,
     SocialPotentialParams,
@@ -147,14 +147,11 @@ def simulate(
             )
         return other(params, x0, v0, dt=dt, steps=steps, goal=goal, rng=rng)
     del rng  # deterministic model
-    check_real("simulate", "dt", dt, low=0.0, low_inclusive=False)
-    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
-        raise ValueError(f"simulate.steps must be an integer >= 0, got {steps!r}")
+    dt, steps = check_run("simulate", dt, steps)
     _check_integrator(integrator)
     x, v = check_state(x0, v0)
     if goal is not None:
         goal = check_goal(goal, x)
-    dt = float(dt)
     xs = np.empty((steps + 1, *x.shape), dtype=x.dtype)
     vs = np.empty_like(xs)
     xs[0], vs[0] = x, v

@@ -57,7 +57,7 @@ from typing import Any
 
 import numpy as np
 
-from swarm_envs.physics._validation import check_goal, check_real, check_state
+from swarm_envs.physics._validation import check_goal, check_real, check_run, check_state
 
 GRADIENTS = ("seed", "exact")
 
@@ -424,10 +424,7 @@ def simulate_lagrangian(
     del rng
     x, v_in = check_state(x0, v0)
     del v_in
-    dt = check_real("simulate_lagrangian", "dt", dt, low=0.0, low_inclusive=False)
-    if isinstance(steps, bool) or int(steps) != steps or steps < 0:
-        raise ValueError(f"simulate_lagrangian.steps must be an integer >= 0, got {steps!r}")
-    steps = int(steps)
+    dt, steps = check_run("simulate_lagrangian", dt, steps)
     x = np.array(x, copy=True)
     goal_arr = None if goal is None else check_goal(goal, x)
     exact = params.gradient == "exact"

@@ -65,7 +65,7 @@ from typing import Any
 
 import numpy as np
 
-from swarm_envs.physics._validation import check_goal, check_real, check_state
+from swarm_envs.physics._validation import check_goal, check_real, check_run, check_state
 from swarm_envs.physics.social_potential import RHO_FLOOR, pair_geometry
 
 __all__ = [
@@ -352,15 +352,12 @@ def simulate_piecewise(
             f"simulate_piecewise: unsupported parameter type {type(params).__name__}; "
             "expected PiecewiseParams"
         )
-    check_real("simulate_piecewise", "dt", dt, low=0.0, low_inclusive=False)
-    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
-        raise ValueError(f"simulate_piecewise.steps must be an integer >= 0, got {steps!r}")
+    dt, steps = check_run("simulate_piecewise", dt, steps)
     x, v = check_state(x0, v0)
     if goal is not None:
         check_goal(goal, x)  # validated only: the passive model has no goal force
     if params.sigma > 0:
         rng = _check_rng(rng, "simulate_piecewise")
-    dt = float(dt)
     xs = np.empty((steps + 1, *x.shape), dtype=x.dtype)
     vs = np.empty_like(xs)
     xs[0], vs[0] = x, v

@@ -48,7 +48,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from swarm_envs.physics._validation import check_goal, check_real, check_state
+from swarm_envs.physics._validation import check_goal, check_real, check_run, check_state
 
 #: Distances are floored at this value before dividing (coincident-agent convention).
 RHO_FLOOR = 1e-12
@@ -458,9 +458,7 @@ def simulate_zone(
             f"simulate_zone: unsupported parameter type {type(params).__name__}; "
             "expected ZoneParams"
         )
-    check_real("simulate_zone", "dt", dt, low=0.0, low_inclusive=False)
-    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
-        raise ValueError(f"simulate_zone.steps must be an integer >= 0, got {steps!r}")
+    dt, steps = check_run("simulate_zone", dt, steps)
     x, v = check_state(x0, v0)
     if goal is not None:
         goal = check_goal(goal, x)
@@ -482,7 +480,6 @@ def simulate_zone(
     if need_informed:
         assert rng is not None
         informed = draw_informed(params, rng, shape)
-    dt = float(dt)
     speed = np.asarray(ap.speed, dtype=x.dtype)
     speed = speed[..., None] if speed.ndim else speed
     xs = np.empty((steps + 1, *x.shape), dtype=x.dtype)
