@@ -59,7 +59,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from swarm_envs.physics import SocialPotentialParams, energy
-from swarm_envs.physics._validation import SUPPORTED_DIMS
+from swarm_envs.physics._validation import as_state
 
 __all__ = [
     "angular_momentum",
@@ -87,16 +87,7 @@ CENTRE_RTOL = 4.0
 
 def _as_state(name: str, a: Any) -> np.ndarray:
     """``a`` as a floating array shaped ``(..., N, d)``, ``N ≥ 1``, ``d`` in {2, 3}."""
-    a = np.asarray(a)
-    if not np.issubdtype(a.dtype, np.floating):
-        a = a.astype(np.float64)
-    if a.ndim < 2 or a.shape[-1] not in SUPPORTED_DIMS:
-        raise ValueError(
-            f"{name} must have shape (..., N, d) with d in {SUPPORTED_DIMS}, got {a.shape}"
-        )
-    if a.shape[-2] < 1:
-        raise ValueError(f"{name} must hold at least one agent (N >= 1), got shape {a.shape}")
-    return a
+    return as_state(a, name, min_agents=1)
 
 
 def _as_pair(x: Any, v: Any) -> tuple[np.ndarray, np.ndarray]:

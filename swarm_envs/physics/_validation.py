@@ -45,19 +45,33 @@ def check_real(
     return value
 
 
+def as_state(a: Any, name: str, *, min_agents: int = 0) -> np.ndarray:
+    """``a`` as a floating array shaped ``(..., N, d)``, d in {2, 3}, ``N ≥ min_agents``.
+
+    Floating arrays keep their dtype (no copy); anything else becomes float64.
+    """
+    a = np.asarray(a)
+    if not np.issubdtype(a.dtype, np.floating):
+        a = a.astype(np.float64)
+    if a.ndim < 2 or a.shape[-1] not in SUPPORTED_DIMS:
+        raise ValueError(
+            f"{name} must have shape (..., N, d) with d in {SUPPORTED_DIMS}, got {a.shape}"
+        )
+    if a.shape[-2] < min_agents:
+        raise ValueError(
+            f"{name} must hold at least {min_agents} agent(s) (N >= {min_agents}), "
+            f"got shape {a.shape}"
+        )
+    return a
+
+
 def check_state(x: Any, v: Any | None = None) -> tuple[np.ndarray, np.ndarray | None]:
     """Validate positions (and velocities) shaped ``(..., N, d)`` with d in {2, 3}.
 
     Floating arrays keep their dtype (float32 stays float32); anything else becomes
     float64. Returns the arrays (no copy when already floating).
     """
-    x = np.asarray(x)
-    if not np.issubdtype(x.dtype, np.floating):
-        x = x.astype(np.float64)
-    if x.ndim < 2 or x.shape[-1] not in SUPPORTED_DIMS:
-        raise ValueError(
-            f"positions must have shape (..., N, d) with d in {SUPPORTED_DIMS}, got {x.shape}"
-        )
+    x = as_state(x, "positions")
     if v is None:
         return x, None
     v = np.asarray(v)
