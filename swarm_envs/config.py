@@ -25,10 +25,21 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from swarm_envs.physics import INTEGRATORS, SocialPotentialParams
+from swarm_envs.physics import (
+    INTEGRATORS,
+    LagrangianParams,
+    PiecewiseParams,
+    SocialPotentialParams,
+    ZoneParams,
+)
 from swarm_envs.physics._validation import SUPPORTED_DIMS, check_real
 
 T = TypeVar("T")
+
+#: The models a SwarmNav environment can run (``SwarmConfig.dynamics``), the first the
+#: default. Each has its parameter section in :class:`SwarmConfig` (``physics`` for the
+#: social potential, which also holds the task's goal sink ``C_g, l_g``).
+DYNAMICS = ("social_potential", "zone", "piecewise", "lagrangian")
 
 #: Where the shipped YAML files live (``configs/`` at the repository root).
 CONFIG_ROOT = Path(__file__).resolve().parent.parent / "configs"
@@ -81,6 +92,11 @@ class SwarmConfig:
 
     n_agents: int = 10
     """Number of agents N, ``≥ 1``."""
+    dynamics: str = "social_potential"
+    """The passive physics, one of :data:`DYNAMICS`: the social potential (Mabrouk &
+    McInnes), Couzin's zone model or Viscido's piecewise force model (both as in
+    Naterop), or the Lagrangian gradient model (Vanualailai & Sharma). Each reads its
+    own section below; how an action biases each is in ``swarm_envs.envs.dynamics``."""
     dim: int = 2
     """Spatial dimension d, 2 or 3."""
     dt: float = 0.1
@@ -88,7 +104,15 @@ class SwarmConfig:
     integrator: str = "semi_implicit_euler"
     """One of ``swarm_envs.physics.INTEGRATORS``."""
     physics: SocialPotentialParams = field(default_factory=SocialPotentialParams.navigation)
-    """Social potential parameters; the goal sink ``C_g, l_g`` defines the task."""
+    """Social potential parameters; the goal sink ``C_g, l_g`` defines the task (the
+    sink force the analytic controllers apply, for every ``dynamics``)."""
+    zone: ZoneParams = field(default_factory=ZoneParams.navigation)
+    """Zone model parameters (``dynamics="zone"``)."""
+    piecewise: PiecewiseParams = field(default_factory=PiecewiseParams.navigation)
+    """Piecewise force model parameters (``dynamics="piecewise"``)."""
+    lagrangian: LagrangianParams = field(default_factory=LagrangianParams.navigation)
+    """Lagrangian gradient model parameters (``dynamics="lagrangian"``); array-valued
+    fields must match ``n_agents``."""
     init_radius: float = 1.5
     """Agents start uniformly in a disc (ball) of this radius around the origin."""
     init_speed: float = 0.1
@@ -132,8 +156,22 @@ class SwarmConfig:
             raise ValueError(
                 f"{owner}.integrator must be one of {INTEGRATORS}, got {self.integrator!r}"
             )
-        if not isinstance(self.physics, SocialPotentialParams):
-            raise ValueError(f"{owner}.physics must be SocialPotentialParams")
+        if self.dynamics not in DYNAMICS:
+            raise ValueError(f"{owner}.dynamics must be one of {DYNAMICS}, got {self.dynamics!r}")
+        sections = {
+            "physics": SocialPotentialParams,
+            "zone": ZoneParams,
+            "piecewise": PiecewiseParams,
+            "lagrangian": LagrangianParams,
+        }
+        for name, cls in sections.items():
+            if not isinstance(getattr(self, name), cls):
+                raise ValueError(f"{owner}.{name} must be {cls.__name__}")
+        if self.dynamics == "lagrangian":
+            try:
+                self.lagrangian.arrays(self.n_agents, self.dim)
+            except ValueError as err:
+                raise ValueError(f"{owner}.lagrangian: {err}") from None
         if not isinstance(self.reward, RewardWeights):
             raise ValueError(f"{owner}.reward must be RewardWeights")
         if not isinstance(self.goal_in_physics, bool):
@@ -171,19 +209,28 @@ def _is_dataclass_type(tp: Any) -> bool:
     return isinstance(tp, type) and dataclasses.is_dataclass(tp)
 
 
+def _field_default(f: dataclasses.Field) -> Any:
+    if f.default_factory is not dataclasses.MISSING:
+        return f.default_factory()
+    return None if f.default is dataclasses.MISSING else f.default
+
+
 def config_from_mapping(cls: type[T], data: Mapping[str, Any] | T, *, path: str = "") -> T:
     """Build dataclass ``cls`` from a mapping, strictly.
 
-    Nested dataclass fields accept a mapping (built recursively) or an instance. Unknown
-    keys raise ``ValueError`` naming the dotted key and the allowed keys; a value the
-    dataclass rejects is re-raised with its dotted key in front.
+    Nested dataclass fields accept a mapping (built recursively, on top of the field's
+    default: ``{"zone": {"r_o": 2}}`` changes only ``r_o`` of the zone section's
+    default) or an instance. Unknown keys raise ``ValueError`` naming the dotted key and
+    the allowed keys; a value the dataclass rejects is re-raised with its dotted key in
+    front.
     """
     if isinstance(data, cls):
         return data
     if not isinstance(data, Mapping):
         where = path or cls.__name__
         raise ValueError(f"config section '{where}' must be a mapping, got {type(data).__name__}")
-    names = {f.name for f in fields(cls)}  # type: ignore[arg-type]
+    by_name = {f.name: f for f in fields(cls)}  # type: ignore[arg-type]
+    names = set(by_name)
     hints = _field_types(cls)
     kwargs: dict[str, Any] = {}
     for key, value in data.items():
@@ -194,6 +241,13 @@ def config_from_mapping(cls: type[T], data: Mapping[str, Any] | T, *, path: str 
             )
         tp = hints[key]
         if _is_dataclass_type(tp) and not isinstance(value, tp):
+            default = _field_default(by_name[key])
+            if isinstance(value, Mapping) and isinstance(default, tp):
+                # A partial section changes only the keys it names: the rest keep the
+                # field's default (e.g. ZoneParams.navigation()), not the class's.
+                unknown = [k for k in value if k not in {f.name for f in fields(tp)}]
+                if not unknown:
+                    value = {**{f.name: getattr(default, f.name) for f in fields(tp)}, **value}
             value = config_from_mapping(tp, value, path=dotted)
         kwargs[key] = value
     try:
@@ -266,6 +320,7 @@ def as_dict(obj: Any) -> Any:
 
 __all__ = [
     "CONFIG_ROOT",
+    "DYNAMICS",
     "RewardWeights",
     "SwarmConfig",
     "as_dict",

@@ -203,6 +203,24 @@ class LagrangianParams:
             b = tuple(map(tuple, m.tolist()))
         return cls(alpha=a, gamma=g, beta=b, r=r, gradient=gradient, step_tol=step_tol)
 
+    @classmethod
+    def navigation(cls, **overrides: Any) -> LagrangianParams:
+        """The SwarmNav default (``dynamics="lagrangian"``): the exact gradient, small bins.
+
+        ``α = 1, γ = 0.5, β = 0.01``, bins of radius ``r = 0.05`` (two bins touch at the
+        environment's collision radius 0.1, so the model cannot collide) and
+        ``gradient="exact"``, for which ``L`` is a Lyapunov function.
+        """
+        values: dict[str, Any] = {
+            "alpha": 1.0,
+            "gamma": 0.5,
+            "beta": 0.01,
+            "r": 0.05,
+            "gradient": "exact",
+            "step_tol": 0.05,
+        }
+        return cls(**{**values, **overrides})
+
     @cached_property
     def _arrays(self) -> dict[str, np.ndarray]:
         return {
@@ -427,75 +445,132 @@ def simulate_lagrangian(
     dt, steps = check_run("simulate_lagrangian", dt, steps)
     x = np.array(x, copy=True)
     goal_arr = None if goal is None else check_goal(goal, x)
-    exact = params.gradient == "exact"
+    check_start_clearance(x, params)
+    v = lagrangian_velocity(x, params, goal_arr)
+    xs = np.empty((steps + 1, *x.shape), dtype=x.dtype)
+    vs = np.empty_like(xs)
+    xs[0], vs[0] = x, v
+    h = None
+    for k in range(1, steps + 1):
+        x, v, h = lagrangian_step(x, params, dt=dt, goal=goal_arr, substep=h)
+        xs[k], vs[k] = x, v
+    return xs, vs
+
+
+def check_start_clearance(x: np.ndarray, params: LagrangianParams) -> None:
+    """Raise :class:`ValueError` unless every pair clearance ``R_ij`` of ``x`` is ``> 0``."""
+    if x.shape[-2] > 1:
+        clear = pair_clearance(x, params)
+        if not np.all(clear > 0):
+            raise ValueError(
+                "x0 must have every pair clearance R_ij > 0 (bins must not overlap), "
+                f"got min R_ij = {float(clear.min()):.6g}"
+            )
+
+
+def lagrangian_step(
+    x: np.ndarray,
+    params: LagrangianParams,
+    *,
+    dt: float,
+    goal: Any | None = None,
+    control: np.ndarray | None = None,
+    substep: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Advance eq. 7 by one frame ``dt`` with the safe substep rule of :func:`simulate_lagrangian`.
+
+    ``ẋ_i = −α_i ⊙ ∂L/∂x_i + u_i``: ``control`` ``u`` (shaped like ``x``, held over the
+    frame) is added to the model velocity, as the SwarmNav environments apply an action
+    (``MODELS.md`` §6). The substep rules 1 (each pair keeps half its clearance, so no
+    ``R_ij`` ever reaches 0, whatever the control) and 2 (local error) always apply; rule
+    3 (``L`` never increases, exact gradient) applies only without control, since a
+    control may rightly raise ``L``.
+
+    Args:
+        x: positions ``(..., N, d)`` with every ``R_ij > 0`` (not re-checked here).
+        params: model parameters.
+        dt: frame length, ``> 0``.
+        goal: fixed centre replacing the centroid, broadcastable to ``(..., d)``.
+        control: added velocity shaped like ``x``, or ``None``.
+        substep: the substep length ``(...)`` carried from the previous frame (``None``:
+            start at ``dt``).
+
+    Returns:
+        ``(x', v', substep')``: new positions, the velocity ``ẋ`` at ``x'`` (control
+        included) and the substep length to carry into the next frame.
+
+    >>> x = np.array([[-3.0, 0.0], [3.0, 0.0], [0.0, 4.0]])
+    >>> p = LagrangianParams(gamma=1.0, beta=1.0, r=0.5, gradient="exact")
+    >>> x1, v1, h = lagrangian_step(x, p, dt=0.1)
+    >>> bool(lagrangian_value(x1, p) <= lagrangian_value(x, p)), x1.shape
+    (True, (3, 2))
+    """
+    goal = None if goal is None else check_goal(goal, x)
+    exact = params.gradient == "exact" and control is None
     n, d = x.shape[-2], x.shape[-1]
     alpha = params.arrays(n, d, x.dtype)["alpha"]
 
     def evaluate(y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        vel = -alpha * lagrangian_gradient(y, params, goal_arr)
+        vel = -alpha * lagrangian_gradient(y, params, goal)
+        if control is not None:
+            vel = vel + control
         clear = pair_clearance(y, params)
-        val = lagrangian_value(y, params, goal_arr) if exact else np.zeros(y.shape[:-2])
+        val = lagrangian_value(y, params, goal) if exact else np.zeros(y.shape[:-2])
         return vel, clear, val
 
     v, clear, L = evaluate(x)
-    if n > 1 and not np.all(clear > 0):
-        raise ValueError(
-            "x0 must have every pair clearance R_ij > 0 (bins must not overlap), "
-            f"got min R_ij = {float(clear.min()):.6g}"
-        )
     batch = x.shape[:-2]
-    xs = np.empty((steps + 1, *x.shape), dtype=x.dtype)
-    vs = np.empty_like(xs)
-    xs[0], vs[0] = x, v
-    h = np.full(batch, dt)
+    h = np.full(batch, dt) if substep is None else np.array(substep, dtype=float, copy=True)
     h_min = dt * MIN_STEP_FRACTION
-    for k in range(1, steps + 1):
-        remaining = np.full(batch, dt)
-        while np.any(remaining > 0):
-            active = remaining > 0
-            h_try = np.where(active, np.minimum(h, remaining), 0.0)
-            x_try = x + h_try[..., None, None] * v
-            v_try, clear_try, L_try = evaluate(x_try)
-            if n > 1:
-                min_clear = clear.min(axis=(-2, -1))
-                ok = np.all(clear_try >= CLEARANCE_KEEP * clear, axis=(-2, -1))
-            else:
-                centre = x.mean(axis=-2, keepdims=True) if goal_arr is None else goal_arr
-                off = x - (centre if goal_arr is None else centre[..., None, :])
-                min_clear = 0.5 * np.einsum("...ik,...ik->...", off, off)
-                ok = np.ones(batch, dtype=bool)
-            dv = v_try - v
-            err = 0.5 * h_try * np.sqrt(np.einsum("...ik,...ik->...i", dv, dv).max(axis=-1))
-            ok &= err <= params.step_tol * np.sqrt(2.0 * np.maximum(min_clear, 0.0))
-            if exact:
-                ok &= L_try <= L
-            accept = active & ok
-            reject = active & ~ok
-            sel = accept[..., None, None]
-            x = np.where(sel, x_try, x)
-            v = np.where(sel, v_try, v)
-            clear = np.where(accept[..., None, None], clear_try, clear)
-            L = np.where(accept, L_try, L)
-            remaining = np.where(accept, remaining - h_try, remaining)
-            remaining = np.where(accept & (remaining <= dt * 1e-12), 0.0, remaining)
-            grown = np.where(h_try < h, h, np.minimum(h_try * STEP_GROWTH, dt))
-            h = np.where(accept, grown, h)
-            h = np.where(reject, h_try * 0.5, h)
-            stuck = reject & (h < h_min)
-            if exact:
-                # Predicted decrease h Σ α (∂L/∂x)² lost in L's round-off: hold the state.
-                drop = h_try * np.einsum("...ik,...ik->...", v, v / alpha)
-                stuck |= reject & (drop <= ROUNDOFF_HOLD * np.finfo(x.dtype).eps * np.abs(L))
-            remaining = np.where(stuck, 0.0, remaining)
-            h = np.where(stuck, np.maximum(h_try, h_min), h)
-        xs[k], vs[k] = x, v
-    return xs, vs
+    remaining = np.full(batch, dt)
+    while np.any(remaining > 0):
+        active = remaining > 0
+        h_try = np.where(active, np.minimum(h, remaining), 0.0)
+        x_try = x + h_try[..., None, None] * v
+        v_try, clear_try, L_try = evaluate(x_try)
+        if n > 1:
+            min_clear = clear.min(axis=(-2, -1))
+            ok = np.all(clear_try >= CLEARANCE_KEEP * clear, axis=(-2, -1))
+        else:
+            centre = x.mean(axis=-2, keepdims=True) if goal is None else goal[..., None, :]
+            off = x - centre
+            min_clear = 0.5 * np.einsum("...ik,...ik->...", off, off)
+            if control is not None:  # a single controlled agent: scale by its own motion
+                min_clear = np.maximum(min_clear, 0.5 * (dt * np.abs(control).max()) ** 2)
+            ok = np.ones(batch, dtype=bool)
+        dv = v_try - v
+        err = 0.5 * h_try * np.sqrt(np.einsum("...ik,...ik->...i", dv, dv).max(axis=-1))
+        ok &= err <= params.step_tol * np.sqrt(2.0 * np.maximum(min_clear, 0.0))
+        if exact:
+            ok &= L_try <= L
+        accept = active & ok
+        reject = active & ~ok
+        sel = accept[..., None, None]
+        x = np.where(sel, x_try, x)
+        v = np.where(sel, v_try, v)
+        clear = np.where(accept[..., None, None], clear_try, clear)
+        L = np.where(accept, L_try, L)
+        remaining = np.where(accept, remaining - h_try, remaining)
+        remaining = np.where(accept & (remaining <= dt * 1e-12), 0.0, remaining)
+        grown = np.where(h_try < h, h, np.minimum(h_try * STEP_GROWTH, dt))
+        h = np.where(accept, grown, h)
+        h = np.where(reject, h_try * 0.5, h)
+        stuck = reject & (h < h_min)
+        if exact:
+            # Predicted decrease h Σ α (∂L/∂x)² lost in L's round-off: hold the state.
+            drop = h_try * np.einsum("...ik,...ik->...", v, v / alpha)
+            stuck |= reject & (drop <= ROUNDOFF_HOLD * np.finfo(x.dtype).eps * np.abs(L))
+        remaining = np.where(stuck, 0.0, remaining)
+        h = np.where(stuck, np.maximum(h_try, h_min), h)
+    return x, v, h
 
 
 __all__ = [
     "GRADIENTS",
     "LagrangianParams",
+    "check_start_clearance",
     "lagrangian_gradient",
+    "lagrangian_step",
     "lagrangian_value",
     "lagrangian_velocity",
     "min_pair_clearance",

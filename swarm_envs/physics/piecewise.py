@@ -151,6 +151,27 @@ class PiecewiseParams:
             raise ValueError(f"{owner}.n_neighbors must be an integer in [1, inf), got {k!r}")
         object.__setattr__(self, "n_neighbors", int(k))
 
+    @classmethod
+    def navigation(cls, **overrides: Any) -> PiecewiseParams:
+        """The SwarmNav default (``dynamics="piecewise"``): table 2 scaled to the task.
+
+        Lengths shrink about 1:7 (``r_r = 0.6, r_0 = 1, r_a = 2, R = 4`` m), the force to
+        ``F_max = 3`` (the action bound, so that repulsion holds against a full push),
+        the noise to a fifth of the report's ``σ`` and ``λ = 6``; the drag ``β = 1.5`` is
+        the report's proposed fix (§5.1), which keeps the group bounded.
+        """
+        values: dict[str, Any] = {
+            "F_max": 3.0,
+            "r_r": 0.6,
+            "r_0": 1.0,
+            "r_a": 2.0,
+            "R": 4.0,
+            "n_neighbors": 6,
+            "noise": 0.2,
+            "beta": 1.5,
+        }
+        return cls(**{**values, **overrides})
+
     @property
     def sigma(self) -> float:
         """Standard deviation of each component of the random force, ``noise · F_max / 6``."""

@@ -147,6 +147,23 @@ class ZoneParams:
         values.update(overrides)
         return cls(**values)
 
+    @classmethod
+    def navigation(cls, **overrides: Any) -> ZoneParams:
+        """The SwarmNav default (``dynamics="zone"``): Naterop's zones scaled to the task.
+
+        The goal lies 8–12 m away with a 1.5 m arrival radius, so the zones shrink to
+        ``r_r = 0.3, r_o = 1, r_a = 3`` m, the speed to 1 m/s and the turn to 30° per
+        0.1 s step; the spread (σ = 0.05), ``ω = 0.5`` and 1 in 5 informed stay Naterop's.
+        """
+        values: dict[str, Any] = {
+            "r_r": 0.3,
+            "r_o": 1.0,
+            "r_a": 3.0,
+            "speed": 1.0,
+            "max_turn": math.radians(30.0),
+        }
+        return cls(**{**values, **overrides})
+
     @property
     def max_turn_degrees(self) -> float:
         """``φ̄`` in degrees, as the report states it."""
@@ -375,10 +392,15 @@ def zone_step(
     informed: np.ndarray | None = None,
     rng: np.random.Generator | None = None,
     agent_params: ZoneAgentParams | None = None,
+    bias: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """One step of the zone model: turn toward :func:`desired_direction`, then move.
 
     ``η̂' = turn_toward(η̂, d̂, φ̄_i)``, ``r' = r + dt s_i η̂'`` (Naterop eqs. 2–6).
+    ``bias`` (shaped like ``x``), when given, is added to the unit desired direction
+    before the turn, ``d̂_i + b_i`` (how the SwarmNav environments apply an action,
+    ``MODELS.md`` §6; ``b_i = ω ĝ_i`` is the informed-individual rule of eq. 6); a zero
+    bias leaves the model unchanged.
     ``rng`` is accepted for a uniform signature; this step is deterministic (the random
     parts of the model, the per-agent parameters and the informed subset, are drawn
     once per run by :func:`simulate_zone`). Returns new arrays ``(x', η̂')``.
@@ -391,6 +413,8 @@ def zone_step(
     del rng
     ap = uniform_agent_params(params) if agent_params is None else agent_params
     desired = desired_direction(x, heading, params, goal, informed, agent_params=ap)
+    if bias is not None:
+        desired = desired + bias
     new_heading = turn_toward(heading, desired, ap.max_turn).astype(np.asarray(x).dtype)
     speed = np.asarray(ap.speed, dtype=new_heading.dtype)
     step = (dt * speed)[..., None] if speed.ndim else dt * speed
