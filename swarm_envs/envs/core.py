@@ -7,10 +7,12 @@ those APIs; it holds state arrays and returns arrays.
 
 One step, for all swarms at once:
 
-1. the action ``a ∈ [−1, 1]^{B×N×d}`` becomes the control force ``u = u_max · a``;
-2. the physics advances ``(x, v)`` by ``dt`` with the passive social-potential force
-   plus ``u`` (``swarm_envs.physics.step`` or ``verlet_step``, unchanged: zero action is
-   exactly the passive model; the goal sink acts passively only if ``goal_in_physics``);
+1. the action ``a ∈ [−1, 1]^{B×N×d}`` becomes the control ``u = u_max · a``;
+2. the model chosen by ``cfg.dynamics`` advances ``(x, v)`` by ``dt`` with its passive
+   physics biased by ``u`` (a force for the social potential and piecewise models, a
+   bias of the desired direction for the zone model, a velocity for the Lagrangian
+   model: :mod:`swarm_envs.envs.dynamics`); zero action is exactly the passive model,
+   and the goal acts passively only if ``goal_in_physics``;
 3. pairwise distances of the new positions are computed once and shared by the
    observations (k nearest neighbours), the collision count, the nearest-neighbour
    statistic and the next step's forces;
@@ -26,15 +28,8 @@ import numpy as np
 from swarm_envs import metrics
 from swarm_envs._malloc import keep_freed_memory
 from swarm_envs.config import SwarmConfig
-from swarm_envs.physics import (
-    PairGeometry,
-    energy,
-    forces,
-    pair_geometry,
-    step,
-    uniform_ball,
-    verlet_step,
-)
+from swarm_envs.envs.dynamics import make_dynamics
+from swarm_envs.physics import PairGeometry, pair_geometry, uniform_ball
 
 #: Every observation component is clipped into ``[−OBS_BOUND, OBS_BOUND]``.
 OBS_BOUND = 10.0
@@ -102,11 +97,10 @@ class SwarmNavCore:
         self.start_distance = np.ones(B, self.dtype)
         self.prev_distance = np.ones(B, self.dtype)
         self.prev_arrived = np.zeros(B, self.dtype)
-        self._f_passive: np.ndarray | None = None  # velocity Verlet carries the force
+        self.dynamics = make_dynamics(cfg, self.batch, self.dtype)
         self._geometry: PairGeometry | None = None
         self._masked: tuple[Any, np.ndarray] | None = None
         self._nbr: tuple[Any, np.ndarray] | None = None
-        self._physics_goal = cfg.physics.C_g > 0 and cfg.goal_in_physics
         self._neighbor_scale = np.array(
             [1.0 / cfg.obs_neighbor_scale] * d + [1.0 / cfg.obs_velocity_scale] * d, self.dtype
         )
@@ -131,17 +125,12 @@ class SwarmNavCore:
         dist = rng.uniform(cfg.goal_distance_min, cfg.goal_distance_max, size=(n, 1))
         self.goal[idx] = bearing * dist
         self.t[idx] = 0
+        self.dynamics.reset(self.x, self.v, self.goal, idx, rng)
         self._geometry = pair_geometry(self.x)
         mean_dist = self._goal_distances().mean(axis=-1)
         self.start_distance[idx] = np.maximum(mean_dist[idx], 1e-6)
         self.prev_distance[idx] = mean_dist[idx]
         self.prev_arrived[idx] = self._arrived_fraction()[idx]
-        if cfg.integrator == "velocity_verlet":
-            f = forces(self.x, self.v, cfg.physics, self._goal_for_physics(), geometry=None)
-            if self._f_passive is None:
-                self._f_passive = f
-            else:
-                self._f_passive[idx] = f[idx]
 
     # ------------------------------------------------------------------ step
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
@@ -158,23 +147,9 @@ class SwarmNavCore:
         # In the core's dtype, so that every adapter gives bit-identical results.
         a = check_actions(actions, self.x.shape).astype(self.dtype, copy=False)
         control = cfg.u_max * a if a.any() else None
-        goal = self._goal_for_physics()
-        if cfg.integrator == "velocity_verlet":
-            assert self._f_passive is not None
-            self.x, self.v, self._f_passive, self._geometry = verlet_step(
-                self.x, self.v, self._f_passive, cfg.physics, dt=cfg.dt, goal=goal, control=control
-            )
-        else:
-            self.x, self.v = step(
-                self.x,
-                self.v,
-                cfg.physics,
-                dt=cfg.dt,
-                goal=goal,
-                control=control,
-                geometry=self._geometry,
-            )
-            self._geometry = pair_geometry(self.x)
+        goal = self.goal if cfg.goal_in_physics else None
+        self.x, self.v, geometry = self.dynamics.step(self.x, self.v, goal, control, self._geometry)
+        self._geometry = pair_geometry(self.x) if geometry is None else geometry
         self.t += 1
 
         stats = self.stats()
@@ -196,9 +171,6 @@ class SwarmNavCore:
         return reward, success, truncated, stats
 
     # ------------------------------------------------------------------ views
-    def _goal_for_physics(self) -> np.ndarray | None:
-        return self.goal if self._physics_goal else None
-
     def _goal_distances(self) -> np.ndarray:
         return np.linalg.norm(self.goal[:, None, :] - self.x, axis=-1)
 
@@ -236,7 +208,7 @@ class SwarmNavCore:
             "angular_momentum": metrics.angular_momentum(self.x, self.v),
             "expanse": metrics.expanse(self.x),
             "nearest_neighbor_distance": nnd,
-            "energy": energy(self.x, self.v, cfg.physics, self.goal, geometry=self._geometry),
+            "energy": self.dynamics.energy(self.x, self.v, self.goal, self._geometry),
             "fraction_arrived": arrived,
             "collisions": collisions.astype(np.float64),
             "centroid_distance": np.linalg.norm(centroid - self.goal, axis=-1),

@@ -33,9 +33,22 @@ SWARM_NAV_DOC = """
     ``goal_in_physics=True`` it also acts passively (the paper's eq. 21) and actions
     are residuals on top of it.
 
+    ``dynamics`` selects another model of the seeds as the passive physics, each with
+    its own parameter section and analytic baseline (``agents.ANALYTIC``):
+
+    | ``dynamics``         | model (config section)               | action ``u = u_max a``  |
+    |----------------------|--------------------------------------|-------------------------|
+    | ``social_potential`` | Mabrouk & McInnes (``physics``)      | force added to ``F_i``  |
+    | ``zone``             | Couzin, Naterop §4.1 (``zone``)      | desired-direction bias  |
+    | ``piecewise``        | Viscido, Naterop §4.2 (``piecewise``)| force added             |
+    | ``lagrangian``       | Vanualailai & Sharma (``lagrangian``)| velocity added          |
+
+    Details, and what ``goal_in_physics`` means for each, in ``swarm_envs.envs.dynamics``.
+
     ## Action Space
 
-    Per agent ``Box(-1, 1, (d,), float32)``; the control force is ``u_i = u_max · a_i``.
+    Per agent ``Box(-1, 1, (d,), float32)``; the control is ``u_i = u_max · a_i`` (a
+    force, a direction bias or a velocity, by ``dynamics``).
     Finite actions outside the box are clipped; NaN/inf or a wrong shape raise
     ``ValueError``. The Gymnasium env takes all agents' actions as one flat
     ``Box(-1, 1, (N·d,))`` (agent-major).
@@ -82,19 +95,22 @@ SWARM_NAV_DOC = """
     ## Arguments
 
     Every field of :class:`swarm_envs.config.SwarmConfig` is a keyword argument
-    (``n_agents``, ``dim``, ``dt``, ``physics={...}``, ``reward={...}``, ...), and
+    (``n_agents``, ``dim``, ``dt``, ``dynamics``, ``physics={...}``, ``zone={...}``,
+    ``reward={...}``, ...; a partial section changes only the keys it names), and
     ``config="configs/env/paper_navigation.yaml"`` loads a YAML first (keywords then
     override it). Unknown keywords and invalid values raise ``ValueError`` naming them.
     ``render_mode`` is ``None``, ``"rgb_array"`` or ``"human"``.
 
     Info (per agent in PettingZoo, one dict in Gymnasium): ``polarization``,
     ``angular_momentum`` (unit-heading forms), ``expanse``,
-    ``nearest_neighbor_distance``, ``energy`` (eq. 16 with the sink), ``fraction_arrived``,
+    ``nearest_neighbor_distance``, ``energy`` (eq. 16 with the sink; ``L`` for the
+    Lagrangian model, kinetic energy for the zone and piecewise models), ``fraction_arrived``,
     ``collisions`` (this step), ``centroid_distance``, ``mean_goal_distance``, ``success``.
 
     ## Version History
 
-    * v0: initial release.
+    * v0: initial release; ``dynamics`` (zone, piecewise, Lagrangian) added without
+      changing the default social-potential env.
 """
 
 
