@@ -7,7 +7,16 @@ module per source paper:
 
 - :class:`PotentialFieldController` (:mod:`agents.mabrouk_mcinnes`): the goal sink of
   Mabrouk & McInnes, eqs. 19–21, applied as the control force.
+- :class:`InformedIndividualController` (:mod:`agents.naterop`): Couzin's informed
+  individuals (Naterop eq. 6), for the zone model.
+- :class:`GoalForceController` (:mod:`agents.naterop`): the goal-sink force on top of
+  Viscido's piecewise force model.
+- :class:`LyapunovTargetController` (:mod:`agents.vanualailai_sharma`): the target
+  term of Vanualailai & Sharma's Lyapunov construction, for the Lagrangian model.
 - :class:`ZeroController`, :class:`RandomController` (:mod:`agents.trivial`).
+
+Each model has its analytic baseline (:data:`ANALYTIC`); the name ``"analytic"`` picks
+the one that matches the environment's ``dynamics``.
 
 Build one from any environment of the package or from a config::
 
@@ -22,24 +31,52 @@ from typing import Any
 
 from agents.base import Controller, swarm_config_of
 from agents.mabrouk_mcinnes import PotentialFieldController
+from agents.naterop import GoalForceController, InformedIndividualController
 from agents.trivial import RandomController, ZeroController
+from agents.vanualailai_sharma import LyapunovTargetController
 
-#: Names of the built-in policies, as ``swarm-eval --policies`` accepts them.
+#: Names of the built-in policies, as ``swarm-eval --policies`` accepts them (plus
+#: ``"analytic"``, the entry of :data:`ANALYTIC` for the environment's dynamics).
 CONTROLLERS: dict[str, type[Controller]] = {
     "potential": PotentialFieldController,
+    "informed": InformedIndividualController,
+    "goal_force": GoalForceController,
+    "lyapunov": LyapunovTargetController,
     "zero": ZeroController,
     "random": RandomController,
 }
 
+#: The analytic baseline of each ``SwarmConfig.dynamics``, as a name in :data:`CONTROLLERS`.
+ANALYTIC: dict[str, str] = {
+    "social_potential": "potential",
+    "zone": "informed",
+    "piecewise": "goal_force",
+    "lagrangian": "lyapunov",
+}
+
+
+def analytic_name(env: Any) -> str:
+    """The name of the analytic baseline matching ``env``'s dynamics (see :data:`ANALYTIC`).
+
+    >>> from swarm_envs.config import SwarmConfig
+    >>> analytic_name(SwarmConfig(dynamics="zone"))
+    'informed'
+    """
+    return ANALYTIC[swarm_config_of(env).dynamics]
+
 
 def make_controller(name: str, env: Any, *, seed: int | None = None) -> Controller:
-    """The built-in policy ``name`` (a key of :data:`CONTROLLERS`) for ``env``.
+    """The built-in policy ``name`` for ``env``: a key of :data:`CONTROLLERS` or ``"analytic"``.
 
-    ``seed`` seeds :class:`RandomController` (the others are deterministic). An unknown
-    name raises :class:`ValueError` listing the known ones.
+    ``"analytic"`` is the baseline of ``env``'s dynamics (:func:`analytic_name`). ``seed``
+    seeds :class:`RandomController` (the others are deterministic). An unknown name
+    raises :class:`ValueError` listing the known ones.
     """
+    if name == "analytic":
+        name = analytic_name(env)
     if name not in CONTROLLERS:
-        raise ValueError(f"unknown policy {name!r}; known: {', '.join(CONTROLLERS)}")
+        known = ", ".join([*CONTROLLERS, "analytic"])
+        raise ValueError(f"unknown policy {name!r}; known: {known}")
     cls = CONTROLLERS[name]
     if cls is RandomController:
         return RandomController(env, seed=seed)
@@ -47,11 +84,16 @@ def make_controller(name: str, env: Any, *, seed: int | None = None) -> Controll
 
 
 __all__ = [
+    "ANALYTIC",
     "CONTROLLERS",
     "Controller",
+    "GoalForceController",
+    "InformedIndividualController",
+    "LyapunovTargetController",
     "PotentialFieldController",
     "RandomController",
     "ZeroController",
+    "analytic_name",
     "make_controller",
     "swarm_config_of",
 ]
