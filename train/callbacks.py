@@ -75,18 +75,18 @@ class AnalyticBaselineEvalCallback(BaseCallback):
         self._baseline: dict[str, Any] | None = None
 
     def _evaluate(self) -> None:
-        from agents import PotentialFieldController
+        from agents import make_controller
         from train.evaluate import evaluate_policies
 
-        if self._baseline is None:
-            baseline = PotentialFieldController.from_config(self.cfg)
+        if self._baseline is None:  # the analytic baseline of the config's dynamics
+            baseline = make_controller("analytic", self.cfg)
             self._baseline = evaluate_policies(
-                {"potential": baseline}, self.cfg, self.episodes, self.seed, progress=False
-            )["policies"]["potential"]
+                {"analytic": baseline}, self.cfg, self.episodes, self.seed, progress=False
+            )["policies"]["analytic"]
         learned = evaluate_policies(
             {"learned": self.model}, self.cfg, self.episodes, self.seed, progress=False
         )["policies"]["learned"]
-        for name, res in (("learned", learned), ("potential", self._baseline)):
+        for name, res in (("learned", learned), ("analytic", self._baseline)):
             self.logger.record(f"eval/{name}_mean_return", res["mean_return"])
             self.logger.record(f"eval/{name}_success_rate", res["success_rate"])
             if res["mean_time_to_goal"] is not None:
@@ -98,7 +98,7 @@ class AnalyticBaselineEvalCallback(BaseCallback):
         if self.verbose:
             print(
                 f"[eval @ {self.num_timesteps}] learned return {learned['mean_return']:.2f} "
-                f"success {learned['success_rate']:.2f} | potential return "
+                f"success {learned['success_rate']:.2f} | analytic return "
                 f"{self._baseline['mean_return']:.2f} success {self._baseline['success_rate']:.2f}"
             )
 
