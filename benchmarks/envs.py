@@ -4,6 +4,8 @@ Usage: ``python benchmarks/envs.py [--seconds 1] [--repeats 5]``
 
 Rows: ``parallel_env`` (PettingZoo dicts) and the Gymnasium env at N = 10, 32, 100
 (float64 core); ``vec_env`` (SB3 VecEnv) at B × 32 for B = 1, 64, 1024 (float32 core).
+Then the same ``parallel_env`` (N = 32) and ``vec_env`` (64 × 32) rows for each
+``dynamics`` of the seeds (``--dynamics`` picks; default all four).
 Random actions drawn once per row (not timed). Median and best of the
 repeated windows. The 1024-swarm VecEnv uses its default worker threads (one per 512
 swarms, up to the CPU count). If ``vmas`` is importable, its navigation scenario is
@@ -25,6 +27,7 @@ import numpy as np
 import swarm_envs  # noqa: F401  (registers the Gymnasium id)
 from swarm_envs import swarm_nav_v0
 from swarm_envs._malloc import keep_freed_memory
+from swarm_envs.config import DYNAMICS
 
 
 def rates(fn: Callable[[], None], seconds: float, repeats: int) -> tuple[float, float]:
@@ -44,8 +47,10 @@ def rates(fn: Callable[[], None], seconds: float, repeats: int) -> tuple[float, 
     return statistics.median(out), max(out)
 
 
-def bench_parallel(n: int, seconds: float, repeats: int) -> tuple[float, float]:
-    env = swarm_nav_v0.parallel_env(n_agents=n, max_steps=10**9)
+def bench_parallel(
+    n: int, seconds: float, repeats: int, dynamics: str = "social_potential"
+) -> tuple[float, float]:
+    env = swarm_nav_v0.parallel_env(n_agents=n, max_steps=10**9, dynamics=dynamics)
     env.reset(seed=0)
     rng = np.random.default_rng(0)
     actions = {a: rng.uniform(-1, 1, 2).astype(np.float32) for a in env.possible_agents}
@@ -61,8 +66,10 @@ def bench_gym(n: int, seconds: float, repeats: int) -> tuple[float, float]:
     return rates(lambda: env.step(action), seconds, repeats)
 
 
-def bench_vec(b: int, n: int, seconds: float, repeats: int) -> tuple[float, float]:
-    venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200)
+def bench_vec(
+    b: int, n: int, seconds: float, repeats: int, dynamics: str = "social_potential"
+) -> tuple[float, float]:
+    venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, dynamics=dynamics)
     venv.seed(0)
     venv.reset()
     actions = np.random.default_rng(0).uniform(-1, 1, (venv.num_envs, 2)).astype(np.float32)
@@ -104,6 +111,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=1.0)
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--dynamics", nargs="+", default=list(DYNAMICS), choices=DYNAMICS)
     args = parser.parse_args()
     print(f"glibc keep-freed-memory tuning active: {keep_freed_memory()}")
     s, r = args.seconds, args.repeats
@@ -120,6 +128,9 @@ def main() -> None:
         print(row("gym.make", 1, n, bench_gym(n, s, r)))
     for b in (1, 64, 1024):
         print(row("vec_env", b, 32, bench_vec(b, 32, s, r)))
+    for dynamics in args.dynamics:
+        print(row(f"parallel_env ({dynamics})", 1, 32, bench_parallel(32, s, r, dynamics)))
+        print(row(f"vec_env ({dynamics})", 64, 32, bench_vec(64, 32, s, r, dynamics)))
     for n, b in ((32, 1), (32, 1024)):
         vmas_rate = bench_vmas(n, b, s, r)
         if vmas_rate is None:
