@@ -509,60 +509,67 @@ def lagrangian_step(
     exact = params.gradient == "exact" and control is None
     n, d = x.shape[-2], x.shape[-1]
     alpha = params.arrays(n, d, x.dtype)["alpha"]
+    # Batch elements choose their substeps independently; each iteration evaluates only
+    # the elements still inside the frame (a stiff swarm does not slow the others).
+    batch = x.shape[:-2]
+    B = int(np.prod(batch, dtype=np.int64))
+    xf = np.array(x, copy=True).reshape(B, n, d)
+    gf = None if goal is None else np.broadcast_to(goal, (*batch, d)).reshape(B, d)
+    cf = None if control is None else np.broadcast_to(control, x.shape).reshape(B, n, d)
 
-    def evaluate(y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        vel = -alpha * lagrangian_gradient(y, params, goal)
-        if control is not None:
-            vel = vel + control
+    def evaluate(y: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        g = None if gf is None else gf[rows]
+        vel = -alpha * lagrangian_gradient(y, params, g)
+        if cf is not None:
+            vel = vel + cf[rows]
         clear = pair_clearance(y, params)
-        val = lagrangian_value(y, params, goal) if exact else np.zeros(y.shape[:-2])
+        val = lagrangian_value(y, params, g) if exact else np.zeros(len(rows))
         return vel, clear, val
 
-    v, clear, L = evaluate(x)
-    batch = x.shape[:-2]
-    h = np.full(batch, dt) if substep is None else np.array(substep, dtype=float, copy=True)
+    v, clear, L = evaluate(xf, np.arange(B))
+    h = np.full(B, dt)
+    if substep is not None:
+        h = np.array(np.broadcast_to(substep, batch), dtype=float).reshape(B)
     h_min = dt * MIN_STEP_FRACTION
-    remaining = np.full(batch, dt)
-    while np.any(remaining > 0):
-        active = remaining > 0
-        h_try = np.where(active, np.minimum(h, remaining), 0.0)
-        x_try = x + h_try[..., None, None] * v
-        v_try, clear_try, L_try = evaluate(x_try)
+    remaining = np.full(B, dt)
+    while (rows := np.flatnonzero(remaining > 0)).size:
+        h_old = h[rows]
+        h_try = np.minimum(h_old, remaining[rows])
+        x_try = xf[rows] + h_try[:, None, None] * v[rows]
+        v_try, clear_try, L_try = evaluate(x_try, rows)
         if n > 1:
-            min_clear = clear.min(axis=(-2, -1))
-            ok = np.all(clear_try >= CLEARANCE_KEEP * clear, axis=(-2, -1))
+            min_clear = clear[rows].min(axis=(-2, -1))
+            ok = np.all(clear_try >= CLEARANCE_KEEP * clear[rows], axis=(-2, -1))
         else:
-            centre = x.mean(axis=-2, keepdims=True) if goal is None else goal[..., None, :]
-            off = x - centre
-            min_clear = 0.5 * np.einsum("...ik,...ik->...", off, off)
-            if control is not None:  # a single controlled agent: scale by its own motion
-                min_clear = np.maximum(min_clear, 0.5 * (dt * np.abs(control).max()) ** 2)
-            ok = np.ones(batch, dtype=bool)
-        dv = v_try - v
-        err = 0.5 * h_try * np.sqrt(np.einsum("...ik,...ik->...i", dv, dv).max(axis=-1))
+            x_rows = xf[rows]
+            centre = x_rows.mean(axis=-2, keepdims=True) if gf is None else gf[rows][:, None, :]
+            off = x_rows - centre
+            min_clear = 0.5 * np.einsum("mik,mik->m", off, off)
+            if cf is not None:  # a single controlled agent: scale by its own motion
+                own = dt * np.abs(cf[rows]).max(axis=(-2, -1))
+                min_clear = np.maximum(min_clear, 0.5 * own**2)
+            ok = np.ones(rows.size, dtype=bool)
+        dv = v_try - v[rows]
+        err = 0.5 * h_try * np.sqrt(np.einsum("mik,mik->mi", dv, dv).max(axis=-1))
         ok &= err <= params.step_tol * np.sqrt(2.0 * np.maximum(min_clear, 0.0))
         if exact:
-            ok &= L_try <= L
-        accept = active & ok
-        reject = active & ~ok
-        sel = accept[..., None, None]
-        x = np.where(sel, x_try, x)
-        v = np.where(sel, v_try, v)
-        clear = np.where(accept[..., None, None], clear_try, clear)
-        L = np.where(accept, L_try, L)
-        remaining = np.where(accept, remaining - h_try, remaining)
-        remaining = np.where(accept & (remaining <= dt * 1e-12), 0.0, remaining)
-        grown = np.where(h_try < h, h, np.minimum(h_try * STEP_GROWTH, dt))
-        h = np.where(accept, grown, h)
-        h = np.where(reject, h_try * 0.5, h)
-        stuck = reject & (h < h_min)
+            ok &= L_try <= L[rows]
+        acc = rows[ok]
+        xf[acc], v[acc], clear[acc], L[acc] = x_try[ok], v_try[ok], clear_try[ok], L_try[ok]
+        left = remaining[acc] - h_try[ok]
+        remaining[acc] = np.where(left <= dt * 1e-12, 0.0, left)
+        grown = np.where(h_try < h_old, h_old, np.minimum(h_try * STEP_GROWTH, dt))
+        new_h = np.where(ok, grown, h_try * 0.5)
+        stuck = ~ok & (new_h < h_min)
         if exact:
             # Predicted decrease h Σ α (∂L/∂x)² lost in L's round-off: hold the state.
-            drop = h_try * np.einsum("...ik,...ik->...", v, v / alpha)
-            stuck |= reject & (drop <= ROUNDOFF_HOLD * np.finfo(x.dtype).eps * np.abs(L))
-        remaining = np.where(stuck, 0.0, remaining)
-        h = np.where(stuck, np.maximum(h_try, h_min), h)
-    return x, v, h
+            v_rows = v[rows]
+            drop = h_try * np.einsum("mik,mik->m", v_rows, v_rows / alpha)
+            eps = np.finfo(x.dtype).eps
+            stuck |= ~ok & (drop <= ROUNDOFF_HOLD * eps * np.abs(L[rows]))
+        remaining[rows[stuck]] = 0.0
+        h[rows] = np.where(stuck, np.maximum(h_try, h_min), new_h)
+    return xf.reshape(x.shape), v.reshape(x.shape), h.reshape(batch)
 
 
 __all__ = [
