@@ -226,3 +226,17 @@ def test_full_demo_learned_policy_beats_the_analytic_controller(tmp_path: Path):
     code = demo.main(["--out", str(tmp_path / "demo"), "--no-progress"])
     report = (tmp_path / "demo" / "report.md").read_text()
     assert code == 0, report
+
+
+@pytest.mark.parametrize("dynamics", ["zone", "piecewise", "lagrangian"])
+def test_smoke_training_on_every_dynamics_with_its_baseline_logged(tmp_path: Path, dynamics):
+    tc = smoke_config(
+        env={**SMOKE_ENV, "dynamics": dynamics},
+        total_timesteps=256,
+        eval_freq=256,
+        eval_episodes=1,
+    )
+    train(tc, tmp_path, progress_bar=False, tensorboard=False, verbose=0)
+    meta = json.loads((tmp_path / "meta.json").read_text())
+    assert meta["evaluations"] and np.isfinite(meta["evaluations"][-1]["learned"]["mean_return"])
+    assert load_train_config(tmp_path / "train_config.yaml").swarm_config().dynamics == dynamics
