@@ -455,3 +455,16 @@ def test_human_render_on_a_headless_machine_warns_but_runs():
     assert len(caught) <= 1  # warned once, not every frame
     env.close()
     env.close()
+
+
+def test_step_after_the_episode_ended_raises_until_reset():
+    env = gym.make(ENV_ID, n_agents=2, max_steps=3).unwrapped
+    env.reset(seed=0)
+    zeros = np.zeros(env.action_space.shape, np.float32)
+    for _ in range(3):
+        *_, terminated, truncated, _ = env.step(zeros)
+    assert terminated or truncated
+    with pytest.raises(RuntimeError, match="after the episode ended"):
+        env.step(zeros)
+    env.reset(seed=1)
+    env.step(zeros)

@@ -319,10 +319,14 @@ class SwarmNavEnv(_Rendering, gymnasium.Env):
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
         if self._needs_reset:
-            raise RuntimeError("step() called before reset()")
+            raise RuntimeError(
+                "step() called before reset() or after the episode ended (terminated or "
+                "truncated); call reset()"
+            )
         n, d = self.cfg.n_agents, self.cfg.dim
         a = check_actions(action, (n * d,)).reshape(1, n, d)
         reward, terminated, truncated, stats = self.core.step(a)
+        self._needs_reset = bool(terminated[0] or truncated[0])
         obs = self.core.observe().reshape(-1)
         self._after_step_render()
         return (
