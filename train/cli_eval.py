@@ -1,17 +1,20 @@
-"""``swarm-eval``: evaluate analytic controllers and SB3 models on SwarmNav.
+"""``swarm-eval``: evaluate analytic controllers, SB3 models and RLlib checkpoints on SwarmNav.
 
 Usage::
 
     swarm-eval --env swarm_envs/SwarmNav-v0 [--config configs/env/paper_navigation.yaml] \\
-        --policies potential zero random [path/to/model.zip ...] \\
+        --policies potential zero random [path/to/model.zip ...] [runs/x_rllib/checkpoint] \\
         --episodes 20 --seed 0 --out runs/eval
 
-Policies are built-in names (``potential``, ``zero``, ``random``; see
-:data:`agents.CONTROLLERS`) or paths to Stable-Baselines3 model zips (algorithm
-detected from the zip). Every policy runs on the same seeded episodes; the output
-folder receives ``results.json``, ``summary.md``, ``curves.png`` and one
-``episode0_<policy>.gif`` per policy (see :mod:`train.evaluate` and
-``docs/evaluation.md``).
+Policies are built-in names (``potential``, ``informed``, ``goal_force``,
+``lyapunov``, ``zero``, ``random``, see :data:`agents.CONTROLLERS`; and ``analytic``,
+the baseline of the config's dynamics, reported under its own name), paths to
+Stable-Baselines3 model zips (algorithm detected from the zip), or RLlib checkpoint
+folders written by ``swarm-train --engine rllib`` (the shared module, through
+:class:`train.rllib.policy.RLlibPolicy`; needs the ``distributed`` extra). Every
+policy runs on the same seeded episodes; the output folder receives ``results.json``,
+``summary.md``, ``curves.png`` and one ``episode0_<policy>.gif`` per policy (see
+:mod:`train.evaluate` and ``docs/evaluation.md``).
 
 Exit status: 0 on success; 2 with a message on stderr for an unknown policy name, a
 missing or unreadable model file, a model whose spaces do not fit the env, an unknown
@@ -57,9 +60,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--policies",
         nargs="+",
-        default=["potential", "zero", "random"],
+        default=["analytic", "zero", "random"],
         metavar="POLICY",
-        help="built-in names (potential, zero, random) and/or SB3 model .zip paths",
+        help="built-in names (analytic = the baseline of the config's dynamics, potential, "
+        "informed, goal_force, lyapunov, zero, random), SB3 model .zip paths and/or RLlib "
+        "checkpoint folders",
     )
     p.add_argument("--episodes", type=int, default=20, help="episodes per policy (default 20)")
     p.add_argument("--seed", type=int, default=0, help="seed of the episodes (default 0)")
@@ -131,22 +136,33 @@ def _unique(name: str, taken: set[str]) -> str:
 
 
 def _load_policies(specs: Sequence[str], cfg: Any, seed: int, device: str) -> dict[str, Any]:
-    from agents import CONTROLLERS, make_controller
+    from agents import CONTROLLERS, analytic_name, make_controller
     from train.evaluate import SpaceMismatchError, load_sb3_model, policy_mode
 
     policies: dict[str, Any] = {}
     for spec in specs:
+        if spec == "analytic":
+            spec = analytic_name(cfg)
         if spec in CONTROLLERS:
             policies[_unique(spec, set(policies))] = make_controller(spec, cfg, seed=seed)
             continue
         path = Path(spec)
         looks_like_path = path.suffix == ".zip" or "/" in spec or "\\" in spec
+        if path.is_dir():
+            rllib_policy = _load_rllib(path, seed)
+            name = _unique(rllib_policy.name, set(policies))
+            try:
+                policy_mode(rllib_policy, cfg)
+            except SpaceMismatchError as err:
+                raise CliError(f"checkpoint {spec} does not fit the env: {err}") from None
+            policies[name] = rllib_policy
+            continue
         if not path.is_file():
             if looks_like_path:
                 raise CliError(f"model file not found: {spec}")
             raise CliError(
-                f"unknown policy {spec!r}; use one of {', '.join(CONTROLLERS)} or a path to "
-                "a Stable-Baselines3 model .zip"
+                f"unknown policy {spec!r}; use one of analytic, {', '.join(CONTROLLERS)} or a "
+                "path to a Stable-Baselines3 model .zip"
             )
         try:
             model = load_sb3_model(path, device=device)
@@ -159,6 +175,21 @@ def _load_policies(specs: Sequence[str], cfg: Any, seed: int, device: str) -> di
             raise CliError(f"model {spec} does not fit the env: {err}") from None
         policies[name] = model
     return policies
+
+
+def _load_rllib(path: Path, seed: int) -> Any:
+    """The shared policy of the RLlib checkpoint at ``path`` (a folder)."""
+    from train.rllib.policy import is_rllib_checkpoint, load_rllib_policy
+
+    if not is_rllib_checkpoint(path):
+        raise CliError(
+            f"{path} is a folder but not an RLlib checkpoint (swarm-train --engine rllib "
+            "writes one as <out>/checkpoint)"
+        )
+    try:
+        return load_rllib_policy(path, seed=seed)
+    except (ImportError, ValueError, OSError) as err:
+        raise CliError(f"cannot load RLlib checkpoint {path}: {err}") from None
 
 
 def main(argv: Sequence[str] | None = None) -> int:
