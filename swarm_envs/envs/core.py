@@ -125,8 +125,7 @@ class SwarmNavCore:
         dist = rng.uniform(cfg.goal_distance_min, cfg.goal_distance_max, size=(n, 1))
         self.goal[idx] = bearing * dist
         self.t[idx] = 0
-        self.dynamics.reset(self.x, self.v, self.goal, idx, rng)
-        self._geometry = pair_geometry(self.x)
+        self._after_reset(idx, rng)
         mean_dist = self._goal_distances().mean(axis=-1)
         self.start_distance[idx] = np.maximum(mean_dist[idx], 1e-6)
         self.prev_distance[idx] = mean_dist[idx]
@@ -146,10 +145,7 @@ class SwarmNavCore:
         cfg = self.cfg
         # In the core's dtype, so that every adapter gives bit-identical results.
         a = check_actions(actions, self.x.shape).astype(self.dtype, copy=False)
-        control = cfg.u_max * a if a.any() else None
-        goal = self.goal if cfg.goal_in_physics else None
-        self.x, self.v, geometry = self.dynamics.step(self.x, self.v, goal, control, self._geometry)
-        self._geometry = pair_geometry(self.x) if geometry is None else geometry
+        self._advance(cfg.u_max * a if a.any() else None)
         self.t += 1
 
         stats = self.stats()
@@ -169,6 +165,33 @@ class SwarmNavCore:
         self.prev_arrived = arrived
         truncated = (self.t >= cfg.max_steps) & ~success
         return reward, success, truncated, stats
+
+    # ------------------------------------------------------------------ physics hooks
+    # A subclass with another state representation (the cut-off core for large swarms)
+    # overrides these three and :meth:`_nearest`; reset draws, reward, statistics and
+    # observations stay shared.
+    def _after_reset(self, idx: np.ndarray, rng: np.random.Generator) -> None:
+        """Model state for the swarms ``idx`` after their starts were drawn."""
+        self.dynamics.reset(self.x, self.v, self.goal, idx, rng)
+        self._geometry = pair_geometry(self.x)
+
+    def _advance(self, control: np.ndarray | None) -> None:
+        """Advance ``x, v`` by one step with the control ``u_max · a`` (None: zero)."""
+        goal = self.goal if self.cfg.goal_in_physics else None
+        self.x, self.v, geometry = self.dynamics.step(self.x, self.v, goal, control, self._geometry)
+        self._geometry = pair_geometry(self.x) if geometry is None else geometry
+
+    def _pair_stats(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(nearest-neighbour distance, colliding pairs, model energy)``, each ``(B,)``."""
+        cfg = self.cfg
+        rho = self._distances()
+        if cfg.n_agents > 1:  # distance to the nearest neighbour, from the shared sort
+            nnd = np.take_along_axis(rho, self._nearest()[..., :1], axis=-1)[..., 0].mean(axis=-1)
+        else:
+            nnd = np.zeros(self.batch)
+        collisions = np.count_nonzero(rho < cfg.collision_radius, axis=(-2, -1)) // 2
+        energy = self.dynamics.energy(self.x, self.v, self.goal, self._geometry)
+        return nnd, collisions.astype(np.float64), energy
 
     # ------------------------------------------------------------------ views
     def _goal_distances(self) -> np.ndarray:
@@ -193,24 +216,18 @@ class SwarmNavCore:
     def stats(self) -> dict[str, np.ndarray]:
         """Group statistics and task measures per swarm, each ``(B,)``."""
         cfg = self.cfg
-        rho = self._distances()
         goal_dist = self._goal_distances()
         arrived = (goal_dist <= cfg.goal_radius).mean(axis=-1)
-        n = cfg.n_agents
-        if n > 1:  # distance to the nearest neighbour, from the shared neighbour sort
-            nnd = np.take_along_axis(rho, self._nearest()[..., :1], axis=-1)[..., 0].mean(axis=-1)
-        else:
-            nnd = np.zeros(self.batch)
-        collisions = np.count_nonzero(rho < cfg.collision_radius, axis=(-2, -1)) // 2
+        nnd, collisions, energy = self._pair_stats()
         centroid = self.x.mean(axis=-2)
         return {
             "polarization": metrics.polarization(self.v),
             "angular_momentum": metrics.angular_momentum(self.x, self.v),
             "expanse": metrics.expanse(self.x),
             "nearest_neighbor_distance": nnd,
-            "energy": self.dynamics.energy(self.x, self.v, self.goal, self._geometry),
+            "energy": energy,
             "fraction_arrived": arrived,
-            "collisions": collisions.astype(np.float64),
+            "collisions": collisions,
             "centroid_distance": np.linalg.norm(centroid - self.goal, axis=-1),
             "mean_goal_distance": goal_dist.mean(axis=-1),
             "success": (arrived >= cfg.success_fraction - 1e-9).astype(np.float64),
