@@ -41,6 +41,9 @@ T = TypeVar("T")
 #: social potential, which also holds the task's goal sink ``C_g, l_g``).
 DYNAMICS = ("social_potential", "zone", "piecewise", "lagrangian")
 
+#: How the env computes a step (``SwarmConfig.backend``); see ``swarm_envs.envs.backends``.
+BACKENDS = ("auto", "numpy", "sparse", "torch")
+
 #: Where the shipped YAML files live (``configs/`` at the repository root).
 CONFIG_ROOT = Path(__file__).resolve().parent.parent / "configs"
 
@@ -146,6 +149,14 @@ class SwarmConfig:
     """Observed velocities (own and relative) are divided by this speed."""
     reward: RewardWeights = field(default_factory=RewardWeights)
     """Reward weights."""
+    backend: str = "auto"
+    """How a step is computed, one of :data:`BACKENDS`: ``"numpy"`` (dense, every
+    model), ``"sparse"`` (cut-off + cell list, large swarms), ``"torch"`` (one fused,
+    compiled step; CPU or CUDA) or ``"auto"``, which picks by model, N and batch
+    (``swarm_envs.envs.backends.select_backend``). Results agree to float tolerance
+    (``"sparse"``: up to its documented cut-off error)."""
+    device: str = "cpu"
+    """Torch device of the ``"torch"`` backend (``"cpu"``, ``"cuda"``, ``"cuda:1"``...)."""
 
     def __post_init__(self) -> None:
         owner = type(self).__name__
@@ -156,6 +167,10 @@ class SwarmConfig:
             raise ValueError(
                 f"{owner}.integrator must be one of {INTEGRATORS}, got {self.integrator!r}"
             )
+        if self.backend not in BACKENDS:
+            raise ValueError(f"{owner}.backend must be one of {BACKENDS}, got {self.backend!r}")
+        if not isinstance(self.device, str) or not self.device:
+            raise ValueError(f"{owner}.device must be a torch device name, got {self.device!r}")
         if self.dynamics not in DYNAMICS:
             raise ValueError(f"{owner}.dynamics must be one of {DYNAMICS}, got {self.dynamics!r}")
         sections = {
@@ -319,6 +334,7 @@ def as_dict(obj: Any) -> Any:
 
 
 __all__ = [
+    "BACKENDS",
     "CONFIG_ROOT",
     "DYNAMICS",
     "RewardWeights",

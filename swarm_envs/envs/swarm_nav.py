@@ -17,6 +17,7 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from swarm_envs.config import SwarmConfig, load_swarm_config
+from swarm_envs.envs.backends import make_core
 from swarm_envs.envs.core import OBS_BOUND, SwarmNavCore, check_actions
 
 RENDER_MODES = ("rgb_array", "human")
@@ -199,7 +200,7 @@ class SwarmNavParallelEnv(_Rendering, ParallelEnv):
             kwargs["max_steps"] = max_cycles
         self.cfg = make_config(config, kwargs)
         self.render_mode = _check_render_mode(render_mode)
-        self.core = SwarmNavCore(self.cfg, batch=1)
+        self.core = make_core(self.cfg, batch=1)
         n, d = self.cfg.n_agents, self.cfg.dim
         self.possible_agents = [f"agent_{i}" for i in range(n)]
         self.agents: list[str] = []
@@ -298,7 +299,7 @@ class SwarmNavEnv(_Rendering, gymnasium.Env):
     def __init__(self, config: str | None = None, render_mode: str | None = None, **kwargs: Any):
         self.cfg = make_config(config, kwargs)
         self.render_mode = _check_render_mode(render_mode)
-        self.core = SwarmNavCore(self.cfg, batch=1)
+        self.core = make_core(self.cfg, batch=1)
         n, d = self.cfg.n_agents, self.cfg.dim
         self.observation_space = spaces.Box(
             -OBS_BOUND, OBS_BOUND, (n * self.core.obs_dim,), np.float32

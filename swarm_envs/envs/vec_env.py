@@ -27,6 +27,7 @@ float64 single-swarm envs); observations are float32 either way.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import os
 from collections.abc import Callable, Iterable, Sequence
@@ -38,6 +39,7 @@ import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
+from swarm_envs.envs.backends import make_core, select_backend
 from swarm_envs.envs.core import OBS_BOUND, SwarmNavCore
 from swarm_envs.envs.swarm_nav import make_config
 
@@ -67,12 +69,18 @@ class SwarmNavVecEnv(VecEnv):
         self.n_agents = self.cfg.n_agents
         if np.dtype(dtype) not in (np.dtype(np.float32), np.dtype(np.float64)):
             raise ValueError(f"dtype must be float32 or float64, got {dtype!r}")
+        self.backend = select_backend(self.cfg, self.n_swarms)
+        if self.backend == "torch":  # one fused step for every swarm; torch has its own threads
+            if n_threads not in (None, 1):
+                raise ValueError(
+                    f"n_threads must be null or 1 with the torch backend, got {n_threads!r}"
+                )
+            n_threads = 1
         self.n_threads = self._check_threads(n_threads)
         bounds = np.linspace(0, self.n_swarms, self.n_threads + 1).round().astype(int)
         self._slices = [slice(int(lo), int(hi)) for lo, hi in itertools.pairwise(bounds)]
-        self.cores = [
-            SwarmNavCore(self.cfg, batch=sl.stop - sl.start, dtype=dtype) for sl in self._slices
-        ]
+        cfg = dataclasses.replace(self.cfg, backend=self.backend)  # the same for each slice
+        self.cores = [make_core(cfg, batch=sl.stop - sl.start, dtype=dtype) for sl in self._slices]
         self._pool: ThreadPoolExecutor | None = None
         obs_space = spaces.Box(-OBS_BOUND, OBS_BOUND, (self.cores[0].obs_dim,), np.float32)
         act_space = spaces.Box(-1.0, 1.0, (self.cfg.dim,), np.float32)

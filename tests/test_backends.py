@@ -1,0 +1,95 @@
+"""Backend selection and the envs on each backend: the same API, the same results."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env as gym_check_env
+from helpers import strict_warnings
+from pettingzoo.test import parallel_api_test
+
+from swarm_envs import ENV_ID, swarm_nav_v0
+from swarm_envs.config import SwarmConfig
+from swarm_envs.envs.backends import (
+    SPARSE_MIN_AGENTS,
+    TORCH_MIN_SLOTS,
+    make_core,
+    select_backend,
+)
+from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.sparse_core import SparseSwarmNavCore
+
+
+def test_auto_picks_by_model_size_and_batch():
+    assert select_backend(SwarmConfig()) == "numpy"
+    assert select_backend(SwarmConfig(n_agents=SPARSE_MIN_AGENTS)) == "sparse"
+    assert select_backend(SwarmConfig(n_agents=SPARSE_MIN_AGENTS - 1)) == "numpy"
+    assert select_backend(SwarmConfig(n_agents=32), batch=TORCH_MIN_SLOTS // 32) == "torch"
+    assert select_backend(SwarmConfig(n_agents=32), batch=TORCH_MIN_SLOTS // 32 - 1) == "numpy"
+    for dynamics in ("zone", "piecewise", "lagrangian"):
+        cfg = SwarmConfig(dynamics=dynamics, n_agents=SPARSE_MIN_AGENTS)
+        assert select_backend(cfg, batch=1000) == "numpy"
+    verlet = SwarmConfig(integrator="velocity_verlet", n_agents=32)
+    assert select_backend(verlet, batch=10_000) == "numpy"
+    assert select_backend(SwarmConfig(device="cuda")) == "torch"
+    assert select_backend(SwarmConfig(backend="sparse")) == "sparse"
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"backend": "gpu"}, "backend must be one of"),
+        ({"backend": "sparse", "dynamics": "zone"}, "social_potential"),
+        ({"backend": "torch", "integrator": "velocity_verlet"}, "semi_implicit_euler"),
+        ({"backend": "numpy", "device": "cuda"}, "needs backend 'torch'"),
+        ({"device": ""}, "device must be"),
+    ],
+)
+def test_unsupported_backend_choices_are_value_errors(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        make_core(SwarmConfig(**kwargs))
+
+
+def test_large_swarms_run_on_the_sparse_core_through_every_api():
+    n = SPARSE_MIN_AGENTS
+    env = gym.make(ENV_ID, n_agents=n, init_radius=15.0)
+    assert isinstance(env.unwrapped.core, SparseSwarmNavCore)
+    obs, _ = env.reset(seed=0)
+    obs, reward, *_ = env.step(np.zeros(env.action_space.shape, np.float32))
+    assert np.isfinite(obs).all() and np.isfinite(reward)
+    penv = swarm_nav_v0.parallel_env(n_agents=n, init_radius=15.0)
+    assert isinstance(penv.core, SparseSwarmNavCore)
+    venv = swarm_nav_v0.vec_env(2, n_agents=n, init_radius=15.0)
+    assert venv.backend == "sparse" and all(isinstance(c, SparseSwarmNavCore) for c in venv.cores)
+    venv.reset()
+    assert np.isfinite(venv.step(np.zeros((2 * n, 2), np.float32))[0]).all()
+
+
+def test_checkers_pass_on_the_sparse_backend():
+    with strict_warnings():
+        gym_check_env(gym.make(ENV_ID, backend="sparse", n_agents=12).unwrapped)
+        parallel_api_test(swarm_nav_v0.parallel_env(backend="sparse", n_agents=6), num_cycles=100)
+
+
+@pytest.mark.parametrize("integrator", ["semi_implicit_euler", "velocity_verlet"])
+def test_sparse_and_numpy_vec_envs_agree_with_a_long_cutoff(integrator: str):
+    def rollout(backend: str) -> np.ndarray:
+        venv = swarm_nav_v0.vec_env(
+            3, n_agents=12, backend=backend, integrator=integrator, dtype=np.float64
+        )
+        if backend == "sparse":  # a cut-off past every pair: exact up to round-off
+            for core in venv.cores:
+                core.cutoff_tol = 1e-300
+        venv.seed(3)
+        out = [venv.reset()]
+        rng = np.random.default_rng(0)
+        for _ in range(40):
+            out.append(venv.step(rng.uniform(-1, 1, (36, 2)))[0])
+        return np.stack(out)
+
+    np.testing.assert_allclose(rollout("sparse"), rollout("numpy"), rtol=0, atol=1e-5)
+
+
+def test_dense_core_is_the_numpy_backend():
+    assert type(make_core(SwarmConfig(), batch=2)) is SwarmNavCore
