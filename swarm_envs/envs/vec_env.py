@@ -2,7 +2,7 @@
 
 All agents of all swarms share one policy (parameter sharing): slot ``b·N + i`` is agent
 i of swarm b, with that agent's local observation, action and the swarm's cooperative
-reward. All swarms step in one array call on :class:`SwarmNavCore`; no Python loop over
+reward. All swarms step in one array call on the batched core; no Python loop over
 envs or agents (SuperSuit's ``pettingzoo_env_to_vec_env_v1`` + ``concat_vec_envs``
 would loop, and never sets ``TimeLimit.truncated``).
 
@@ -20,6 +20,11 @@ Large batches are split over worker threads (``n_threads``; default one per 512
 swarms, up to the CPU count), each stepping its own slice of swarms on its own core:
 numpy releases the GIL inside its array loops, so the slices run in parallel. A seed
 gives the same rollout for the same ``n_threads``.
+
+The step runs on the backend ``select_backend`` picks (``backend=`` overrides; see
+:mod:`swarm_envs.envs.backends`): the dense numpy core, the cut-off core for large swarms,
+or from ``TORCH_MIN_SLOTS`` agent slots the fused torch step (one core, no worker
+threads; ``device="cuda"`` for a GPU). :attr:`SwarmNavVecEnv.backend` says which.
 
 The state is float32 by default (``dtype=np.float64`` for exact agreement with the
 float64 single-swarm envs); observations are float32 either way.
