@@ -93,3 +93,32 @@ def test_sparse_and_numpy_vec_envs_agree_with_a_long_cutoff(integrator: str):
 
 def test_dense_core_is_the_numpy_backend():
     assert type(make_core(SwarmConfig(), batch=2)) is SwarmNavCore
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_torch_and_numpy_vec_envs_agree_through_auto_resets(monkeypatch, dtype):
+    monkeypatch.setenv("SWARM_ENVS_TORCH_COMPILE", "0")  # plain torch: no compile time here
+    tol = 1e-9 if dtype == np.float64 else 2e-3
+
+    def rollout(backend: str) -> tuple[np.ndarray, np.ndarray]:
+        venv = swarm_nav_v0.vec_env(4, n_agents=6, backend=backend, max_steps=25, dtype=dtype)
+        assert venv.backend == backend
+        venv.seed(11)
+        obs, rewards = [venv.reset()], []
+        rng = np.random.default_rng(2)
+        for _ in range(60):  # two auto-resets of every swarm
+            o, r, _, _ = venv.step(rng.uniform(-1, 1, (24, 2)).astype(np.float32))
+            obs.append(o)
+            rewards.append(r)
+        return np.stack(obs), np.stack(rewards)
+
+    (obs_t, rew_t), (obs_n, rew_n) = rollout("torch"), rollout("numpy")
+    np.testing.assert_allclose(obs_t, obs_n, rtol=0, atol=tol)
+    np.testing.assert_allclose(rew_t, rew_n, rtol=0, atol=tol)
+
+
+def test_checkers_pass_on_the_torch_backend(monkeypatch):
+    monkeypatch.setenv("SWARM_ENVS_TORCH_COMPILE", "0")
+    with strict_warnings():
+        gym_check_env(gym.make(ENV_ID, backend="torch", n_agents=5).unwrapped)
+        parallel_api_test(swarm_nav_v0.parallel_env(backend="torch", n_agents=4), num_cycles=50)

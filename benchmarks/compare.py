@@ -1,0 +1,383 @@
+"""Side by side: swarm_envs (numpy and torch cores) against VMAS and MPE2, same N and batch.
+
+Usage::
+
+    python benchmarks/compare.py [--sizes 32x1,32x64,32x1024] [--seconds 0.5] [--repeats 5]
+                                 [--threads T] [--json out.json] [--no-physics]
+
+Installs nothing. VMAS rows appear where ``vmas`` imports, MPE2 rows where ``mpe2``
+imports (try a separate venv: ``python3.11 -m venv /tmp/peers && /tmp/peers/bin/pip
+install -c constraints.txt vmas==1.5.2 mpe2 -e .``).
+
+Every row is one ``step`` of B swarms (environments) of N agents, timed in windows of
+about ``--seconds``; the rows of one size take turns, window after window, ``--repeats``
+times, so that a busy machine slows them all alike. Printed: median and best
+agent-steps/s (steps/s × B × N) and the ratio of each row's median to the numpy core's.
+
+Rows, ours (all with random actions in [−1, 1], drawn once per row):
+
+- ``numpy core``: :class:`SwarmNavCore` (float32) ``step`` + ``observe`` (physics,
+  observations, reward, statistics);
+- ``numpy vec_env``: :class:`SwarmNavVecEnv` ``step`` (adds SB3's per-slot infos and the
+  auto-reset bookkeeping);
+- ``torch core (plain)`` / ``torch core (compiled)``: :class:`TorchSwarmNavCore`, the same
+  work as the numpy core in torch, without and with ``torch.compile``;
+- ``torch vec_env (compiled)``: the SB3 VecEnv stepping the compiled torch core;
+- ``physics only``: one semi-implicit Euler step of the social potential model, numpy
+  and torch plain/compiled (no observations, reward or statistics).
+
+Peers:
+
+- ``vmas navigation``: VMAS's ``navigation`` scenario (lidar observations, goal reward),
+  its spawn box widened ∝ √N (VMAS's rejection sampling of 2N entities in its default
+  2 × 2 box never finishes at N = 32);
+- ``vmas pairwise``: a minimal VMAS scenario defined here, N disc agents and nothing
+  else: VMAS's simulator core (all-pairs collision forces, integration) with the
+  cheapest observation (own position and velocity) and zero reward, the closest
+  VMAS analogue of our "physics only";
+- ``mpe2 simple_spread``: MPE2's ``simple_spread_v3`` (N agents, N landmarks) through its
+  PettingZoo ``parallel_env``; MPE2 has no batching, so B environments are B Python
+  objects stepped in a loop (run for B ≤ 64 and B × N ≤ 2048 only: seconds per step
+  beyond).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import statistics
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import torch
+
+import swarm_envs  # noqa: F401  (registers the Gymnasium id)
+from swarm_envs import swarm_nav_v0
+from swarm_envs._malloc import keep_freed_memory
+from swarm_envs.config import SwarmConfig
+from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.torch_core import TorchSwarmNavCore
+from swarm_envs.physics import SocialPotentialParams, random_swarm
+from swarm_envs.physics import step as numpy_step
+from swarm_envs.physics.torch_backend import SocialPotentialStepper
+
+Step = Callable[[], Any]
+
+#: Largest batch, and largest B × N, for which MPE2's per-environment loop is timed.
+MPE2_MAX_BATCH = 64
+MPE2_MAX_AGENTS = 2048
+
+
+def machine() -> str:
+    """One line naming the machine and the libraries."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as fh:
+            names = [ln.split(":", 1)[1].strip() for ln in fh if ln.startswith("model name")]
+        cpu = names[0] if names else cpu
+    except OSError:
+        pass
+    return (
+        f"{cpu}, {os.cpu_count()} cores, torch {torch.__version__} "
+        f"({torch.get_num_threads()} threads), numpy {np.__version__}, "
+        f"python {platform.python_version()}"
+    )
+
+
+def actions_for(shape: tuple[int, ...], seed: int = 0) -> np.ndarray:
+    return np.random.default_rng(seed).uniform(-1, 1, shape).astype(np.float32)
+
+
+# --------------------------------------------------------------------------- ours
+
+
+def numpy_core(n: int, b: int) -> Step:
+    core = SwarmNavCore(SwarmConfig(n_agents=n, max_steps=10**9), batch=b, dtype=np.float32)
+    core.reset(np.random.default_rng(0))
+    a = actions_for((b, n, 2))
+    return lambda: (core.step(a), core.observe())
+
+
+def numpy_vec_env(n: int, b: int) -> Step:
+    venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200)
+    venv.seed(0)
+    venv.reset()
+    a = actions_for((venv.num_envs, 2))
+    return lambda: venv.step(a)
+
+
+def torch_vec_env(n: int, b: int) -> Step:
+    """The SB3 VecEnv on the compiled torch core.
+
+    Uses ``vec_env(..., backend="torch")`` where the env takes it; otherwise builds the
+    numpy VecEnv with one core and swaps that core for a :class:`TorchSwarmNavCore`.
+    """
+    try:
+        venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, backend="torch")
+    except (TypeError, ValueError):
+        venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, n_threads=1)
+        venv.cores = [TorchSwarmNavCore(venv.cfg, batch=b)]
+    venv.seed(0)
+    venv.reset()
+    a = actions_for((venv.num_envs, 2))
+    return lambda: venv.step(a)
+
+
+def torch_core(compile: bool) -> Callable[[int, int], Step]:
+    def make(n: int, b: int) -> Step:
+        core = TorchSwarmNavCore(SwarmConfig(n_agents=n, max_steps=10**9), batch=b, compile=compile)
+        if compile:
+            print(f"    (torch core {b} x {n}: compiled in {core.compile_seconds:.1f} s)")
+        core.reset(np.random.default_rng(0))
+        a = actions_for((b, n, 2))
+        return lambda: (core.step(a), core.observe())
+
+    return make
+
+
+def physics_numpy(n: int, b: int) -> Step:
+    params = SocialPotentialParams.navigation()
+    x, v = random_swarm(
+        np.random.default_rng(0), n, radius=3.0, speed=0.5, batch_shape=(b,), dtype=np.float32
+    )
+    u = 3.0 * actions_for(x.shape)
+    return lambda: numpy_step(x, v, params, dt=0.1, control=u)
+
+
+def physics_torch(compile: bool) -> Callable[[int, int], Step]:
+    def make(n: int, b: int) -> Step:
+        params = SocialPotentialParams.navigation()
+        x, v = random_swarm(
+            np.random.default_rng(0), n, radius=3.0, speed=0.5, batch_shape=(b,), dtype=np.float32
+        )
+        tx, tv = torch.from_numpy(x), torch.from_numpy(v)
+        u = torch.from_numpy(3.0 * actions_for(x.shape))
+        stepper = SocialPotentialStepper(params, dt=0.1, compile=compile)
+        stepper.warmup(tx, tv, None, u)
+        if compile:
+            print(f"    (physics {b} x {n}: compiled in {stepper.compile_seconds:.1f} s)")
+        return lambda: stepper(tx, tv, None, u)
+
+    return make
+
+
+# --------------------------------------------------------------------------- peers
+
+
+def vmas_navigation(n: int, b: int) -> Step | None:
+    try:
+        import vmas
+    except ImportError:
+        return None
+    half_width = max(1.0, 0.5 * math.sqrt(n))  # see the module docstring
+    env = vmas.make_env(
+        "navigation",
+        num_envs=b,
+        device="cpu",
+        n_agents=n,
+        continuous_actions=True,
+        world_spawning_x=half_width,
+        world_spawning_y=half_width,
+    )
+    env.reset()
+    acts = [torch.from_numpy(actions_for((b, 2), seed=i)) for i in range(n)]
+    return lambda: env.step(acts)
+
+
+def vmas_pairwise(n: int, b: int) -> Step | None:
+    try:
+        import vmas
+        from vmas.simulator.core import Agent, Sphere, World
+        from vmas.simulator.scenario import BaseScenario
+    except ImportError:
+        return None
+
+    class Pairwise(BaseScenario):
+        """N disc agents and nothing else: VMAS's all-pairs collision physics."""
+
+        def make_world(self, batch_dim: int, device: torch.device, **kwargs: Any) -> World:
+            world = World(batch_dim, device)
+            for i in range(n):
+                world.add_agent(Agent(name=f"agent_{i}", shape=Sphere(0.05), u_multiplier=1.0))
+            return world
+
+        def reset_world_at(self, env_index: int | None = None) -> None:
+            half = max(1.0, 0.5 * math.sqrt(n))
+            for agent in self.world.agents:
+                shape = (1 if env_index is not None else self.world.batch_dim, 2)
+                pos = (torch.rand(shape, device=self.world.device) * 2 - 1) * half
+                agent.set_pos(pos if env_index is None else pos[0], batch_index=env_index)
+
+        def observation(self, agent: Agent) -> torch.Tensor:
+            return torch.cat([agent.state.pos, agent.state.vel], dim=-1)
+
+        def reward(self, agent: Agent) -> torch.Tensor:
+            return torch.zeros(self.world.batch_dim, device=self.world.device)
+
+    env = vmas.make_env(Pairwise(), num_envs=b, device="cpu", continuous_actions=True)
+    env.reset()
+    acts = [torch.from_numpy(actions_for((b, 2), seed=i)) for i in range(n)]
+    return lambda: env.step(acts)
+
+
+def mpe2_spread(n: int, b: int) -> Step | None:
+    if b > MPE2_MAX_BATCH or b * n > MPE2_MAX_AGENTS:
+        return None
+    try:
+        from mpe2 import simple_spread_v3
+    except ImportError:
+        return None
+    envs = [
+        simple_spread_v3.parallel_env(N=n, continuous_actions=True, max_cycles=10**9)
+        for _ in range(b)
+    ]
+    for i, env in enumerate(envs):
+        env.reset(seed=i)
+    acts = [
+        {a: np.abs(actions_for((5,), seed=j)) for j, a in enumerate(env.possible_agents)}
+        for env in envs
+    ]
+
+    def step() -> None:
+        for env, act in zip(envs, acts, strict=True):
+            env.step(act)
+
+    return step
+
+
+ROWS: list[tuple[str, Callable[[int, int], Step | None], bool]] = [
+    # (label, factory, physics-only row?)
+    ("numpy core", numpy_core, False),
+    ("numpy vec_env", numpy_vec_env, False),
+    ("torch core (plain)", torch_core(False), False),
+    ("torch core (compiled)", torch_core(True), False),
+    ("torch vec_env (compiled)", torch_vec_env, False),
+    ("vmas navigation", vmas_navigation, False),
+    ("vmas pairwise", vmas_pairwise, False),
+    ("mpe2 simple_spread", mpe2_spread, False),
+    ("physics only, numpy", physics_numpy, True),
+    ("physics only, torch plain", physics_torch(False), True),
+    ("physics only, torch compiled", physics_torch(True), True),
+]
+
+
+def time_window(fn: Step, seconds: float) -> float:
+    """Calls per second over one window of about ``seconds`` (at least one call)."""
+    calls, start = 0, time.perf_counter()
+    while True:
+        fn()
+        calls += 1
+        elapsed = time.perf_counter() - start
+        if elapsed >= seconds:
+            return calls / elapsed
+
+
+def compare(n: int, b: int, seconds: float, repeats: int, physics: bool) -> list[dict]:
+    """Time every available row at N = n, B = b, alternating; one dict per row."""
+    steps: dict[str, Step] = {}
+    for label, factory, is_physics in ROWS:
+        if is_physics and not physics:
+            continue
+        fn = factory(n, b)
+        if fn is None:
+            continue
+        fn()  # warm-up (caches, first allocation)
+        steps[label] = fn
+    rates: dict[str, list[float]] = {label: [] for label in steps}
+    for _ in range(repeats):
+        for label, fn in steps.items():
+            rates[label].append(time_window(fn, seconds))
+    return [
+        {
+            "row": label,
+            "n_agents": n,
+            "batch": b,
+            "steps_per_s_median": statistics.median(r),
+            "steps_per_s_best": max(r),
+            "agent_steps_per_s_median": statistics.median(r) * n * b,
+            "agent_steps_per_s_best": max(r) * n * b,
+        }
+        for label, r in rates.items()
+    ]
+
+
+def print_table(results: list[dict]) -> None:
+    print(
+        "| row | N | B | agent-steps/s (median) | agent-steps/s (best) | vs numpy core (median) |"
+    )
+    print("|---|---:|---:|---:|---:|---:|")
+    for size in sorted({(r["n_agents"], r["batch"]) for r in results}):
+        rows = [r for r in results if (r["n_agents"], r["batch"]) == size]
+        base = next((r for r in rows if r["row"] == "numpy core"), None)
+        for r in rows:
+            ratio = (
+                f"{r['agent_steps_per_s_median'] / base['agent_steps_per_s_median']:.2f}x"
+                if base
+                else "-"
+            )
+            print(
+                f"| {r['row']} | {r['n_agents']} | {r['batch']} | "
+                f"{fmt(r['agent_steps_per_s_median'])} | {fmt(r['agent_steps_per_s_best'])} "
+                f"| {ratio} |"
+            )
+
+
+def fmt(rate: float) -> str:
+    if rate >= 1e6:
+        return f"{rate / 1e6:.2f} M"
+    if rate >= 1e3:
+        return f"{rate / 1e3:.1f} k"
+    return f"{rate:.0f}"
+
+
+def parse_sizes(text: str) -> list[tuple[int, int]]:
+    """``"32x1,32x1024"`` → ``[(32, 1), (32, 1024)]`` (N x B)."""
+    sizes = []
+    for part in text.split(","):
+        try:
+            n, b = (int(v) for v in part.lower().split("x"))
+        except ValueError:
+            raise SystemExit(f"--sizes: expected NxB pairs like 32x1024, got {part!r}") from None
+        if n < 1 or b < 1:
+            raise SystemExit(f"--sizes: N and B must be >= 1, got {part!r}")
+        sizes.append((n, b))
+    return sizes
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", default="32x1,32x64,32x1024", help="N x B pairs")
+    parser.add_argument("--seconds", type=float, default=0.5, help="length of one window")
+    parser.add_argument("--repeats", type=int, default=5, help="windows per row")
+    parser.add_argument("--threads", type=int, default=None, help="torch.set_num_threads")
+    parser.add_argument("--json", default=None, help="also write the results here")
+    parser.add_argument("--no-physics", action="store_true", help="skip physics-only rows")
+    args = parser.parse_args()
+    if args.threads is not None:
+        torch.set_num_threads(args.threads)
+    keep_freed_memory()
+    print(f"machine: {machine()}")
+    for mod in ("vmas", "mpe2"):
+        try:
+            version = getattr(__import__(mod), "__version__", "?")
+            print(f"{mod} {version}: importable")
+        except ImportError:
+            print(f"{mod}: not importable (its rows are skipped)")
+    results: list[dict] = []
+    for n, b in parse_sizes(args.sizes):
+        print(f"\n== N = {n}, B = {b} ==", flush=True)
+        results += compare(n, b, args.seconds, args.repeats, not args.no_physics)
+    print()
+    print_table(results)
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump({"machine": machine(), "results": results}, fh, indent=1)
+
+
+if __name__ == "__main__":
+    main()

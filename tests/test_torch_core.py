@@ -1,0 +1,282 @@
+"""TorchSwarmNavCore: the numpy SwarmNavCore's interface and numbers, in torch.
+
+Same seed and actions → same starts, observations, rewards, flags and statistics as
+:class:`SwarmNavCore` over dozens of steps (float32 and float64), including partial
+resets, padding (N − 1 < k), N = 1, 3-D and the passive goal; TESTING.md items 11
+(coincident agents), 12 (seeding), 13 (pickling) and 16 (bad input). One test compiles
+(small shapes) and checks the compiled step against the plain one; the rest run plain
+torch, the fallback path.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import pickle
+
+import numpy as np
+import pytest
+import torch
+
+from swarm_envs.config import SwarmConfig
+from swarm_envs.envs.core import OBS_BOUND, STAT_KEYS, SwarmNavCore
+from swarm_envs.envs.torch_core import TorchSwarmNavCore
+from swarm_envs.physics.torch_backend import compile_support
+
+TOL = {np.float32: dict(rtol=2e-4, atol=2e-4), np.float64: dict(rtol=1e-9, atol=1e-9)}
+
+
+def rollout(core, seed: int, steps: int, reset_every: int = 0) -> list[tuple]:
+    """Observations, rewards, flags and stats of a seeded rollout with random actions.
+
+    Every ``reset_every`` steps, swarms whose episode ended or whose index is even are
+    reset on their own (the VecEnv's partial reset).
+    """
+    rng = np.random.default_rng(seed)
+    core.reset(rng)
+    out = [(core.observe(), None, None, None, core.stats())]
+    shape = (core.batch, core.cfg.n_agents, core.cfg.dim)
+    actions = np.random.default_rng(seed + 1)
+    for n in range(steps):
+        a = actions.uniform(-1.2, 1.2, shape).astype(np.float32)
+        reward, terminated, truncated, stats = core.step(a)
+        # Copies: SwarmNavCore keeps two of these arrays as prev_distance/prev_arrived
+        # and a partial reset writes into them.
+        stats = {key: value.copy() for key, value in stats.items()}
+        out.append((core.observe(), reward, terminated, truncated, stats))
+        if reset_every and (n + 1) % reset_every == 0:
+            which = terminated | truncated | (np.arange(core.batch) % 2 == 0)
+            core.reset(rng, which=which)
+            out.append((core.observe(), None, None, None, core.stats()))
+    return out
+
+
+def assert_same_rollout(ours: list[tuple], ref: list[tuple], tol: dict) -> None:
+    assert len(ours) == len(ref)
+    for (obs, rew, term, trunc, stats), (obs_r, rew_r, term_r, trunc_r, stats_r) in zip(
+        ours, ref, strict=True
+    ):
+        assert obs.dtype == np.float32 and obs.shape == obs_r.shape
+        np.testing.assert_allclose(obs, obs_r, **tol)
+        if rew is not None:
+            assert rew.dtype == rew_r.dtype and rew.shape == rew_r.shape
+            np.testing.assert_allclose(rew, rew_r, **tol)
+            np.testing.assert_array_equal(term, term_r)
+            np.testing.assert_array_equal(trunc, trunc_r)
+        assert list(stats) == list(STAT_KEYS)
+        for key in STAT_KEYS:
+            assert stats[key].dtype == stats_r[key].dtype, key
+            scale = max(1.0, float(np.abs(stats_r[key]).max()))
+            np.testing.assert_allclose(
+                stats[key], stats_r[key], err_msg=key, **tol, equal_nan=False
+            )
+            assert np.abs(stats[key] - stats_r[key]).max() <= tol["atol"] * scale * 10
+
+
+CONFIGS = {
+    "default": dict(n_agents=10),
+    "padding_3d_goal_physics": dict(
+        n_agents=4, dim=3, goal_in_physics=True, collision_radius=1.0, max_steps=25
+    ),
+    "single_agent": dict(n_agents=1),
+    "no_neighbours_heavy": dict(
+        n_agents=6, n_neighbors=0, physics={"m": 2.0, "C_o": 0.0}, success_fraction=0.5
+    ),
+    "instant_success": dict(
+        n_agents=5, goal_distance_min=0.0, goal_distance_max=0.0, goal_radius=50.0
+    ),
+}
+
+
+def make_config(overrides: dict) -> SwarmConfig:
+    overrides = dict(overrides)
+    physics = overrides.pop("physics", None)
+    cfg = SwarmConfig(**overrides)
+    if physics:
+        cfg = dataclasses.replace(cfg, physics=dataclasses.replace(cfg.physics, **physics))
+    return cfg
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("name", list(CONFIGS))
+def test_same_rollout_as_the_numpy_core(name, dtype):
+    cfg = make_config(CONFIGS[name])
+    batch = 4
+    ref = rollout(SwarmNavCore(cfg, batch=batch, dtype=dtype), seed=7, steps=36, reset_every=12)
+    ours = rollout(
+        TorchSwarmNavCore(cfg, batch=batch, dtype=dtype, compile=False),
+        seed=7,
+        steps=36,
+        reset_every=12,
+    )
+    assert_same_rollout(ours, ref, TOL[dtype])
+
+
+def test_same_seed_same_start_and_attributes_as_numpy():
+    cfg = SwarmConfig(n_agents=8)
+    ref = SwarmNavCore(cfg, batch=3, dtype=np.float32)
+    ours = TorchSwarmNavCore(cfg, batch=3, compile=False)
+    ref.reset(np.random.default_rng(11))
+    ours.reset(np.random.default_rng(11))
+    for name in ("x", "v", "goal"):  # the same draws, cast the same way: bit for bit
+        np.testing.assert_array_equal(getattr(ours, name), getattr(ref, name), err_msg=name)
+    for name in ("start_distance", "prev_distance", "prev_arrived"):
+        np.testing.assert_allclose(getattr(ours, name), getattr(ref, name), rtol=1e-6)
+    assert ours.x.shape == (3, 8, 2) and ours.x.dtype == np.float32
+    assert ours.batch == 3 and ours.obs_dim == ref.obs_dim and ours.cfg is cfg
+    np.testing.assert_array_equal(ours.t, ref.t)
+    ours.reset(np.random.default_rng(12))
+    assert not np.array_equal(ours.x, ref.x)  # different seed, different start
+
+
+def test_step_counter_is_writable_and_truncates():
+    cfg = SwarmConfig(n_agents=3, max_steps=10)
+    core = TorchSwarmNavCore(cfg, batch=3, compile=False)
+    core.reset(np.random.default_rng(0))
+    core.t[1] = cfg.max_steps - 1  # as the VecEnv tests do on the numpy core
+    _, terminated, truncated, _ = core.step(np.zeros((3, 3, 2)))
+    assert truncated.tolist() == [False, True, False] and not terminated.any()
+
+
+def test_state_views_are_read_only_copies_and_assignment_remeasures():
+    core = TorchSwarmNavCore(SwarmConfig(n_agents=4), batch=2, compile=False)
+    core.reset(np.random.default_rng(0))
+    x = core.x
+    with pytest.raises(ValueError, match="read-only"):
+        x[0, 0, 0] = 1.0
+    before = core.observe()
+    core.x = x + 1.0  # shifts every agent: the goal offset in the observation changes
+    after = core.observe()
+    np.testing.assert_allclose(after[..., :2], before[..., :2] - 0.1, atol=1e-6)
+    np.testing.assert_allclose(core.x, x + 1.0)
+    with pytest.raises(ValueError, match="finite numeric array of shape"):
+        core.v = np.zeros((2, 4, 3))
+    with pytest.raises(ValueError, match="finite"):
+        core.goal = np.full((2, 2), np.nan)
+
+
+def test_observe_hands_out_fresh_arrays():
+    core = TorchSwarmNavCore(SwarmConfig(n_agents=4), batch=2, compile=False)
+    core.reset(np.random.default_rng(0))
+    core.step(np.zeros((2, 4, 2)))
+    first = core.observe()
+    second = core.observe()
+    np.testing.assert_array_equal(first, second)
+    first[:] = 99.0
+    assert np.abs(core.observe()).max() <= OBS_BOUND
+    stats = core.stats()
+    stats["energy"][:] = 0.0
+    assert core.stats()["energy"].any()
+
+
+def test_coincident_agents_and_bound_actions_stay_finite():
+    cfg = SwarmConfig(n_agents=6, collision_radius=0.5)
+    core = TorchSwarmNavCore(cfg, batch=2, compile=False)
+    core.reset(np.random.default_rng(0))
+    core.x = np.zeros((2, 6, 2))  # everybody on the same spot
+    signs = np.random.default_rng(1).choice([-1.0, 1.0], size=(2, 6, 2))
+    for _ in range(5):
+        reward, _, _, stats = core.step(signs)
+        obs = core.observe()
+        assert np.isfinite(obs).all() and np.abs(obs).max() <= OBS_BOUND
+        assert np.isfinite(reward).all()
+        assert all(np.isfinite(stats[k]).all() for k in STAT_KEYS)
+
+
+def test_torch_actions_and_flat_actions_are_accepted():
+    cfg = SwarmConfig(n_agents=3)
+    a = np.random.default_rng(0).uniform(-1, 1, (2, 3, 2))
+    results = []
+    for actions in (a, torch.from_numpy(a), a.reshape(-1)):
+        core = TorchSwarmNavCore(cfg, batch=2, compile=False)
+        core.reset(np.random.default_rng(0))
+        results.append(core.step(actions)[0])
+    np.testing.assert_allclose(results[1], results[0], rtol=1e-6)
+    np.testing.assert_array_equal(results[2], results[0])
+
+
+@pytest.mark.parametrize(
+    ("actions", "match"),
+    [
+        (np.zeros((2, 3, 3)), "shape"),
+        (np.full((2, 3, 2), np.nan), "finite"),
+        (np.array([["a"]]), "numeric"),
+        (torch.full((2, 3, 2), float("inf")), "finite"),
+        (torch.zeros(2, 3, 3), "shape"),
+    ],
+)
+def test_bad_actions_raise_value_error(actions, match):
+    core = TorchSwarmNavCore(SwarmConfig(n_agents=3), batch=2, compile=False)
+    core.reset(np.random.default_rng(0))
+    with pytest.raises(ValueError, match=match):
+        core.step(actions)
+
+
+def test_unsupported_configs_and_options_raise_value_error():
+    with pytest.raises(ValueError, match="semi_implicit_euler"):
+        TorchSwarmNavCore(SwarmConfig(integrator="velocity_verlet"), compile=False)
+    if any(f.name == "dynamics" for f in dataclasses.fields(SwarmConfig)):
+        with pytest.raises(ValueError, match="social_potential"):
+            TorchSwarmNavCore(SwarmConfig(dynamics="zone"), compile=False)
+    with pytest.raises(ValueError, match="dtype"):
+        TorchSwarmNavCore(SwarmConfig(), dtype=np.int32, compile=False)
+    with pytest.raises(ValueError, match="batch"):
+        TorchSwarmNavCore(SwarmConfig(), batch=0, compile=False)
+    with pytest.raises(ValueError, match="device"):
+        TorchSwarmNavCore(SwarmConfig(), device="warp-drive", compile=False)
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match="cuda"):
+            TorchSwarmNavCore(SwarmConfig(), device="cuda", compile=False)
+    with pytest.raises(ValueError, match="compile"):
+        TorchSwarmNavCore(SwarmConfig(), compile="sometimes")
+
+
+def test_pickle_round_trip_reproduces_the_rollout():
+    cfg = SwarmConfig(n_agents=5)
+    core = TorchSwarmNavCore(cfg, batch=2, compile=False)
+    core.reset(np.random.default_rng(3))
+    actions = np.random.default_rng(4).uniform(-1, 1, (6, 2, 5, 2))
+    core.step(actions[0])
+    clone = pickle.loads(pickle.dumps(core))
+    for a in actions[1:]:
+        r1, *_ = core.step(a)
+        r2, *_ = clone.step(a)
+        np.testing.assert_array_equal(r1, r2)
+        np.testing.assert_array_equal(core.observe(), clone.observe())
+    np.testing.assert_array_equal(core.t, clone.t)
+
+
+def test_fallback_is_used_when_compiling_is_unavailable(monkeypatch):
+    from swarm_envs.physics import torch_backend as tb
+
+    monkeypatch.delenv(tb.COMPILE_ENV, raising=False)
+    monkeypatch.setattr(tb, "compile_support", lambda device="cpu": "no C++ compiler found")
+    core = TorchSwarmNavCore(SwarmConfig(n_agents=3), batch=2)  # compile="auto"
+    assert not core.compiled and core.compile_seconds is not None
+    monkeypatch.setenv(tb.COMPILE_ENV, "0")
+    monkeypatch.setattr(tb, "compile_support", lambda device="cpu": None)
+    assert not TorchSwarmNavCore(SwarmConfig(n_agents=3), batch=2).compiled
+
+
+@pytest.mark.skipif(compile_support("cpu") is not None, reason="torch.compile unavailable")
+def test_compiled_core_matches_plain_core():
+    cfg = SwarmConfig(n_agents=6, n_neighbors=3)
+    compiled = TorchSwarmNavCore(cfg, batch=3, compile=True)
+    assert compiled.compiled and compiled.compile_seconds > 0
+    plain = TorchSwarmNavCore(cfg, batch=3, compile=False)
+    assert_same_rollout(
+        rollout(compiled, seed=5, steps=24, reset_every=8),
+        rollout(plain, seed=5, steps=24, reset_every=8),
+        TOL[np.float32],
+    )
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_cuda_core_matches_cpu_core():
+    cfg = SwarmConfig(n_agents=12)
+    gpu = TorchSwarmNavCore(cfg, batch=16, device="cuda")
+    cpu = TorchSwarmNavCore(cfg, batch=16, device="cpu", compile=False)
+    assert_same_rollout(
+        rollout(gpu, seed=9, steps=30, reset_every=10),
+        rollout(cpu, seed=9, steps=30, reset_every=10),
+        TOL[np.float32],
+    )
