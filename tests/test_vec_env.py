@@ -432,3 +432,32 @@ def test_ppo_trains_on_the_vec_env_with_nan_checks():
     action, _ = model.predict(obs, deterministic=True)
     assert action.shape == (venv.num_envs, 2)
     assert np.all(np.abs(action) <= 1.0)
+
+
+def test_quiet_slots_share_a_read_only_info_and_swarm_infos_read_the_step():
+    from swarm_envs.envs.vec_env import QUIET_INFO, SwarmInfo
+
+    venv = swarm_nav_v0.vec_env(2, n_agents=3, max_steps=50)
+    venv.reset()
+    _, _, _, infos = venv.step(np.zeros((6, 2), np.float32))
+    assert isinstance(infos[0], SwarmInfo) and isinstance(infos[3], SwarmInfo)
+    assert all(infos[i] is QUIET_INFO for i in (1, 2, 4, 5))
+    with pytest.raises(TypeError):
+        infos[1]["x"] = 1  # type: ignore[index]
+    first = infos[0].copy()
+    assert first == {k: float(venv.last_stats[k][0]) for k in STAT_KEYS}
+    venv.step(np.ones((6, 2), np.float32))
+    assert infos[0].copy() == first  # an old step's info keeps its values
+
+
+def test_a_partial_reset_does_not_rewrite_the_returned_statistics():
+    venv = swarm_nav_v0.vec_env(3, n_agents=3, max_steps=2)
+    venv.seed(0)
+    venv.reset()
+    venv.step(np.zeros((9, 2), np.float32))
+    before = {k: v.copy() for k, v in venv.last_stats.items()}
+    stats = venv.last_stats
+    core = venv.cores[0]
+    core.reset(np.random.default_rng(1), which=np.array([True, False, False]))
+    for k in STAT_KEYS:
+        np.testing.assert_array_equal(stats[k], before[k])

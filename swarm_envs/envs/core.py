@@ -161,8 +161,10 @@ class SwarmNavCore:
             - w.effort * np.einsum("bik,bik->b", a, a) / cfg.n_agents
             - w.time
         )
-        self.prev_distance = distance
-        self.prev_arrived = arrived
+        # Copies: reset(which) writes into these in place, and the returned statistics
+        # must keep this step's values.
+        self.prev_distance = distance.copy()
+        self.prev_arrived = arrived.copy()
         truncated = (self.t >= cfg.max_steps) & ~success
         return reward, success, truncated, stats
 

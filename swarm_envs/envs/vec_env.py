@@ -11,10 +11,12 @@ slots' infos carry ``terminal_observation`` (the last observation of that episod
 ``TimeLimit.truncated`` (true when it ended by the step limit, not by success), which
 SB3 uses to bootstrap the value of truncated episodes.
 
-Infos: every slot's info dict is fresh. The swarm's statistics
-(:data:`swarm_envs.envs.core.STAT_KEYS`) are in the info of the swarm's first slot
-(``b·N``) only, which keeps the step cheap; :attr:`SwarmNavVecEnv.last_stats` holds
-them as ``(B,)`` arrays.
+Infos: the swarm's statistics (:data:`swarm_envs.envs.core.STAT_KEYS`) are in the info
+of the swarm's first slot (``b·N``) only, as a read-only :class:`SwarmInfo` mapping; the
+slots of a swarm that just ended get fresh dicts (with the statistics in the first);
+every other slot's info is :data:`QUIET_INFO`, one shared read-only empty mapping
+(fresh dicts for 32k slots would cost more than the fused step).
+:attr:`SwarmNavVecEnv.last_stats` holds the statistics as ``(B,)`` arrays.
 
 Large batches are split over worker threads (``n_threads``; default one per 512
 swarms, up to the CPU count), each stepping its own slice of swarms on its own core:
@@ -35,8 +37,9 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import os
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from types import MappingProxyType
 from typing import Any
 
 import gymnasium
@@ -47,6 +50,41 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 from swarm_envs.envs.backends import make_core, select_backend
 from swarm_envs.envs.core import OBS_BOUND, SwarmNavCore
 from swarm_envs.envs.swarm_nav import make_config
+
+#: The info of every slot with nothing to report (not the first slot of a swarm, and
+#: its swarm did not just end): one shared, read-only empty mapping. Writing to it
+#: raises ``TypeError``; copy it first (``dict(info)``), as SB3's ``VecMonitor`` does.
+QUIET_INFO: Mapping[str, Any] = MappingProxyType({})
+
+
+class SwarmInfo(Mapping[str, float]):
+    """The statistics of swarm ``b`` as a read-only mapping ``{key: float}``.
+
+    The info of each swarm's first slot: values are read from the step's ``(B,)``
+    arrays on access, so a step builds B small objects, not B dicts. ``dict(info)`` or
+    :meth:`copy` gives a plain dict.
+    """
+
+    __slots__ = ("_b", "_stats")
+
+    def __init__(self, stats: Mapping[str, np.ndarray], b: int) -> None:
+        self._stats = stats
+        self._b = b
+
+    def __getitem__(self, key: str) -> float:
+        return float(self._stats[key][self._b])
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._stats)
+
+    def __len__(self) -> int:
+        return len(self._stats)
+
+    def copy(self) -> dict[str, float]:
+        return dict(self)
+
+    def __repr__(self) -> str:
+        return f"SwarmInfo({dict(self)!r})"
 
 
 class SwarmNavVecEnv(VecEnv):
@@ -173,18 +211,22 @@ class SwarmNavVecEnv(VecEnv):
         self._actions = None
         a = actions.reshape(B, N, d)
         parts = self._map(lambda core, sl: (*core.step(a[sl]), core.observe()))
-        reward, terminated, truncated = (np.concatenate([p[i] for p in parts]) for i in range(3))
-        stats = {k: np.concatenate([p[3][k] for p in parts]) for k in parts[0][3]}
-        obs = np.concatenate([p[4] for p in parts], axis=0)
+        if len(parts) == 1:  # one core: its arrays as they are, no copies
+            reward, terminated, truncated, stats, obs = parts[0]
+        else:
+            reward, terminated, truncated = (
+                np.concatenate([p[i] for p in parts]) for i in range(3)
+            )
+            stats = {k: np.concatenate([p[3][k] for p in parts]) for k in parts[0][3]}
+            obs = np.concatenate([p[4] for p in parts], axis=0)
         self.last_stats = stats
         self.episode_returns += reward
         self.episode_lengths += 1
         done = terminated | truncated
-        infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
-        keys = list(stats)
-        rows = np.column_stack([stats[k] for k in keys]).tolist()  # (B, n_stats) floats
-        for b, row in enumerate(rows):  # one small dict per swarm, not per agent
-            infos[b * N].update(zip(keys, row, strict=True))
+        # Slots with nothing to report share one read-only empty mapping: building 32k
+        # fresh dicts per step would cost more than the fused step itself.
+        infos: list[Any] = [QUIET_INFO] * self.num_envs
+        infos[::N] = [SwarmInfo(stats, b) for b in range(B)]  # read on access
         if done.any():
             for b in np.flatnonzero(done):  # only the swarms that just ended
                 episode = {
@@ -193,10 +235,11 @@ class SwarmNavVecEnv(VecEnv):
                 }
                 time_limit = bool(truncated[b] and not terminated[b])
                 for i in range(N):
-                    info = infos[b * N + i]
+                    info = dict(infos[b * N]) if i == 0 else {}
                     info["terminal_observation"] = obs[b, i]
                     info["TimeLimit.truncated"] = time_limit
                     info["swarm_episode"] = episode
+                    infos[b * N + i] = info
             obs = obs.copy()  # the terminal observations above keep the old rows
             for core, sl in zip(self.cores, self._slices, strict=True):  # in order: seeded
                 if done[sl].any():
