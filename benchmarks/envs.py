@@ -3,7 +3,9 @@
 Usage: ``python benchmarks/envs.py [--seconds 1] [--repeats 5]``
 
 Rows: ``parallel_env`` (PettingZoo dicts) and the Gymnasium env at N = 10, 32, 100
-(float64 core); ``vec_env`` (SB3 VecEnv) at B × 32 for B = 1, 64, 1024 (float32 core).
+(float64 core); ``vec_env`` (SB3 VecEnv) at B × 32 for B = 1, 64, 1024 (float32 core)
+on the backend ``"auto"`` picks (the label says which; the torch backend compiles once,
+before timing), and at 64 and 1024 × 32 on the numpy backend.
 Then the same ``parallel_env`` (N = 32) and ``vec_env`` (64 × 32) rows for each
 ``dynamics`` of the seeds (``--dynamics`` picks; default all four).
 Random actions drawn once per row (not timed). Median and best of the
@@ -27,7 +29,8 @@ import numpy as np
 import swarm_envs  # noqa: F401  (registers the Gymnasium id)
 from swarm_envs import swarm_nav_v0
 from swarm_envs._malloc import keep_freed_memory
-from swarm_envs.config import DYNAMICS
+from swarm_envs.config import DYNAMICS, SwarmConfig
+from swarm_envs.envs.backends import select_backend
 
 
 def rates(fn: Callable[[], None], seconds: float, repeats: int) -> tuple[float, float]:
@@ -67,9 +70,14 @@ def bench_gym(n: int, seconds: float, repeats: int) -> tuple[float, float]:
 
 
 def bench_vec(
-    b: int, n: int, seconds: float, repeats: int, dynamics: str = "social_potential"
+    b: int,
+    n: int,
+    seconds: float,
+    repeats: int,
+    dynamics: str = "social_potential",
+    backend: str = "auto",
 ) -> tuple[float, float]:
-    venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, dynamics=dynamics)
+    venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, dynamics=dynamics, backend=backend)
     venv.seed(0)
     venv.reset()
     actions = np.random.default_rng(0).uniform(-1, 1, (venv.num_envs, 2)).astype(np.float32)
@@ -127,7 +135,10 @@ def main() -> None:
     for n in (10, 32, 100):
         print(row("gym.make", 1, n, bench_gym(n, s, r)))
     for b in (1, 64, 1024):
-        print(row("vec_env", b, 32, bench_vec(b, 32, s, r)))
+        backend = select_backend(SwarmConfig(n_agents=32), b)
+        print(row(f"vec_env ({backend})", b, 32, bench_vec(b, 32, s, r)))
+    for b in (64, 1024):
+        print(row("vec_env (numpy)", b, 32, bench_vec(b, 32, s, r, backend="numpy")))
     for dynamics in args.dynamics:
         print(row(f"parallel_env ({dynamics})", 1, 32, bench_parallel(32, s, r, dynamics)))
         print(row(f"vec_env ({dynamics})", 64, 32, bench_vec(64, 32, s, r, dynamics)))
