@@ -104,7 +104,7 @@ def numpy_core(n: int, b: int) -> Step:
 
 
 def numpy_vec_env(n: int, b: int) -> Step:
-    venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200)
+    venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, backend="numpy")
     venv.seed(0)
     venv.reset()
     a = actions_for((venv.num_envs, 2))
@@ -112,16 +112,8 @@ def numpy_vec_env(n: int, b: int) -> Step:
 
 
 def torch_vec_env(n: int, b: int) -> Step:
-    """The SB3 VecEnv on the compiled torch core.
-
-    Uses ``vec_env(..., backend="torch")`` where the env takes it; otherwise builds the
-    numpy VecEnv with one core and swaps that core for a :class:`TorchSwarmNavCore`.
-    """
-    try:
-        venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, backend="torch")
-    except (TypeError, ValueError):
-        venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, n_threads=1)
-        venv.cores = [TorchSwarmNavCore(venv.cfg, batch=b)]
+    """The SB3 VecEnv on the compiled torch core (``backend="torch"``)."""
+    venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, backend="torch")
     venv.seed(0)
     venv.reset()
     a = actions_for((venv.num_envs, 2))
