@@ -75,6 +75,25 @@ def check_actions(actions: Any, shape: tuple[int, ...]) -> np.ndarray:
     return np.clip(a, -1.0, 1.0)
 
 
+def draw_starts(
+    cfg: SwarmConfig, rng: np.random.Generator, n: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``n`` new starts ``(x (n, N, d), v (n, N, d), goal (n, d))``, float64.
+
+    Agents uniform in a disc (ball) of ``init_radius`` around the origin, velocities
+    uniform in a disc of ``init_speed``; the goal at a uniform random bearing and a
+    distance uniform in ``[goal_distance_min, goal_distance_max]``. Every core draws
+    its starts here, so a seed gives the same starts on every backend.
+    """
+    N, d = cfg.n_agents, cfg.dim
+    x = uniform_ball(rng, (n, N, d), cfg.init_radius)
+    v = uniform_ball(rng, (n, N, d), cfg.init_speed)
+    bearing = rng.standard_normal((n, d))
+    bearing /= np.maximum(np.linalg.norm(bearing, axis=-1, keepdims=True), 1e-12)
+    dist = rng.uniform(cfg.goal_distance_min, cfg.goal_distance_max, size=(n, 1))
+    return x, v, bearing * dist
+
+
 class SwarmNavCore:
     """State and dynamics of ``batch`` independent SwarmNav swarms.
 
@@ -117,13 +136,7 @@ class SwarmNavCore:
         idx = np.arange(self.batch) if which is None else np.flatnonzero(which)
         if idx.size == 0:
             return
-        n, N, d = idx.size, cfg.n_agents, cfg.dim
-        self.x[idx] = uniform_ball(rng, (n, N, d), cfg.init_radius)
-        self.v[idx] = uniform_ball(rng, (n, N, d), cfg.init_speed)
-        bearing = rng.standard_normal((n, d))
-        bearing /= np.maximum(np.linalg.norm(bearing, axis=-1, keepdims=True), 1e-12)
-        dist = rng.uniform(cfg.goal_distance_min, cfg.goal_distance_max, size=(n, 1))
-        self.goal[idx] = bearing * dist
+        self.x[idx], self.v[idx], self.goal[idx] = draw_starts(cfg, rng, idx.size)
         self.t[idx] = 0
         self._after_reset(idx, rng)
         mean_dist = self._goal_distances().mean(axis=-1)

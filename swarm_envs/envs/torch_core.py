@@ -55,9 +55,15 @@ import numpy as np
 import torch
 
 from swarm_envs._malloc import keep_freed_memory
-from swarm_envs.envs.core import OBS_BOUND, STAT_KEYS, check_actions, observation_size
+from swarm_envs.envs.core import (
+    OBS_BOUND,
+    STAT_KEYS,
+    check_actions,
+    draw_starts,
+    observation_size,
+)
 from swarm_envs.metrics import CENTRE_RTOL
-from swarm_envs.physics import SocialPotentialParams, uniform_ball
+from swarm_envs.physics import SocialPotentialParams
 from swarm_envs.physics import torch_backend as tb
 
 __all__ = ["TorchSwarmNavCore", "build_advance"]
@@ -451,13 +457,7 @@ class TorchSwarmNavCore:
         idx = np.arange(self.batch) if which is None else np.flatnonzero(which)
         if idx.size == 0:
             return
-        n, N, d = idx.size, cfg.n_agents, cfg.dim
-        x = uniform_ball(rng, (n, N, d), cfg.init_radius)
-        v = uniform_ball(rng, (n, N, d), cfg.init_speed)
-        bearing = rng.standard_normal((n, d))
-        bearing /= np.maximum(np.linalg.norm(bearing, axis=-1, keepdims=True), 1e-12)
-        dist = rng.uniform(cfg.goal_distance_min, cfg.goal_distance_max, size=(n, 1))
-        goal = bearing * dist
+        x, v, goal = draw_starts(cfg, rng, idx.size)
         # Out of place: the old tensors may share memory with arrays handed out.
         rows = torch.as_tensor(idx, device=self.device)
         self._x = self._put(self._x, rows, x)
