@@ -40,8 +40,39 @@ def algorithm_class(name: str) -> type:
     return getattr(stable_baselines3, name)
 
 
+class RunConfig:
+    """What every training run's config shares (SB3's and RLlib's): the env part
+    (``env_config`` YAML plus ``env`` overrides), ``net_arch`` and ``hyperparams``.
+
+    A mixin for the frozen dataclasses that declare those fields.
+    """
+
+    env_config: str | None  # declared by the subclasses' dataclass fields
+    env: Mapping[str, Any]
+    net_arch: Any
+    hyperparams: Mapping[str, Any]
+
+    def swarm_config(self) -> SwarmConfig:
+        """The env configuration this run trains on (YAML, then the ``env`` overrides)."""
+        return load_swarm_config(self.env_config, dict(self.env))
+
+    def _check_env(self) -> None:
+        try:
+            self.swarm_config()
+        except ValueError as err:
+            raise ValueError(f"env: {err}") from None
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data for YAML (saved beside the model or checkpoint)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self)}  # type: ignore[arg-type]
+        out["net_arch"] = list(self.net_arch)
+        out["env"] = dict(self.env)
+        out["hyperparams"] = dict(self.hyperparams)
+        return out
+
+
 @dataclass(frozen=True)
-class TrainConfig:
+class TrainConfig(RunConfig):
     """One training run. ``total_timesteps`` counts SB3 timesteps: agent-steps in
     ``shared`` mode (each vector step is ``n_swarms × n_agents`` of them), swarm-steps in
     ``central`` mode."""
@@ -120,23 +151,7 @@ class TrainConfig:
                     f"hyperparams.{key} is not a {self.algo} argument; "
                     f"allowed: {', '.join(sorted(allowed))}"
                 )
-        # Validate the env part now, so a typo fails before any training starts.
-        try:
-            self.swarm_config()
-        except ValueError as err:
-            raise ValueError(f"env: {err}") from None
-
-    def swarm_config(self) -> SwarmConfig:
-        """The env configuration this run trains on (YAML, then the ``env`` overrides)."""
-        return load_swarm_config(self.env_config, dict(self.env))
-
-    def to_dict(self) -> dict[str, Any]:
-        """Plain data for YAML (saved beside the model)."""
-        out = {f.name: getattr(self, f.name) for f in fields(self)}
-        out["net_arch"] = list(self.net_arch)
-        out["env"] = dict(self.env)
-        out["hyperparams"] = dict(self.hyperparams)
-        return out
+        self._check_env()  # a typo in the env part fails before any training starts
 
 
 def train_config_from_mapping(data: Mapping[str, Any]) -> TrainConfig:

@@ -21,13 +21,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from swarm_envs.config import SwarmConfig, config_from_mapping, load_swarm_config
+from swarm_envs.config import config_from_mapping
+from train.config import RunConfig
 
 __all__ = [
     "ALGOS",
@@ -73,7 +74,7 @@ def _check_int(name: str, value: Any, low: int) -> None:
 
 
 @dataclass(frozen=True)
-class RLlibTrainConfig:
+class RLlibTrainConfig(RunConfig):
     """One RLlib run: PPO on ``swarm_nav_v0.parallel_env``, one policy for all agents.
 
     What scales what: ``num_env_runners × num_envs_per_env_runner`` swarms are sampled
@@ -166,22 +167,7 @@ class RLlibTrainConfig:
                     f"hyperparams.{key} is not a PPO training argument; "
                     f"allowed: {', '.join(sorted(PPO_TRAINING_ARGS))}"
                 )
-        try:  # a typo in the env part fails before Ray starts
-            self.swarm_config()
-        except ValueError as err:
-            raise ValueError(f"env: {err}") from None
-
-    def swarm_config(self) -> SwarmConfig:
-        """The env configuration this run trains on (YAML, then the ``env`` overrides)."""
-        return load_swarm_config(self.env_config, dict(self.env))
-
-    def to_dict(self) -> dict[str, Any]:
-        """Plain data for YAML (saved beside the checkpoint)."""
-        out = {f.name: getattr(self, f.name) for f in fields(self)}
-        out["net_arch"] = list(self.net_arch)
-        out["env"] = dict(self.env)
-        out["hyperparams"] = dict(self.hyperparams)
-        return out
+        self._check_env()  # a typo in the env part fails before Ray starts
 
 
 def rllib_config_from_mapping(data: Mapping[str, Any]) -> RLlibTrainConfig:
