@@ -75,6 +75,22 @@ def check_actions(actions: Any, shape: tuple[int, ...]) -> np.ndarray:
     return np.clip(a, -1.0, 1.0)
 
 
+def check_batch(batch: Any) -> int:
+    """The number of swarms of a core: an integer ``≥ 1``, else :class:`ValueError`."""
+    if isinstance(batch, bool) or not isinstance(batch, (int, np.integer)) or batch < 1:
+        raise ValueError(f"batch must be an integer >= 1, got {batch!r}")
+    return int(batch)
+
+
+def require_social_potential(cfg: SwarmConfig, owner: str) -> None:
+    """Raise :class:`ValueError` unless ``cfg`` runs the social potential model."""
+    if cfg.dynamics != "social_potential":
+        raise ValueError(
+            f"{owner} supports dynamics='social_potential' only, got {cfg.dynamics!r} "
+            "(use SwarmNavCore, the numpy core, for the other models)"
+        )
+
+
 def draw_starts(
     cfg: SwarmConfig, rng: np.random.Generator, n: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -105,7 +121,7 @@ class SwarmNavCore:
     def __init__(self, cfg: SwarmConfig, batch: int = 1, dtype: type = np.float64) -> None:
         keep_freed_memory()  # per-step temporaries stay in the heap (see swarm_envs._malloc)
         self.cfg = cfg
-        self.batch = int(batch)
+        self.batch = check_batch(batch)
         self.dtype = np.dtype(dtype)
         B, N, d = self.batch, cfg.n_agents, cfg.dim
         self.obs_dim = observation_size(cfg)

@@ -66,7 +66,7 @@ from typing import Any
 import numpy as np
 
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.core import SwarmNavCore, require_social_potential
 from swarm_envs.physics import goal_force, goal_potential
 from swarm_envs.physics._validation import check_real
 from swarm_envs.physics.cutoff import PairAccumulator, cutoff_radius
@@ -169,14 +169,7 @@ class SparseSwarmNavCore(SwarmNavCore):
         cutoff_tol: float = DEFAULT_CUTOFF_TOL,
         cutoff_speed: float = DEFAULT_CUTOFF_SPEED,
     ) -> None:
-        dynamics = getattr(cfg, "dynamics", "social_potential")
-        if dynamics != "social_potential":
-            raise ValueError(
-                "SparseSwarmNavCore supports dynamics='social_potential' only, got "
-                f"{dynamics!r} (use SwarmNavCore for the other models)"
-            )
-        if isinstance(batch, bool) or not isinstance(batch, (int, np.integer)) or batch < 1:
-            raise ValueError(f"batch must be an integer >= 1, got {batch!r}")
+        require_social_potential(cfg, "SparseSwarmNavCore")
         super().__init__(cfg, batch, dtype)
         self.cutoff_tol = check_real(
             "SparseSwarmNavCore", "cutoff_tol", cutoff_tol, low=0.0, low_inclusive=False

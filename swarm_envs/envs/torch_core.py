@@ -59,8 +59,10 @@ from swarm_envs.envs.core import (
     OBS_BOUND,
     STAT_KEYS,
     check_actions,
+    check_batch,
     draw_starts,
     observation_size,
+    require_social_potential,
 )
 from swarm_envs.metrics import CENTRE_RTOL
 from swarm_envs.physics import SocialPotentialParams
@@ -360,21 +362,14 @@ class TorchSwarmNavCore:
         device: Any = "cpu",
         compile: bool | str = "auto",
     ) -> None:
-        dynamics = getattr(cfg, "dynamics", "social_potential")
-        if dynamics != "social_potential":
-            raise ValueError(
-                f"TorchSwarmNavCore supports dynamics='social_potential' only, got {dynamics!r}"
-                " (use SwarmNavCore, the numpy core, for the other models)"
-            )
+        require_social_potential(cfg, "TorchSwarmNavCore")
         if cfg.integrator != "semi_implicit_euler":
             raise ValueError(
                 "TorchSwarmNavCore supports integrator='semi_implicit_euler' only, got "
                 f"{cfg.integrator!r} (use SwarmNavCore, the numpy core, for velocity_verlet)"
             )
-        if isinstance(batch, bool) or not isinstance(batch, (int, np.integer)) or batch < 1:
-            raise ValueError(f"batch must be an integer >= 1, got {batch!r}")
         self.cfg = cfg
-        self.batch = int(batch)
+        self.batch = check_batch(batch)
         self.dtype, self._tdtype = _torch_dtype(dtype)
         self.device = _device(device)
         if self.device.type == "cpu":
