@@ -95,26 +95,44 @@ def test_dense_core_is_the_numpy_backend():
     assert type(make_core(SwarmConfig(), batch=2)) is SwarmNavCore
 
 
-@pytest.mark.parametrize("dtype", [np.float64, np.float32])
-def test_torch_and_numpy_vec_envs_agree_through_auto_resets(monkeypatch, dtype):
+@pytest.mark.parametrize(
+    ("dtype", "n_swarms"), [(np.float64, 4), (np.float32, 4), (np.float32, 64)]
+)
+def test_torch_and_numpy_vec_envs_agree_through_auto_resets(monkeypatch, dtype, n_swarms):
+    # 64 swarms with near goals: episodes end at different steps, and the torch core
+    # measures the few reset swarms only (TorchSwarmNavCore.reset_batch = 4).
     monkeypatch.setenv("SWARM_ENVS_TORCH_COMPILE", "0")  # plain torch: no compile time here
     tol = 1e-9 if dtype == np.float64 else 2e-3
+    goals = (
+        {} if n_swarms == 4 else dict(goal_distance_min=2.0, goal_distance_max=9.0, goal_radius=3.0)
+    )
 
-    def rollout(backend: str) -> tuple[np.ndarray, np.ndarray]:
-        venv = swarm_nav_v0.vec_env(4, n_agents=6, backend=backend, max_steps=25, dtype=dtype)
+    def rollout(backend: str) -> tuple[np.ndarray, ...]:
+        venv = swarm_nav_v0.vec_env(
+            n_swarms, n_agents=6, backend=backend, max_steps=25, dtype=dtype, **goals
+        )
         assert venv.backend == backend
         venv.seed(11)
-        obs, rewards = [venv.reset()], []
+        obs, rewards, ends, terminal = [venv.reset()], [], [], []
         rng = np.random.default_rng(2)
-        for _ in range(60):  # two auto-resets of every swarm
-            o, r, _, _ = venv.step(rng.uniform(-1, 1, (24, 2)).astype(np.float32))
+        for _ in range(60):  # two or more auto-resets of every swarm
+            o, r, done, infos = venv.step(rng.uniform(-1, 1, (venv.num_envs, 2)).astype(np.float32))
             obs.append(o)
             rewards.append(r)
-        return np.stack(obs), np.stack(rewards)
+            ends.append(done[:: venv.n_agents].sum())
+            terminal += [
+                info["terminal_observation"] for info in infos if "terminal_observation" in info
+            ]
+        return np.stack(obs), np.stack(rewards), np.array(ends), np.stack(terminal)
 
-    (obs_t, rew_t), (obs_n, rew_n) = rollout("torch"), rollout("numpy")
+    (obs_t, rew_t, ends_t, term_t) = rollout("torch")
+    (obs_n, rew_n, ends_n, term_n) = rollout("numpy")
+    np.testing.assert_array_equal(ends_t, ends_n)
     np.testing.assert_allclose(obs_t, obs_n, rtol=0, atol=tol)
     np.testing.assert_allclose(rew_t, rew_n, rtol=0, atol=tol)
+    np.testing.assert_allclose(term_t, term_n, rtol=0, atol=tol)
+    if n_swarms == 64:
+        assert ((ends_t >= 1) & (ends_t <= 4)).any()  # the sub-batch reset ran
 
 
 def test_checkers_pass_on_the_torch_backend(monkeypatch):

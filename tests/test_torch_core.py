@@ -25,11 +25,12 @@ from swarm_envs.physics.torch_backend import compile_support
 TOL = {np.float32: dict(rtol=2e-4, atol=2e-4), np.float64: dict(rtol=1e-9, atol=1e-9)}
 
 
-def rollout(core, seed: int, steps: int, reset_every: int = 0) -> list[tuple]:
+def rollout(core, seed: int, steps: int, reset_every: int = 0, few: bool = False) -> list[tuple]:
     """Observations, rewards, flags and stats of a seeded rollout with random actions.
 
     Every ``reset_every`` steps, swarms whose episode ended or whose index is even are
-    reset on their own (the VecEnv's partial reset).
+    reset on their own (the VecEnv's partial reset). With ``few``, one swarm in 16 (a
+    different one each time) instead of the even ones: the torch core's sub-batch reset.
     """
     rng = np.random.default_rng(seed)
     core.reset(rng)
@@ -44,7 +45,8 @@ def rollout(core, seed: int, steps: int, reset_every: int = 0) -> list[tuple]:
         stats = {key: value.copy() for key, value in stats.items()}
         out.append((core.observe(), reward, terminated, truncated, stats))
         if reset_every and (n + 1) % reset_every == 0:
-            which = terminated | truncated | (np.arange(core.batch) % 2 == 0)
+            picked = np.arange(core.batch) % (16 if few else 2) == (n % 16 if few else 0)
+            which = terminated | truncated | picked
             core.reset(rng, which=which)
             out.append((core.observe(), None, None, None, core.stats()))
     return out
@@ -257,15 +259,52 @@ def test_fallback_is_used_when_compiling_is_unavailable(monkeypatch):
     assert not TorchSwarmNavCore(SwarmConfig(n_agents=3), batch=2).compiled
 
 
+def count_calls(monkeypatch, fn) -> list[int]:
+    """Wrap ``fn`` (a MaybeCompiled) so that each call appends its batch size."""
+    calls: list[int] = []
+    inner = fn._call
+
+    def counted(*args):
+        calls.append(args[0].shape[1])
+        return inner(*args)
+
+    monkeypatch.setattr(fn, "_call", counted)
+    return calls
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_resets_of_a_few_swarms_measure_only_those(monkeypatch, dtype):
+    # B = 64: resets of up to 4 swarms run the fused function on 4 swarms (padded);
+    # the truncation of all 64 at step 20 re-measures the whole batch. Observations
+    # handed out before a reset must keep their values (rollout keeps them all).
+    cfg = SwarmConfig(n_agents=8, max_steps=20)
+    ours = TorchSwarmNavCore(cfg, batch=64, dtype=dtype, compile=False)
+    assert ours.reset_batch == 4
+    part = count_calls(monkeypatch, ours._advance_part)
+    full = count_calls(monkeypatch, ours._advance)
+    got = rollout(ours, seed=3, steps=30, reset_every=5, few=True)
+    ref = rollout(
+        SwarmNavCore(cfg, batch=64, dtype=dtype), seed=3, steps=30, reset_every=5, few=True
+    )
+    assert_same_rollout(got, ref, TOL[dtype])
+    # Six partial resets (after steps 5, 10, ..., 30): those of at most 4 swarms ran on
+    # 4, the others (all 64 truncated after step 20, successes) on the whole batch.
+    assert len(part) >= 3 and set(part) == {4}
+    assert full == [64] * (1 + 30 + 6 - len(part))  # reset(), the steps, the rest
+    assert TorchSwarmNavCore(cfg, batch=63, compile=False).reset_batch is None
+
+
 @pytest.mark.skipif(compile_support("cpu") is not None, reason="torch.compile unavailable")
 def test_compiled_core_matches_plain_core():
-    cfg = SwarmConfig(n_agents=6, n_neighbors=3)
-    compiled = TorchSwarmNavCore(cfg, batch=3, compile=True)
+    # 64 swarms: the compiled sub-batch reset (4 swarms, padded) is checked too.
+    cfg = SwarmConfig(n_agents=6, n_neighbors=3, max_steps=16)
+    compiled = TorchSwarmNavCore(cfg, batch=64, compile=True)
     assert compiled.compiled and compiled.compile_seconds > 0
-    plain = TorchSwarmNavCore(cfg, batch=3, compile=False)
+    assert compiled._advance_part is not None and compiled._advance_part.compiled
+    plain = TorchSwarmNavCore(cfg, batch=64, compile=False)
     assert_same_rollout(
-        rollout(compiled, seed=5, steps=24, reset_every=8),
-        rollout(plain, seed=5, steps=24, reset_every=8),
+        rollout(compiled, seed=5, steps=24, reset_every=4, few=True),
+        rollout(plain, seed=5, steps=24, reset_every=4, few=True),
         TOL[np.float32],
     )
 

@@ -29,7 +29,11 @@ give the usual ``(B, N, d)``.
 The carried force is the force the numpy core computes at the start of the next step
 from the same state, so the trajectories agree. A reset (or assigning ``x``, ``v`` or
 ``goal``) re-evaluates the same function with the integration switched off, so the
-observations, statistics and carried force always describe the current state.
+observations, statistics and carried force always describe the current state. A reset
+of a few swarms (at most :attr:`TorchSwarmNavCore.reset_batch`, 1/16 of a batch of 64
+or more) evaluates them alone, through the same function compiled for that sub-batch:
+in a VecEnv some swarm ends on most steps, and re-measuring all B swarms each time
+would cost a second full step.
 
 Compile time: the constructor makes the first (compiling) call, on the all-zero state,
 and stores its wall time in :attr:`TorchSwarmNavCore.compile_seconds` (also logged once
@@ -68,12 +72,27 @@ from swarm_envs.metrics import CENTRE_RTOL
 from swarm_envs.physics import SocialPotentialParams
 from swarm_envs.physics import torch_backend as tb
 
-__all__ = ["TorchSwarmNavCore", "build_advance"]
+__all__ = ["PARTIAL_RESET_MIN_BATCH", "TorchSwarmNavCore", "build_advance", "partial_reset_batch"]
 
 #: Columns of the packed per-swarm result: the statistics, then the reward.
 _PACKED = (*STAT_KEYS, "reward")
 #: Statistics the numpy core returns in float64 whatever its dtype (bool means, counts).
 _FLOAT64_STATS = ("fraction_arrived", "collisions", "success")
+
+
+#: The smallest batch whose resets of a few swarms measure only those (see
+#: :func:`partial_reset_batch`); smaller batches re-measure every swarm on a reset.
+PARTIAL_RESET_MIN_BATCH = 64
+
+
+def partial_reset_batch(batch: int) -> int | None:
+    """Sub-batch size ``R = batch // 16`` for resets of at most R swarms, or ``None``.
+
+    With ``batch ≥ PARTIAL_RESET_MIN_BATCH`` a reset of at most ``R`` swarms runs the
+    fused function on those swarms only (padded to R): 1/16 of a step. Below that size,
+    or for larger resets, every swarm is measured, which costs a whole step.
+    """
+    return batch // 16 if batch >= PARTIAL_RESET_MIN_BATCH else None
 
 
 def _success_count(n_agents: int, success_fraction: float) -> int:
@@ -339,8 +358,10 @@ class TorchSwarmNavCore:
 
     Attributes:
         compiled: whether the step runs compiled.
-        compile_seconds: wall time of the first call, made by the constructor (the
+        compile_seconds: wall time of the first calls, made by the constructor (the
             compile time when compiled).
+        reset_batch: resets of at most this many swarms evaluate only those
+            (:func:`partial_reset_batch`); ``None`` below 64 swarms.
 
     ``x``, ``v``, ``goal`` read as fresh read-only numpy arrays; assigning one of them
     (a whole array) moves it to the device and re-measures the state. ``t`` is the
@@ -388,20 +409,36 @@ class TorchSwarmNavCore:
         self._move_all = torch.ones(B, dtype=torch.bool, device=self.device)
         self._move_none = torch.zeros(B, dtype=torch.bool, device=self.device)
         self._compile_request = compile
-        self._advance = tb.MaybeCompiled(
-            build_advance(cfg),
-            compile=compile,
-            device=self.device,
-            name="TorchSwarmNavCore.step",
-            # The neighbour indices come from _nearest, always in range: no bound checks
-            # on the gathers (they cost a third of the observation).
-            options={"assert_indirect_indexing": False},
-            key=("TorchSwarmNavCore", repr(cfg), self.batch, str(self.dtype), str(self.device)),
-        )
+        self._advance = self._build(self.batch, compile, "TorchSwarmNavCore.step")
         self._obs = torch.empty(0)
         self._obs_given = False
         self._packed: np.ndarray = np.empty((0, len(_PACKED)))
         self._measure(warmup=True)
+        # Resets of a few swarms measure only those, through the same function compiled
+        # for a sub-batch of `reset_batch` swarms (padded): in a VecEnv some swarm ends
+        # on most steps, and measuring all B swarms each time would double the step.
+        self.reset_batch = partial_reset_batch(self.batch)
+        self._advance_part: tb.MaybeCompiled | None = None
+        if self.reset_batch is not None:
+            self._advance_part = self._build(
+                self.reset_batch, self._advance.compiled, "TorchSwarmNavCore.reset"
+            )
+            R = self.reset_batch
+            rows = torch.zeros(R, dtype=torch.int64, device=self.device)
+            self._advance_part.warmup(*self._row_args(rows))
+
+    def _build(self, batch: int, compile: bool | str, name: str) -> tb.MaybeCompiled:
+        """The fused function for ``batch`` swarms, compiled or plain (``compile``)."""
+        return tb.MaybeCompiled(
+            build_advance(self.cfg),
+            compile=compile,
+            device=self.device,
+            name=name,
+            # The neighbour indices come from _nearest, always in range: no bound checks
+            # on the gathers (they cost a third of the observation).
+            options={"assert_indirect_indexing": False},
+            key=("TorchSwarmNavCore", repr(self.cfg), batch, str(self.dtype), str(self.device)),
+        )
 
     # ------------------------------------------------------------------ helpers
     def _zeros(self, *shape: int) -> torch.Tensor:
@@ -414,8 +451,13 @@ class TorchSwarmNavCore:
 
     @property
     def compile_seconds(self) -> float | None:
-        """Wall time of the constructor's first call (the compile time when compiled)."""
-        return self._advance.compile_seconds
+        """Wall time of the constructor's first calls (the compile time when compiled):
+        the step's function, plus the partial reset's when there is one."""
+        seconds = self._advance.compile_seconds
+        part = self._advance_part
+        if seconds is not None and part is not None and part.compile_seconds is not None:
+            seconds += part.compile_seconds
+        return seconds
 
     def _run(self, a: torch.Tensor, move: torch.Tensor, warmup: bool = False) -> tuple:
         args = (
@@ -439,6 +481,38 @@ class TorchSwarmNavCore:
         """Observations, statistics and passive force of the current state (no step)."""
         return self._run(self._no_action, self._move_none, warmup=warmup)
 
+    def _row_args(self, rows: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """The fused function's arguments for swarms ``rows`` only, measuring (no step)."""
+        n = rows.shape[0]
+        return (
+            self._x[:, rows],
+            self._v[:, rows],
+            self._f[:, rows],
+            self._goal[rows],
+            self._no_action[:n],
+            self._move_none[:n],
+            self._prev_distance[rows],
+            self._prev_arrived[rows],
+            self._start_distance[rows],
+        )
+
+    def _measure_rows(self, rows: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """:meth:`_measure` for swarms ``rows`` (at most :attr:`reset_batch`) only.
+
+        The rows are padded to ``reset_batch`` with copies of the first; the results of
+        the real ones are written into the force, observations and statistics.
+        """
+        assert self._advance_part is not None and self.reset_batch is not None
+        n = rows.shape[0]
+        padded = torch.cat([rows, rows[:1].expand(self.reset_batch - n)])
+        _, _, f, obs, packed, mean_dist, arrived, _ = self._advance_part(*self._row_args(padded))
+        self._f[:, rows] = f[:, :n]
+        if self._obs_given:  # the array handed out shares memory with self._obs: keep it
+            self._obs, self._obs_given = self._obs.clone(), False
+        self._obs[rows] = obs[:n]
+        self._packed[rows.cpu().numpy()] = packed[:n].cpu().numpy()
+        return mean_dist[:n], arrived[:n]
+
     # ------------------------------------------------------------------ reset
     def reset(self, rng: np.random.Generator, which: np.ndarray | None = None) -> None:
         """Draw new starts for the swarms in ``which`` (bool mask ``(B,)``; all if None).
@@ -461,14 +535,17 @@ class TorchSwarmNavCore:
         goal_t[rows] = self._to_device(goal)
         self._goal = goal_t
         self.t[idx] = 0
-        mean_dist, arrived = self._measure()
-        mask = torch.zeros(self.batch, dtype=torch.bool, device=self.device)
-        mask[rows] = True
-        self._start_distance = torch.where(
-            mask, torch.clamp(mean_dist, min=1e-6), self._start_distance
+        if self.reset_batch is not None and idx.size <= self.reset_batch:
+            mean_dist, arrived = self._measure_rows(rows)
+        else:
+            mean_dist, arrived = self._measure()
+            mean_dist, arrived = mean_dist[rows], arrived[rows]
+        # Out of place, as above.
+        self._start_distance = self._start_distance.index_put(
+            (rows,), torch.clamp(mean_dist, min=1e-6)
         )
-        self._prev_distance = torch.where(mask, mean_dist, self._prev_distance)
-        self._prev_arrived = torch.where(mask, arrived, self._prev_arrived)
+        self._prev_distance = self._prev_distance.index_put((rows,), mean_dist)
+        self._prev_arrived = self._prev_arrived.index_put((rows,), arrived)
 
     def _put(self, state: torch.Tensor, rows: torch.Tensor, new: np.ndarray) -> torch.Tensor:
         """A copy of ``state`` ``(d, B, N)`` with swarms ``rows`` set from ``new`` ``(n, N, d)``."""

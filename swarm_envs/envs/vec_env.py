@@ -211,6 +211,7 @@ class SwarmNavVecEnv(VecEnv):
         self._actions = None
         a = actions.reshape(B, N, d)
         parts = self._map(lambda core, sl: (*core.step(a[sl]), core.observe()))
+        obs_parts = [p[4] for p in parts]
         if len(parts) == 1:  # one core: its arrays as they are, no copies
             reward, terminated, truncated, stats, obs = parts[0]
         else:
@@ -218,7 +219,7 @@ class SwarmNavVecEnv(VecEnv):
                 np.concatenate([p[i] for p in parts]) for i in range(3)
             )
             stats = {k: np.concatenate([p[3][k] for p in parts]) for k in parts[0][3]}
-            obs = np.concatenate([p[4] for p in parts], axis=0)
+            obs = np.concatenate(obs_parts, axis=0)
         self.last_stats = stats
         self.episode_returns += reward
         self.episode_lengths += 1
@@ -240,11 +241,13 @@ class SwarmNavVecEnv(VecEnv):
                     info["TimeLimit.truncated"] = time_limit
                     info["swarm_episode"] = episode
                     infos[b * N + i] = info
-            obs = obs.copy()  # the terminal observations above keep the old rows
-            for core, sl in zip(self.cores, self._slices, strict=True):  # in order: seeded
-                if done[sl].any():
+            # A core's observe() never hands out memory it writes to later, so the
+            # terminal observations above (views of `obs`) keep the old rows.
+            for c, (core, sl) in enumerate(zip(self.cores, self._slices, strict=True)):
+                if done[sl].any():  # in order: seeded
                     core.reset(self._rng, which=done[sl])
-                    obs[sl] = core.observe()
+                    obs_parts[c] = core.observe()
+            obs = obs_parts[0] if len(obs_parts) == 1 else np.concatenate(obs_parts, axis=0)
             self.episode_returns[done] = 0.0
             self.episode_lengths[done] = 0
         rewards = np.repeat(reward, N).astype(np.float32)
