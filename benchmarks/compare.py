@@ -12,7 +12,9 @@ install -c constraints.txt vmas==1.5.2 mpe2 -e .``).
 Every row is one ``step`` of B swarms (environments) of N agents, timed in windows of
 about ``--seconds``; the rows of one size take turns, window after window, ``--repeats``
 times, so that a busy machine slows them all alike. Printed: median and best
-agent-steps/s (steps/s × B × N) and the ratio of each row's median to the numpy core's.
+agent-steps/s (steps/s × B × N) and the ratio of each row's median to the numpy core's;
+then, per size, how many times the physics alone the full step costs (torch core, torch
+vec_env, numpy core; issue 8's target for the VecEnv is 2×).
 
 Rows, ours (all with random actions in [−1, 1], drawn once per row):
 
@@ -319,6 +321,38 @@ def print_table(results: list[dict]) -> None:
             )
 
 
+#: (full-step row, physics-only row) pairs of the "cost of the full step" table.
+FULL_VS_PHYSICS = (
+    ("torch core (compiled)", "physics only, torch compiled"),
+    ("torch vec_env (compiled)", "physics only, torch compiled"),
+    ("numpy core", "physics only, numpy"),
+)
+
+
+def print_full_vs_physics(results: list[dict]) -> None:
+    """How many times the physics alone costs the full step (issue 8's target: ≤ 2×).
+
+    Both rows of a ratio come from the same run, their windows alternating; a ratio of
+    medians and a ratio of bests (the bests are the least disturbed windows).
+    """
+    lines = []
+    for size in sorted({(r["n_agents"], r["batch"]) for r in results}):
+        rows = {r["row"]: r for r in results if (r["n_agents"], r["batch"]) == size}
+        for full, physics in FULL_VS_PHYSICS:
+            if full in rows and physics in rows:
+                f, p = rows[full], rows[physics]
+                median = p["agent_steps_per_s_median"] / f["agent_steps_per_s_median"]
+                best = p["agent_steps_per_s_best"] / f["agent_steps_per_s_best"]
+                lines.append(
+                    f"| {full} | {physics} | {size[0]} | {size[1]} | {median:.2f}x | {best:.2f}x |"
+                )
+    if lines:
+        print("\nCost of the full step (observations, reward, statistics) over the physics alone:")
+        print("| full step | physics alone | N | B | time ratio (medians) | time ratio (bests) |")
+        print("|---|---|---:|---:|---:|---:|")
+        print("\n".join(lines))
+
+
 def fmt(rate: float) -> str:
     if rate >= 1e6:
         return f"{rate / 1e6:.2f} M"
@@ -366,6 +400,7 @@ def main() -> None:
         results += compare(n, b, args.seconds, args.repeats, not args.no_physics)
     print()
     print_table(results)
+    print_full_vs_physics(results)
     if args.json:
         with open(args.json, "w") as fh:
             json.dump({"machine": machine(), "results": results}, fh, indent=1)
