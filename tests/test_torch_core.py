@@ -294,6 +294,24 @@ def test_resets_of_a_few_swarms_measure_only_those(monkeypatch, dtype):
     assert TorchSwarmNavCore(cfg, batch=63, compile=False).reset_batch is None
 
 
+def test_observations_handed_out_keep_their_values_through_a_few_resets():
+    core = TorchSwarmNavCore(SwarmConfig(n_agents=5), batch=64, compile=False)
+    rng = np.random.default_rng(0)
+    core.reset(rng)
+    core.step(np.zeros((64, 5, 2)))
+    tensor = core.observe_tensor()
+    saved = tensor.clone()
+    which = np.zeros(64, bool)
+    which[[3, 40]] = True
+    core.reset(rng, which=which)  # a sub-batch reset: 2 ≤ reset_batch = 4
+    assert torch.equal(tensor, saved)
+    after = core.observe()
+    assert not np.array_equal(after[which], saved.numpy()[which])  # new starts
+    np.testing.assert_array_equal(after[~which], saved.numpy()[~which])
+    core.reset(rng, which=which)
+    np.testing.assert_array_equal(after[~which], saved.numpy()[~which])  # the array too
+
+
 @pytest.mark.skipif(compile_support("cpu") is not None, reason="torch.compile unavailable")
 def test_compiled_core_matches_plain_core():
     # 64 swarms: the compiled sub-batch reset (4 swarms, padded) is checked too.

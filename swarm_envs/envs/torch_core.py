@@ -411,7 +411,8 @@ class TorchSwarmNavCore:
         self._compile_request = compile
         self._advance = self._build(self.batch, compile, "TorchSwarmNavCore.step")
         self._obs = torch.empty(0)
-        self._obs_given = False
+        self._obs_given = False  # observe() handed out the current observations
+        self._obs_shared = False  # observe_tensor() did
         self._packed: np.ndarray = np.empty((0, len(_PACKED)))
         self._measure(warmup=True)
         # Resets of a few swarms measure only those, through the same function compiled
@@ -474,7 +475,7 @@ class TorchSwarmNavCore:
         out = self._advance.warmup(*args) if warmup else self._advance(*args)
         self._x, self._v, self._f, self._obs, packed, mean_dist, arrived, _ = out
         self._packed = packed.cpu().numpy()
-        self._obs_given = False
+        self._obs_given = self._obs_shared = False
         return mean_dist, arrived
 
     def _measure(self, warmup: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
@@ -507,8 +508,9 @@ class TorchSwarmNavCore:
         padded = torch.cat([rows, rows[:1].expand(self.reset_batch - n)])
         _, _, f, obs, packed, mean_dist, arrived, _ = self._advance_part(*self._row_args(padded))
         self._f[:, rows] = f[:, :n]
-        if self._obs_given:  # the array handed out shares memory with self._obs: keep it
-            self._obs, self._obs_given = self._obs.clone(), False
+        if self._obs_given or self._obs_shared:  # handed out: leave that memory alone
+            self._obs = self._obs.clone()
+            self._obs_given = self._obs_shared = False
         self._obs[rows] = obs[:n]
         self._packed[rows.cpu().numpy()] = packed[:n].cpu().numpy()
         return mean_dist[:n], arrived[:n]
@@ -638,7 +640,11 @@ class TorchSwarmNavCore:
         return self._obs.cpu().numpy()
 
     def observe_tensor(self) -> torch.Tensor:
-        """The observations as a float32 tensor on the device (no copy; do not modify)."""
+        """The observations as a float32 tensor on the device (no copy; do not modify).
+
+        The tensor keeps its values: later steps and resets write to new memory.
+        """
+        self._obs_shared = True
         return self._obs
 
     # ------------------------------------------------------------------ state as numpy
