@@ -163,6 +163,37 @@ def test_shared_mode_uses_one_slot_per_agent():
     venv.close()
 
 
+def test_stats_callback_reads_the_batched_envs_arrays_as_the_infos_hold_them(monkeypatch):
+    # Shared mode: the means come from SwarmNavVecEnv.last_stats under the VecMonitor;
+    # they must equal the loop over the infos (the path every other env takes).
+    from stable_baselines3.common.logger import configure
+
+    from train.callbacks import SwarmStatsCallback
+
+    tc = smoke_config(n_swarms=3)
+    venv = make_training_env(tc)
+    venv.seed(0)
+    venv.reset()
+    rng = np.random.default_rng(0)
+    for batched in (True, False):
+        model = build_model(tc, venv)
+        model.set_logger(configure(None, []))
+        callback = SwarmStatsCallback(tc.swarm_config())
+        callback.init_callback(model)
+        assert callback._batched_env() is venv.venv
+        if not batched:
+            monkeypatch.setattr(callback, "_batched_env", lambda: None)
+        _, _, dones, infos = venv.step(rng.uniform(-1, 1, (venv.num_envs, 2)))
+        callback.update_locals({"infos": infos, "dones": dones})
+        callback.on_step()
+        values = dict(model.logger.name_to_value)
+        assert {f"swarm/{k}" for k in venv.venv.last_stats} <= set(values)
+        expected = {k: float(np.mean(v)) for k, v in venv.venv.last_stats.items()}
+        for key, value in expected.items():
+            assert values[f"swarm/{key}"] == pytest.approx(value, rel=1e-6, abs=1e-9)
+    venv.close()
+
+
 def test_periodic_evaluation_logs_and_keeps_the_best_model(tmp_path: Path):
     tc = smoke_config(total_timesteps=512, eval_freq=256, eval_episodes=2)
     train(tc, tmp_path, progress_bar=False, tensorboard=True, verbose=0)
