@@ -450,6 +450,25 @@ def test_quiet_slots_share_a_read_only_info_and_swarm_infos_read_the_step():
     assert infos[0].copy() == first  # an old step's info keeps its values
 
 
+def test_swarm_infos_are_recycled_only_once_the_caller_dropped_them():
+    venv = swarm_nav_v0.vec_env(4, n_agents=2, max_steps=10**6)
+    venv.reset()
+    zeros = np.zeros((8, 2), np.float32)
+    first_ids = [id(info) for info in venv.step(zeros)[3][::2]]  # infos dropped here
+    infos = venv.step(zeros)[3]
+    assert [id(info) for info in infos[::2]] == first_ids  # the dropped set came back
+    kept = infos[2]  # swarm 1's info of this step only, not its list
+    values = kept.copy()
+    assert values == {k: float(venv.last_stats[k][1]) for k in STAT_KEYS}
+    del infos
+    for _ in range(4):
+        infos = venv.step(np.ones((8, 2), np.float32))[3]
+        assert all(id(info) not in first_ids for info in infos[::2])  # `kept` pins its set
+        assert kept.copy() == values
+        assert infos[2].copy() == {k: float(venv.last_stats[k][1]) for k in STAT_KEYS}
+        del infos
+
+
 def test_a_partial_reset_does_not_rewrite_the_returned_statistics():
     venv = swarm_nav_v0.vec_env(3, n_agents=3, max_steps=2)
     venv.seed(0)

@@ -37,6 +37,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import os
+import sys
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from types import MappingProxyType
@@ -60,31 +61,66 @@ QUIET_INFO: Mapping[str, Any] = MappingProxyType({})
 class SwarmInfo(Mapping[str, float]):
     """The statistics of swarm ``b`` as a read-only mapping ``{key: float}``.
 
-    The info of each swarm's first slot: values are read from the step's ``(B,)``
-    arrays on access, so a step builds B small objects, not B dicts. ``dict(info)`` or
-    :meth:`copy` gives a plain dict.
+    The info of each swarm's first slot: values are read from one step's ``(B,)``
+    arrays on access (``holder[0]``, the step's statistics), so a step builds no dicts.
+    ``dict(info)`` or :meth:`copy` gives a plain dict. The VecEnv reuses these objects
+    from step to step while nothing outside it holds them (:class:`_SwarmInfoPool`).
     """
 
-    __slots__ = ("_b", "_stats")
+    __slots__ = ("_b", "_holder")
 
-    def __init__(self, stats: Mapping[str, np.ndarray], b: int) -> None:
-        self._stats = stats
+    def __init__(self, holder: list[Mapping[str, np.ndarray]], b: int) -> None:
+        self._holder = holder
         self._b = b
 
     def __getitem__(self, key: str) -> float:
-        return float(self._stats[key][self._b])
+        return float(self._holder[0][key][self._b])
 
     def __iter__(self) -> Iterator[str]:
-        return iter(self._stats)
+        return iter(self._holder[0])
 
     def __len__(self) -> int:
-        return len(self._stats)
+        return len(self._holder[0])
 
     def copy(self) -> dict[str, float]:
         return dict(self)
 
     def __repr__(self) -> str:
         return f"SwarmInfo({dict(self)!r})"
+
+
+class _SwarmInfoPool:
+    """The B :class:`SwarmInfo` of a step, recycled once nothing outside holds them.
+
+    Building B fresh objects per step costs little by itself, but at 1,024 swarms they
+    keep the garbage collector busy (gen-0 passes every step and, as they age, full
+    passes over every object of the process): about 0.7 ms per step. So a step takes a
+    set whose objects are referenced by this pool alone (the caller has dropped that
+    step's infos) and points it at the new statistics; if every set is still held, it
+    makes a new one. An info kept by the caller thus keeps its step's values.
+    """
+
+    def __init__(self, n_swarms: int) -> None:
+        self.n_swarms = n_swarms
+        self._sets: list[tuple[list[Any], list[SwarmInfo]]] = []
+
+    def infos(self, stats: Mapping[str, np.ndarray]) -> list[SwarmInfo]:
+        """B infos reading ``stats``: a free recycled set, or a new one."""
+        for holder, objects in self._sets:
+            # In the pool's list only: sys.getrefcount sees that list and its argument.
+            if max(map(sys.getrefcount, objects)) <= 2:
+                holder[0] = stats
+                return objects
+        holder = [stats]
+        objects = [SwarmInfo(holder, b) for b in range(self.n_swarms)]
+        if len(self._sets) < _MAX_INFO_SETS:
+            self._sets.append((holder, objects))
+        return objects
+
+
+#: Recycled sets of SwarmInfo per VecEnv: two cover a caller that keeps one step's infos
+#: while it takes the next (SB3's rollout loop); more sets are made fresh, not kept.
+_MAX_INFO_SETS = 3
 
 
 class SwarmNavVecEnv(VecEnv):
@@ -134,6 +170,7 @@ class SwarmNavVecEnv(VecEnv):
         self.last_stats: dict[str, np.ndarray] = {}
         self.episode_returns = np.zeros(self.n_swarms)
         self.episode_lengths = np.zeros(self.n_swarms, np.int64)
+        self._swarm_infos = _SwarmInfoPool(self.n_swarms)
 
     def _check_threads(self, n_threads: int | None) -> int:
         """Worker threads: given, or 1 per 512 swarms up to the CPU count (at least 1)."""
@@ -177,6 +214,7 @@ class SwarmNavVecEnv(VecEnv):
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state["_pool"] = None  # threads do not pickle; recreated on first use
+        state["_swarm_infos"] = _SwarmInfoPool(self.n_swarms)  # no step's infos
         return state
 
     # ------------------------------------------------------------------ VecEnv API
@@ -227,7 +265,7 @@ class SwarmNavVecEnv(VecEnv):
         # Slots with nothing to report share one read-only empty mapping: building 32k
         # fresh dicts per step would cost more than the fused step itself.
         infos: list[Any] = [QUIET_INFO] * self.num_envs
-        infos[::N] = [SwarmInfo(stats, b) for b in range(B)]  # read on access
+        infos[::N] = self._swarm_infos.infos(stats)  # read on access; see the pool
         if done.any():
             for b in np.flatnonzero(done):  # only the swarms that just ended
                 episode = {
