@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import dataclasses
+import pickle
 
 import numpy as np
 import pytest
 
 from swarm_envs.config import SwarmConfig
+from swarm_envs.envs import sparse_core
 from swarm_envs.envs.core import OBS_BOUND, STAT_KEYS, SwarmNavCore
 from swarm_envs.envs.sparse_core import (
     DEFAULT_CUTOFF_SPEED,
@@ -248,3 +250,34 @@ def test_large_swarm_step() -> None:
     assert obs.shape == (1, n, core.obs_dim) and np.isfinite(obs).all()
     assert np.isfinite(reward).all() and all(np.isfinite(s).all() for s in stats.values())
     assert 0.3 < stats["nearest_neighbor_distance"][0] < 0.6  # ≈ 0.5 / √1.41 for a Poisson cloud
+
+
+def test_look_ahead_neighbour_search_changes_nothing(monkeypatch) -> None:
+    """From KNN_AHEAD_MIN_AGENTS agents the k-NN runs in a worker during the pair pass:
+    the same observations and statistics, through partial resets and a pickle."""
+    cfg = SwarmConfig(n_agents=60, init_radius=3.0, n_neighbors=5)
+    actions = np.random.default_rng(1).uniform(-1, 1, (2, 60, 2))
+
+    def run(threshold: int) -> tuple[list, SparseSwarmNavCore]:
+        monkeypatch.setattr(sparse_core, "KNN_AHEAD_MIN_AGENTS", threshold)
+        core = SparseSwarmNavCore(cfg, batch=2)
+        rng = np.random.default_rng(0)
+        core.reset(rng)
+        out = []
+        for t in range(12):
+            core.step(actions)
+            out.append((core.observe(), core.stats()))
+            if t == 5:
+                core.reset(rng, np.array([True, False]))
+        return out, core
+
+    lazy, _ = run(10**9)
+    ahead, core = run(1)
+    for (obs_l, stats_l), (obs_a, stats_a) in zip(lazy, ahead, strict=True):
+        np.testing.assert_array_equal(obs_a, obs_l)
+        for key in STAT_KEYS:
+            np.testing.assert_array_equal(stats_a[key], stats_l[key])
+    core._knn_cache = None
+    core._start_knn()  # in flight, as between the pair pass and the statistics of a step
+    clone = pickle.loads(pickle.dumps(core))
+    np.testing.assert_array_equal(clone.observe(), core.observe())
