@@ -5,6 +5,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch
 from gymnasium.utils.env_checker import check_env as gym_check_env
 from helpers import strict_warnings
 from pettingzoo.test import parallel_api_test
@@ -140,3 +141,34 @@ def test_checkers_pass_on_the_torch_backend(monkeypatch):
     with strict_warnings():
         gym_check_env(gym.make(ENV_ID, backend="torch", n_agents=5).unwrapped)
         parallel_api_test(swarm_nav_v0.parallel_env(backend="torch", n_agents=4), num_cycles=50)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_cuda_vec_env_agrees_with_the_cpu_through_auto_resets(monkeypatch):
+    # 64 swarms: the sub-batch resets run on the GPU too. Compiled on the GPU (Triton),
+    # plain torch on the CPU; float32 both.
+    goals = dict(goal_distance_min=2.0, goal_distance_max=9.0, goal_radius=3.0)
+
+    def rollout(device: str) -> tuple[np.ndarray, ...]:
+        if device == "cpu":
+            monkeypatch.setenv("SWARM_ENVS_TORCH_COMPILE", "0")
+        venv = swarm_nav_v0.vec_env(
+            64, n_agents=6, max_steps=25, backend="torch", device=device, **goals
+        )
+        assert venv.backend == "torch" and venv.core.device.type == device
+        venv.seed(3)
+        obs, rewards, ends = [venv.reset()], [], []
+        rng = np.random.default_rng(4)
+        for _ in range(60):
+            o, r, done, _ = venv.step(rng.uniform(-1, 1, (venv.num_envs, 2)).astype(np.float32))
+            obs.append(o)
+            rewards.append(r)
+            ends.append(done[:: venv.n_agents].sum())
+        return np.stack(obs), np.stack(rewards), np.array(ends)
+
+    obs_g, rew_g, ends_g = rollout("cuda")
+    obs_c, rew_c, ends_c = rollout("cpu")
+    np.testing.assert_array_equal(ends_g, ends_c)
+    np.testing.assert_allclose(obs_g, obs_c, rtol=0, atol=2e-3)
+    np.testing.assert_allclose(rew_g, rew_c, rtol=0, atol=2e-3)
+    assert ((ends_g >= 1) & (ends_g <= 4)).any()  # the sub-batch reset ran
