@@ -632,12 +632,21 @@ class TorchSwarmNavCore:
         ``(r_j − r_i)/obs_neighbor_scale`` (d), ``(v_j − v_i)/obs_velocity_scale`` (d) and
         a mask (1 real, 0 padding). Every call returns an array of the caller's own: the
         first after a step is the step's result itself (no copy on the CPU); a second
-        call on the same state measures it again.
+        call on the same state measures it again. From a GPU the observations are copied
+        into page-locked host memory (torch's caching host allocator), several times
+        faster than into a fresh numpy array for large batches.
         """
-        if self._obs_given and self.device.type == "cpu":
-            self._measure()  # the array handed out shares memory with self._obs
+        if self.device.type == "cpu":
+            if self._obs_given:
+                self._measure()  # the array handed out shares memory with self._obs
+            self._obs_given = True
+            return self._obs.numpy()
         self._obs_given = True
-        return self._obs.cpu().numpy()
+        host = torch.empty(
+            self._obs.shape, dtype=self._obs.dtype, pin_memory=self.device.type == "cuda"
+        )
+        host.copy_(self._obs)  # synchronous: the array is complete when returned
+        return host.numpy()
 
     def observe_tensor(self) -> torch.Tensor:
         """The observations as a float32 tensor on the device (no copy; do not modify).
