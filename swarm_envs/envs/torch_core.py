@@ -497,8 +497,12 @@ class TorchSwarmNavCore:
             self._start_distance[rows],
         )
 
-    def _measure_rows(self, rows: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """:meth:`_measure` for swarms ``rows`` (at most :attr:`reset_batch`) only.
+    def _measure_rows(
+        self, idx: np.ndarray, rows: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """:meth:`_measure` for swarms ``idx`` (at most :attr:`reset_batch`) only.
+
+        ``rows`` holds the same indices on the device.
 
         The rows are padded to ``reset_batch`` with copies of the first; the results of
         the real ones are written into the force, observations and statistics.
@@ -512,7 +516,7 @@ class TorchSwarmNavCore:
             self._obs = self._obs.clone()
             self._obs_given = self._obs_shared = False
         self._obs[rows] = obs[:n]
-        self._packed[rows.cpu().numpy()] = packed[:n].cpu().numpy()
+        self._packed[idx] = packed[:n].cpu().numpy()
         return mean_dist[:n], arrived[:n]
 
     # ------------------------------------------------------------------ reset
@@ -538,7 +542,7 @@ class TorchSwarmNavCore:
         self._goal = goal_t
         self.t[idx] = 0
         if self.reset_batch is not None and idx.size <= self.reset_batch:
-            mean_dist, arrived = self._measure_rows(rows)
+            mean_dist, arrived = self._measure_rows(idx, rows)
         else:
             mean_dist, arrived = self._measure()
             mean_dist, arrived = mean_dist[rows], arrived[rows]

@@ -103,12 +103,14 @@ class _SwarmInfoPool:
     def __init__(self, n_swarms: int) -> None:
         self.n_swarms = n_swarms
         self._sets: list[tuple[list[Any], list[SwarmInfo]]] = []
+        # What sys.getrefcount says of an object that one list alone holds, measured as
+        # below (interpreters differ in what the count includes).
+        self._free = max(map(sys.getrefcount, [object()]))
 
     def infos(self, stats: Mapping[str, np.ndarray]) -> list[SwarmInfo]:
         """B infos reading ``stats``: a free recycled set, or a new one."""
         for holder, objects in self._sets:
-            # In the pool's list only: sys.getrefcount sees that list and its argument.
-            if max(map(sys.getrefcount, objects)) <= 2:
+            if max(map(sys.getrefcount, objects)) <= self._free:  # the pool's list only
                 holder[0] = stats
                 return objects
         holder = [stats]
