@@ -2,10 +2,11 @@
 
 Same seed and actions → same starts, observations, rewards, flags and statistics as
 :class:`SwarmNavCore` over dozens of steps (float32 and float64), including partial
-resets, padding (N − 1 < k), N = 1, 3-D and the passive goal; TESTING.md items 11
-(coincident agents), 12 (seeding), 13 (pickling) and 16 (bad input). One test compiles
-(small shapes) and checks the compiled step against the plain one; the rest run plain
-torch, the fallback path.
+resets (of the whole batch, and of a few swarms through the sub-batch function),
+padding (N − 1 < k), N = 1, 3-D and the passive goal; TESTING.md items 11 (coincident
+agents), 12 (seeding), 13 (pickling) and 16 (bad input). One test compiles (64 swarms
+of 6: the step and the sub-batch reset) and checks both against plain torch; the rest
+run plain torch, the fallback path. The CUDA test runs where a GPU is present.
 """
 
 from __future__ import annotations
