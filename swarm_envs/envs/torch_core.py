@@ -414,7 +414,15 @@ class TorchSwarmNavCore:
         self._obs_given = False  # observe() handed out the current observations
         self._obs_shared = False  # observe_tensor() did
         self._packed: np.ndarray = np.empty((0, len(_PACKED)))
+        self._graphed: tb.CudaGraphed | None = None
         self._measure(warmup=True)
+        if self.device.type == "cuda" and self._advance.compiled:
+            # One replay instead of a launch per kernel (tb.CudaGraphed; captured here,
+            # never in a step).
+            self._graphed = tb.CudaGraphed(
+                self._advance, self._args(self._no_action, self._move_none)
+            )
+            self._measure()
         # Resets of a few swarms measure only those, through the same function compiled
         # for a sub-batch of `reset_batch` swarms (padded): in a VecEnv some swarm ends
         # on most steps, and measuring all B swarms each time would double the step.
@@ -460,8 +468,9 @@ class TorchSwarmNavCore:
             seconds += part.compile_seconds
         return seconds
 
-    def _run(self, a: torch.Tensor, move: torch.Tensor, warmup: bool = False) -> tuple:
-        args = (
+    def _args(self, a: torch.Tensor, move: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """The fused function's arguments for the whole batch."""
+        return (
             self._x,
             self._v,
             self._f,
@@ -472,8 +481,19 @@ class TorchSwarmNavCore:
             self._prev_arrived,
             self._start_distance,
         )
-        out = self._advance.warmup(*args) if warmup else self._advance(*args)
-        self._x, self._v, self._f, self._obs, packed, mean_dist, arrived, _ = out
+
+    def _run(self, a: torch.Tensor, move: torch.Tensor, warmup: bool = False) -> tuple:
+        args = self._args(a, move)
+        if self._graphed is not None:
+            # The graph's outputs are overwritten by its next replay: the state and the
+            # running reward terms are only read before then (or passed back in); the
+            # observations, which are handed out, are copied.
+            out = self._graphed(*args)
+            self._x, self._v, self._f, obs, packed, mean_dist, arrived, _ = out
+            self._obs = obs.clone()
+        else:
+            out = self._advance.warmup(*args) if warmup else self._advance(*args)
+            self._x, self._v, self._f, self._obs, packed, mean_dist, arrived, _ = out
         self._packed = packed.cpu().numpy()
         self._obs_given = self._obs_shared = False
         return mean_dist, arrived

@@ -60,6 +60,7 @@ from swarm_envs.physics.social_potential import RHO_FLOOR, SocialPotentialParams
 
 __all__ = [
     "COMPILE_ENV",
+    "CudaGraphed",
     "MaybeCompiled",
     "SocialPotentialStepper",
     "TorchPairGeometry",
@@ -519,6 +520,45 @@ class MaybeCompiled:
     def _sync(self) -> None:
         if self.device.type == "cuda":
             torch.cuda.synchronize(self.device)
+
+
+class CudaGraphed:
+    """A function of CUDA tensors, captured once as a CUDA graph and replayed.
+
+    A compiled step is a couple of dozen GPU kernels; launched one by one from Python
+    they cost far more host time than the GPU needs to run them (benchmarks/gpu.py). A
+    replay launches them all at once. The function must take and return tensors of
+    fixed shapes and make no host synchronisation.
+
+    ``graphed(*args)`` copies ``args`` into the graph's own input tensors, replays, and
+    returns the graph's own output tensors: the next call overwrites them, so a caller
+    copies whatever it keeps longer (reading them until the next call is fine, and so is
+    passing them back as the next call's arguments).
+
+    Args:
+        fn: the function (compiled or not); it is run twice on a side stream to warm
+            up, then captured.
+        example: arguments of the shapes, dtypes and device of every later call.
+    """
+
+    def __init__(self, fn: Callable[..., Any], example: Sequence[torch.Tensor]) -> None:
+        self._inputs = [t.clone() for t in example]
+        side = torch.cuda.Stream(device=self._inputs[0].device)
+        side.wait_stream(torch.cuda.current_stream())
+        with torch.cuda.stream(side):
+            for _ in range(2):
+                fn(*self._inputs)
+        torch.cuda.current_stream().wait_stream(side)
+        self._graph = torch.cuda.CUDAGraph()
+        with torch.cuda.graph(self._graph):
+            self._outputs = fn(*self._inputs)
+
+    def __call__(self, *args: torch.Tensor) -> Any:
+        for static, arg in zip(self._inputs, args, strict=True):
+            if static is not arg:
+                static.copy_(arg)
+        self._graph.replay()
+        return self._outputs
 
 
 class SocialPotentialStepper:
