@@ -82,8 +82,10 @@ MAX_CELLS = 2**30
 CHUNK = 1 << 16
 
 #: A dense table of cumulative counts per key replaces binary search when the key
-#: range is at most this many times the number of points.
-LOOKUP_FACTOR = 8
+#: range is at most this many times the number of points (at most 256 bytes per point).
+#: Binary search was 37 % of a 3-D k-nearest search of 100,000 agents, whose grid of
+#: small cells spans about 23 keys per point; the table halves that search.
+LOOKUP_FACTOR = 32
 
 #: Default ``reach`` of :func:`radius_pairs` (cells per search radius).
 REACH = 3
