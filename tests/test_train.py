@@ -12,6 +12,7 @@ import yaml
 
 from agents import PotentialFieldController
 from swarm_envs.config import CONFIG_ROOT
+from swarm_envs.envs.vec_env import SwarmNavVecEnv
 from train import cli_train, demo
 from train.config import (
     TrainConfig,
@@ -164,8 +165,8 @@ def test_shared_mode_uses_one_slot_per_agent():
 
 
 def test_stats_callback_reads_the_batched_envs_arrays_as_the_infos_hold_them(monkeypatch):
-    # Shared mode: the means come from SwarmNavVecEnv.last_stats under the VecMonitor;
-    # they must equal the loop over the infos (the path every other env takes).
+    # Shared mode: the means come from SwarmNavVecEnv.last_stats; they must equal the
+    # loop over the infos (the path every other env takes).
     from stable_baselines3.common.logger import configure
 
     from train.callbacks import SwarmStatsCallback
@@ -180,17 +181,71 @@ def test_stats_callback_reads_the_batched_envs_arrays_as_the_infos_hold_them(mon
         model.set_logger(configure(None, []))
         callback = SwarmStatsCallback(tc.swarm_config())
         callback.init_callback(model)
-        assert callback._batched_env() is venv.venv
+        assert callback._batched_env() is venv
         if not batched:
             monkeypatch.setattr(callback, "_batched_env", lambda: None)
         _, _, dones, infos = venv.step(rng.uniform(-1, 1, (venv.num_envs, 2)))
         callback.update_locals({"infos": infos, "dones": dones})
         callback.on_step()
         values = dict(model.logger.name_to_value)
-        assert {f"swarm/{k}" for k in venv.venv.last_stats} <= set(values)
-        expected = {k: float(np.mean(v)) for k, v in venv.venv.last_stats.items()}
+        assert {f"swarm/{k}" for k in venv.last_stats} <= set(values)
+        expected = {k: float(np.mean(v)) for k, v in venv.last_stats.items()}
         for key, value in expected.items():
             assert values[f"swarm/{key}"] == pytest.approx(value, rel=1e-6, abs=1e-9)
+    venv.close()
+
+
+def test_training_env_reports_episodes_without_a_monitor():
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    shared = make_training_env(smoke_config(n_swarms=2))
+    assert isinstance(shared, SwarmNavVecEnv)  # reports "episode" itself
+    central = make_training_env(smoke_config(mode="central", n_swarms=2))
+    assert isinstance(central, VecMonitor)
+    shared.close()
+    central.close()
+
+
+@pytest.mark.parametrize("algo", ["PPO", "SAC"])
+def test_done_slots_only_keeps_what_sb3_buffers(algo):
+    # The override visits the ended slots only; on infos as monitors write them
+    # ("episode" where an episode ended, "is_success" anywhere) the buffers must hold
+    # exactly what SB3's own loop over every slot puts there.
+    from train.config import algorithm_class
+    from train.train import done_slots_only
+
+    hyperparams = {"buffer_size": 1000} if algo == "SAC" else {"n_steps": 64, "batch_size": 64}
+    tc = smoke_config(n_swarms=2, algo=algo, hyperparams=hyperparams)
+    venv = make_training_env(tc)
+    base = algorithm_class(algo)
+    fast = done_slots_only(base)
+    assert issubclass(fast, base) and fast.__name__ == base.__name__
+    assert done_slots_only(base) is fast  # made once
+    rng = np.random.default_rng(0)
+    models = [build_model(tc, venv) for _ in range(2)]
+    models[0].__class__ = base
+    models[1].__class__ = fast
+    for model in models:
+        model._setup_learn(10, None)
+    for _ in range(20):
+        dones = rng.random(venv.num_envs) < 0.3
+        infos = [
+            {"episode": {"r": float(rng.normal()), "l": int(rng.integers(1, 9)), "t": 0.0}}
+            if done
+            else {}
+            for done in dones
+        ]
+        for info in infos:
+            if rng.random() < 0.5:
+                info["is_success"] = bool(rng.random() < 0.5)
+        for model in models:
+            model._update_info_buffer(infos, dones)
+    assert list(models[0].ep_info_buffer) == list(models[1].ep_info_buffer)
+    assert list(models[0].ep_success_buffer) == list(models[1].ep_success_buffer)
+    assert len(models[1].ep_success_buffer) > 0
+    no_dones = [{"episode": {"r": 1.0, "l": 1, "t": 0.0}}] * 3
+    models[1]._update_info_buffer(no_dones)  # without dones: SB3's own loop
+    assert list(models[1].ep_info_buffer)[-3:] == [info["episode"] for info in no_dones]
     venv.close()
 
 

@@ -195,6 +195,36 @@ def test_vec_monitor_reports_episodes():
     assert dones.all() and all(info["episode"]["l"] == 4 for info in infos)
 
 
+def test_episode_infos_match_what_vec_monitor_reports():
+    # The VecEnv reports SB3's "episode" itself, in the slots whose swarm ended, with the
+    # return and length that a VecMonitor computes; swarms end at different steps here.
+    B, N, T = 3, 2, 6
+    plain = swarm_nav_v0.vec_env(B, n_agents=N, max_steps=T)
+    monitored = VecMonitor(swarm_nav_v0.vec_env(B, n_agents=N, max_steps=T))
+    for venv in (plain, monitored):
+        venv.seed(7)
+        venv.reset()
+    plain.core.t[:] = [0, 2, 4]
+    monitored.venv.core.t[:] = [0, 2, 4]
+    rng = np.random.default_rng(0)
+    ended = 0
+    for _ in range(2 * T):
+        actions = rng.uniform(-1, 1, (B * N, 2)).astype(np.float32)
+        _, rewards, dones, infos = plain.step(actions)
+        _, m_rewards, m_dones, m_infos = monitored.step(actions)
+        np.testing.assert_array_equal(rewards, m_rewards)
+        np.testing.assert_array_equal(dones, m_dones)
+        for i in range(B * N):
+            assert ("episode" in infos[i]) is bool(dones[i])
+            if dones[i]:
+                ended += 1
+                mine, theirs = infos[i]["episode"], m_infos[i]["episode"]
+                assert set(mine) == {"r", "l", "t"} and mine["t"] >= 0.0
+                assert mine["l"] == theirs["l"]
+                assert mine["r"] == pytest.approx(theirs["r"], rel=1e-5, abs=1e-6)
+    assert ended >= 3 * N  # every swarm ended at least once, not all on the same step
+
+
 # --------------------------------------------------------------------------- layout vs envs
 
 

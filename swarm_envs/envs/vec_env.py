@@ -9,7 +9,11 @@ would loop, and never sets ``TimeLimit.truncated``).
 A swarm whose episode ends is reset on its own within the same ``step_wait``. Its
 slots' infos carry ``terminal_observation`` (the last observation of that episode) and
 ``TimeLimit.truncated`` (true when it ended by the step limit, not by success), which
-SB3 uses to bootstrap the value of truncated episodes.
+SB3 uses to bootstrap the value of truncated episodes, and ``episode``: ``{"r": return,
+"l": length, "t": seconds since the VecEnv was made}``, what SB3's ``VecMonitor`` would
+add (so none is needed: at 1,024 × 32 slots its Python loop over the infos adds about
+2.6 ms to a 4.5 ms step; wrapping one anyway gives the same values). ``swarm_episode``
+is the same dict under its older name.
 
 Infos: the swarm's statistics (:data:`swarm_envs.envs.core.STAT_KEYS`) are in the info
 of the swarm's first slot (``b·N``) only, as a read-only :class:`SwarmInfo` mapping; the
@@ -38,6 +42,7 @@ import dataclasses
 import itertools
 import os
 import sys
+import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from types import MappingProxyType
@@ -173,6 +178,7 @@ class SwarmNavVecEnv(VecEnv):
         self.episode_returns = np.zeros(self.n_swarms)
         self.episode_lengths = np.zeros(self.n_swarms, np.int64)
         self._swarm_infos = _SwarmInfoPool(self.n_swarms)
+        self._t_start = time.time()  # the "t" of the episode infos, as VecMonitor's
 
     def _check_threads(self, n_threads: int | None) -> int:
         """Worker threads: given, or 1 per 512 swarms up to the CPU count (at least 1)."""
@@ -273,13 +279,14 @@ class SwarmNavVecEnv(VecEnv):
                 episode = {
                     "r": float(self.episode_returns[b]),
                     "l": int(self.episode_lengths[b]),
+                    "t": round(time.time() - self._t_start, 6),
                 }
                 time_limit = bool(truncated[b] and not terminated[b])
                 for i in range(N):
                     info = dict(infos[b * N]) if i == 0 else {}
                     info["terminal_observation"] = obs[b, i]
                     info["TimeLimit.truncated"] = time_limit
-                    info["swarm_episode"] = episode
+                    info["episode"] = info["swarm_episode"] = episode
                     infos[b * N + i] = info
             # A core's observe() never hands out memory it writes to later, so the
             # terminal observations above (views of `obs`) keep the old rows.
