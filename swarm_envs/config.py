@@ -44,8 +44,10 @@ DYNAMICS = ("social_potential", "zone", "piecewise", "lagrangian")
 #: How the env computes a step (``SwarmConfig.backend``); see ``swarm_envs.envs.backends``.
 BACKENDS = ("auto", "numpy", "sparse", "torch")
 
-#: Where the shipped YAML files live (``configs/`` at the repository root).
-CONFIG_ROOT = Path(__file__).resolve().parent.parent / "configs"
+#: Where the shipped YAML files live: ``configs/`` at the repository root, which the
+#: package holds as ``swarm_envs/configs`` (a symbolic link in the repository, the files
+#: themselves in an installed wheel), so named configs resolve after any install.
+CONFIG_ROOT = Path(__file__).resolve().parent / "configs"
 
 
 def _check_int(owner: str, name: str, value: Any, *, low: int, high: int | None = None) -> int:
@@ -289,20 +291,23 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
     return data
 
 
-def resolve_config_path(path: str | Path) -> Path:
+def resolve_config_path(path: str | Path, section: str = "env", kind: str = "config file") -> Path:
     """Find a config by path, or by a path relative to the shipped ``configs/``.
 
     ``"configs/env/paper_navigation.yaml"``, ``"env/paper_navigation.yaml"`` and
-    ``"paper_navigation"`` (looked up in ``configs/env``) all resolve to the same file.
+    ``"paper_navigation"`` (looked up in ``configs/<section>``) all resolve to the same
+    file, from any working folder. A file at ``path`` itself comes first. ``kind`` names
+    the file in the error (``"train config"``, ...).
     """
     p = Path(path)
-    candidates = [p, CONFIG_ROOT / p, CONFIG_ROOT / "env" / p, CONFIG_ROOT / "env" / f"{p}.yaml"]
+    folder = CONFIG_ROOT / section
+    candidates = [p, CONFIG_ROOT / p, folder / p, folder / f"{p}.yaml"]
     if p.parts and p.parts[0] == "configs":
         candidates.append(CONFIG_ROOT.joinpath(*p.parts[1:]))
     for c in candidates:
         if c.is_file():
             return c
-    raise ValueError(f"config file not found: {path} (looked in . and {CONFIG_ROOT})")
+    raise ValueError(f"{kind} not found: {path} (looked in . and {folder})")
 
 
 def load_swarm_config(

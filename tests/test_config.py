@@ -109,3 +109,76 @@ def test_missing_file_and_non_mapping_yaml(tmp_path: Path):
     bad.write_text("- 1\n- 2\n")
     with pytest.raises(ValueError, match="must hold a mapping"):
         load_swarm_config(bad)
+
+
+# --------------------------------------------------------------------------- packaging
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def test_config_root_is_inside_the_package_and_is_the_repositorys_configs():
+    import swarm_envs
+
+    assert Path(swarm_envs.__file__).resolve().parent / "configs" == CONFIG_ROOT
+    assert CONFIG_ROOT.resolve() == (REPO / "configs").resolve()
+
+
+def test_every_shipped_config_matches_the_package_data_glob():
+    # pyproject ships configs/ as package data "configs/*/*.yaml": a file elsewhere
+    # (deeper, or .yml) would be missing from a non-editable install.
+    import tomllib
+
+    pyproject = tomllib.loads((REPO / "pyproject.toml").read_text())
+    assert "configs/*/*.yaml" in pyproject["tool"]["setuptools"]["package-data"]["swarm_envs"]
+    files = [p for p in (REPO / "configs").rglob("*") if p.is_file()]
+    assert files
+    for path in files:
+        assert path.relative_to(REPO / "configs").match("*/*.yaml"), path
+
+
+def test_named_configs_resolve_from_an_installed_wheel(tmp_path: Path):
+    # Build the wheel (offline, from this checkout) and import it from another folder.
+    import shutil
+    import subprocess
+    import sys
+
+    pytest.importorskip("setuptools")
+    pytest.importorskip("wheel")
+    # A copy of what the wheel is built from, so that the build writes nothing here.
+    src, wheel_dir, site = tmp_path / "src", tmp_path / "wheel", tmp_path / "site"
+    src.mkdir()
+    for name in ("pyproject.toml", "README.md"):
+        shutil.copy(REPO / name, src / name)
+    ignore = shutil.ignore_patterns("__pycache__")
+    for name in ("swarm_envs", "agents", "train", "configs"):
+        shutil.copytree(REPO / name, src / name, symlinks=True, ignore=ignore)
+    pip = [sys.executable, "-m", "pip", "--disable-pip-version-check", "-q"]
+    build = [*pip, "wheel", "--no-build-isolation", "--no-deps", "-w", str(wheel_dir), str(src)]
+    subprocess.run(build, check=True, cwd=tmp_path)
+    wheels = list(wheel_dir.glob("*.whl"))
+    install = [
+        *pip,
+        "install",
+        "--no-deps",
+        "--no-compile",
+        "--target",
+        str(site),
+        *map(str, wheels),
+    ]
+    subprocess.run(install, check=True, cwd=tmp_path)
+    probe = (
+        "import swarm_envs, swarm_envs.config as c, train.demo as d;"
+        f"assert swarm_envs.__file__.startswith({str(site)!r}), swarm_envs.__file__;"
+        "assert not c.CONFIG_ROOT.is_symlink() and d.DEFAULT_CONFIG.is_file();"
+        "print(c.load_swarm_config('paper_navigation').n_agents)"
+    )
+    env = {"PYTHONPATH": str(site), "PATH": "/usr/bin:/bin"}
+    out = subprocess.run(
+        [sys.executable, "-c", probe],
+        check=True,
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+    )
+    assert out.stdout.strip() == str(load_swarm_config("paper_navigation").n_agents)

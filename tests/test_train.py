@@ -49,6 +49,19 @@ def smoke_config(**kw) -> TrainConfig:
 # --------------------------------------------------------------------------- configs
 
 
+def test_shipped_configs_load_by_name_from_any_folder(tmp_path: Path, monkeypatch):
+    from train.sweep import load_sweep_config
+
+    monkeypatch.chdir(tmp_path)  # no configs/ here: the package's are found
+    by_path = load_train_config("configs/train/demo.yaml")
+    assert load_train_config("demo") == by_path == load_train_config("train/demo.yaml")
+    assert load_sweep_config("quick") == load_sweep_config("configs/sweeps/quick.yaml")
+    (tmp_path / "demo.yaml").write_text("n_swarms: 5\n")  # a file here comes first
+    assert load_train_config("demo.yaml").n_swarms == 5
+    with pytest.raises(ValueError, match="train config not found: nope"):
+        load_train_config("nope")
+
+
 def test_shipped_train_configs_exist():
     names = {p.stem for p in TRAIN_CONFIGS}
     assert {"demo", "paper_navigation", "central", "sac_shared"} <= names

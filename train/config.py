@@ -23,7 +23,12 @@ from typing import Any
 import yaml
 
 from swarm_envs import ENV_ID
-from swarm_envs.config import SwarmConfig, config_from_mapping, load_swarm_config
+from swarm_envs.config import (
+    SwarmConfig,
+    config_from_mapping,
+    load_swarm_config,
+    resolve_config_path,
+)
 
 ALGOS = ("PPO", "SAC")
 MODES = ("shared", "central")
@@ -183,9 +188,7 @@ def load_train_config(
     """Load ``configs/train/<name>.yaml`` and merge ``overrides`` (nested dicts merge)."""
     data: dict[str, Any] = {}
     if path is not None:
-        p = Path(path)
-        if not p.is_file():
-            raise ValueError(f"train config not found: {p}")
+        p = resolve_config_path(path, "train", "train config")
         data = yaml.safe_load(p.read_text()) or {}
         if not isinstance(data, dict):
             raise ValueError(f"train config {p} must hold a mapping")

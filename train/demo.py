@@ -20,9 +20,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from swarm_envs.config import CONFIG_ROOT
 from train.config import load_train_config, parse_overrides
 
-DEFAULT_CONFIG = Path(__file__).resolve().parent.parent / "configs" / "train" / "demo.yaml"
+DEFAULT_CONFIG = CONFIG_ROOT / "train" / "demo.yaml"
 LEARNED = "learned"
 
 

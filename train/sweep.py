@@ -67,6 +67,7 @@ from swarm_envs.config import (
     as_dict,
     config_from_mapping,
     load_swarm_config,
+    resolve_config_path,
 )
 from swarm_envs.physics import INTEGRATORS, SocialPotentialParams, random_swarm, simulate
 
@@ -443,9 +444,7 @@ def load_sweep_config(
     """Load ``configs/sweeps/<name>.yaml`` and merge ``overrides`` (sections merge)."""
     data: dict[str, Any] = {}
     if path is not None:
-        p = Path(path)
-        if not p.is_file():
-            raise ValueError(f"sweep config not found: {p}")
+        p = resolve_config_path(path, "sweeps", "sweep config")
         data = yaml.safe_load(p.read_text()) or {}
         if not isinstance(data, dict):
             raise ValueError(f"sweep config {p} must hold a mapping")

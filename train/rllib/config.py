@@ -27,7 +27,7 @@ from typing import Any
 
 import yaml
 
-from swarm_envs.config import config_from_mapping
+from swarm_envs.config import config_from_mapping, resolve_config_path
 from train.config import RunConfig
 
 __all__ = [
@@ -181,9 +181,7 @@ def load_rllib_config(
     """Load ``configs/train/<name>_rllib.yaml`` and merge ``overrides`` (sections merge)."""
     data: dict[str, Any] = {}
     if path is not None:
-        p = Path(path)
-        if not p.is_file():
-            raise ValueError(f"train config not found: {p}")
+        p = resolve_config_path(path, "train", "train config")
         data = yaml.safe_load(p.read_text()) or {}
         if not isinstance(data, dict):
             raise ValueError(f"train config {p} must hold a mapping")
