@@ -21,7 +21,7 @@ $(BIN)/python:
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
 $(STAMP): $(BIN)/python pyproject.toml constraints.txt
-	$(BIN)/python -m pip install --quiet -c constraints.txt -e ".[dev,distributed]"
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e ".[dev,distributed,fast]"
 	@touch $(STAMP)
 
 install: $(STAMP)

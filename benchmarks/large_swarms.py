@@ -3,6 +3,10 @@
 Usage: ``python benchmarks/large_swarms.py [--dim 2] [--repeats 7] [--max-n 100000]
 [--dense-max 4000] [--kdtree] [--accuracy 2000] [--cutoff-tol 0.03]``
 
+The sparse core's pair pass is compiled with numba where it imports
+(:mod:`swarm_envs.physics.compiled_pairs`); ``SWARM_ENVS_NUMBA=0`` times the numpy pass
+instead. The header says which ran.
+
 A full step is ``core.step(actions)`` followed by ``core.observe()`` (what every env
 adapter does), for one swarm (B = 1, float64) with the default config except
 ``init_radius``, which is scaled as ``1.5 (N / 10)^{1/d}``
@@ -49,7 +53,7 @@ from swarm_envs.envs.sparse_core import (
     SparseSwarmNavCore,
     density_preserving_radius,
 )
-from swarm_envs.physics import forces
+from swarm_envs.physics import compiled_pairs, forces
 from swarm_envs.physics.cutoff import force_error_bound, sparse_forces
 from swarm_envs.physics.neighbors import CELL_MARGIN, REACH, CellList, knn, radius_pairs
 
@@ -193,6 +197,11 @@ def main() -> None:
         f"d = {dim}; cut-off r_c = {probe.cutoff:.3f} (cutoff_tol {probe.cutoff_tol}, "
         f"cutoff_speed {probe.cutoff_speed}); SPARSE_MIN_AGENTS = {SPARSE_MIN_AGENTS}"
     )
+    if compiled_pairs.numba_enabled():
+        pair_pass = f"compiled (numba {compiled_pairs.numba.__version__})"
+    else:
+        pair_pass = "numpy (numba missing, or SWARM_ENVS_NUMBA=0)"
+    print(f"sparse pair pass: {pair_pass}")
     print()
     head = "| N | init_radius | dense s/step (median) | sparse s/step (median) | dense best | "
     head += "sparse best | dense / sparse |"

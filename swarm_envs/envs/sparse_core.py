@@ -14,9 +14,13 @@ array. One step:
 3. one cell-list search (:class:`swarm_envs.physics.neighbors.CellList`) finds every
    pair within ``max(r_c, collision_radius)`` of the new positions, chunk by chunk, and
    the same pass over those pairs gives the next passive force, the pair potential of
-   the ``energy`` statistic and the collision count
-   (:class:`swarm_envs.physics.cutoff.PairAccumulator`; the agents are taken in cell
-   order, so the pairs' memory accesses stay local);
+   the ``energy`` statistic and the collision count (the agents are taken in cell
+   order, so the pairs' memory accesses stay local). Where numba imports, that pass is
+   one compiled loop over the cell pairs
+   (:func:`swarm_envs.physics.compiled_pairs.cell_pair_sums`, 2–3 times faster);
+   otherwise numpy sums chunks of candidates
+   (:class:`swarm_envs.physics.cutoff.PairAccumulator`). Both give the same sums to
+   round-off; ``SWARM_ENVS_NUMBA=0`` picks numpy;
 4. the k nearest neighbours (observations, nearest-neighbour distance) come from the
    same cell-list structure (:func:`swarm_envs.physics.neighbors.knn`), on demand and
    cached per state; the search starts at the previous step's neighbour distances.
@@ -36,7 +40,8 @@ the nearest-neighbour distance are exact. A state that is no longer finite raise
 
 The defaults, ``cutoff_tol = 0.03`` (1 % of the default action bound ``u_max = 3``) and
 ``cutoff_speed = 1``, give ``r_c ≈ 5.08`` with the navigation parameters and one swarm
-of 100,000 agents at about 0.4–0.5 s per full step (2-D, on the 2-core development
+of 100,000 agents at about 0.3 s per full step in 2-D and 0.7–0.75 s in 3-D with the
+compiled pass (0.3–0.45 s and 1.1–1.6 s with numpy; on the 2-core development
 machine). What they cost in accuracy, measured at 2,000 agents at the default start
 density (``benchmarks/large_swarms.py --accuracy 2000``): per-agent force errors of
 median 0.1–0.3 and maximum 0.6–1.3 in the first 20 steps, mostly the alignment drag of
@@ -57,8 +62,9 @@ times denser.
 
 Below :data:`SPARSE_MIN_AGENTS` agents per swarm the dense core is as fast or faster
 (and exact); above it this one is faster, increasingly so (``benchmarks/large_swarms.py``
-measures the crossover: about 300 agents in 2-D and 500 in 3-D in float64, 400 and 800
-in float32). :func:`use_sparse_core` is the selection rule.
+measures the crossover: about 300 agents in 2-D and 3-D in float64 with the compiled
+pass; with numpy about 300 in 2-D and 500 in 3-D, 400 and 800 in float32).
+:func:`use_sparse_core` is the selection rule.
 """
 
 from __future__ import annotations
@@ -71,15 +77,15 @@ import numpy as np
 
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.core import SwarmNavCore, require_social_potential
-from swarm_envs.physics import goal_force, goal_potential
+from swarm_envs.physics import compiled_pairs, goal_force, goal_potential
 from swarm_envs.physics._validation import check_real
 from swarm_envs.physics.cutoff import PairAccumulator, cutoff_radius
 from swarm_envs.physics.neighbors import CELL_MARGIN, REACH, CellList, knn
 
 #: Agents per swarm from which to use :class:`SparseSwarmNavCore`: above the crossover
 #: with the dense core measured by ``benchmarks/large_swarms.py`` (about 300 agents in
-#: 2-D, 500 in 3-D, float64, default config at the start density of N = 10), where the
-#: sparse core is already 1.4–2 times faster in 2-D and on par in 3-D.
+#: 2-D, 300–500 in 3-D, float64, default config at the start density of N = 10), where
+#: the sparse core is already 1.4–2 times faster in 2-D and on par in 3-D or faster.
 SPARSE_MIN_AGENTS = 500
 
 #: From this many agents in a core (B·N), the k-nearest-neighbour search of a new state
@@ -252,18 +258,31 @@ class SparseSwarmNavCore(SwarmNavCore):
         if radius > 0 and N > 1:
             cells = CellList.build(self.x, radius * (1.0 + CELL_MARGIN) / REACH, REACH)
             order = cells.order
-            acc = PairAccumulator(
-                p,
-                B * N,
-                velocity.reshape(B * N, d)[order],
-                groups=order // N if B > 1 else None,
-                n_groups=B,
-                potential=True,
-                close_radius=cfg.collision_radius,
-            )
-            for chunk in cells.iter_pairs(radius):
-                acc.add(*chunk)
-            sums = acc.result(d, self.dtype)
+            vel = velocity.reshape(B * N, d)[order]
+            groups = order // N if B > 1 else None
+            if compiled_pairs.numba_enabled():  # one compiled loop over the cell pairs
+                sums = compiled_pairs.cell_pair_sums(
+                    cells,
+                    radius,
+                    p,
+                    vel,
+                    groups=groups,
+                    n_groups=B,
+                    close_radius=cfg.collision_radius,
+                )
+            else:
+                acc = PairAccumulator(
+                    p,
+                    B * N,
+                    vel,
+                    groups=groups,
+                    n_groups=B,
+                    potential=True,
+                    close_radius=cfg.collision_radius,
+                )
+                for chunk in cells.iter_pairs(radius):
+                    acc.add(*chunk)
+                sums = acc.result(d, self.dtype)
             force[order] = sums.force
             self._potential = sums.potential
             self._collisions = sums.close.astype(np.float64)

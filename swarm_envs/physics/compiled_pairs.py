@@ -1,0 +1,216 @@
+"""The cut-off pair pass over a cell list as one compiled loop (numba), when numba imports.
+
+:func:`cell_pair_sums` gives exactly what feeding every chunk of
+:meth:`swarm_envs.physics.neighbors.CellList.iter_pairs` to a
+:class:`swarm_envs.physics.cutoff.PairAccumulator` gives (the forces, pair potential and
+close pairs of every unordered pair within the radius, MODELS.md §1 eqs. 9–11), to
+float64 round-off: the numpy pass makes about 40 array passes over 65,536 candidates at
+a time and spends most of its time in memory; this one visits each candidate once, in
+registers. Per pair within ``r`` (``ρ = |x_j − x_i|``, ``u_ij = (x_j − x_i)/ρ``):
+
+``f_ij = (C_a/l_a) e^{−ρ/l_a} − (C_r/l_r) e^{−ρ/l_r} − C_o ((v_i − v_j)·u_ij) e^{−ρ/l_o}``
+(eqs. 10–11), ``+f_ij u_ij`` on ``i`` and ``−f_ij u_ij`` on ``j``;
+``U(ρ) = C_r e^{−ρ/l_r} − C_a e^{−ρ/l_a}`` (eq. 9) to the swarm of ``i``; a close pair
+when ``ρ² < close_radius²``. ``ρ`` is floored at ``RHO_FLOOR`` in ``1/ρ``, so that
+coincident agents give no force (``x_j − x_i = 0``), never NaN.
+
+The points are split into :data:`BLOCKS` blocks of consecutive sorted positions, each
+summed into its own buffer by whichever thread takes it (``numba.prange``), and the
+buffers are added in block order: the result does not depend on the number of threads.
+Without numba (it is optional: ``pip install swarm-envs[fast]``) :data:`AVAILABLE` is
+false and the callers keep the numpy pass; ``SWARM_ENVS_NUMBA=0`` forces that too.
+The first call compiles (a few seconds; cached on disk by numba where it can write).
+Calls are serialised by a lock (numba's fallback threading layer, workqueue, does not
+allow concurrent parallel calls). Its OpenMP layer is not fork-safe: processes that use
+the sparse core after a fork should be started with ``spawn`` or ``forkserver`` (as
+SB3's ``SubprocVecEnv`` and Ray do by default).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import threading
+import time
+
+import numpy as np
+
+from swarm_envs.physics.cutoff import PairSums
+from swarm_envs.physics.neighbors import CellList, _rows
+from swarm_envs.physics.social_potential import RHO_FLOOR, SocialPotentialParams
+
+__all__ = ["AVAILABLE", "BLOCKS", "cell_pair_sums", "compile_seconds", "numba_enabled"]
+
+#: Blocks of points summed separately, then added in order (see the module docstring).
+BLOCKS = 16
+
+logger = logging.getLogger(__name__)
+
+#: Wall time of the process's first kernel call (the compile, or loading numba's disk
+#: cache), logged once at INFO level; ``None`` until then.
+compile_seconds: float | None = None
+
+# One kernel call at a time: numba's fallback threading layer (workqueue) aborts on
+# concurrent parallel calls; the kernel uses every core anyway.
+_KERNEL_LOCK = threading.Lock()
+
+try:  # pragma: no cover - which branch runs depends on the install
+    import numba
+    from numba import prange
+
+    AVAILABLE = True
+except ImportError:  # pragma: no cover
+    numba = None
+    prange = range
+    AVAILABLE = False
+
+
+def numba_enabled() -> bool:
+    """Whether the compiled pass runs: numba imports and ``SWARM_ENVS_NUMBA`` is not ``0``."""
+    flag = os.environ.get("SWARM_ENVS_NUMBA", "auto").strip().lower()
+    if flag not in ("auto", "0", "1"):
+        raise ValueError(f"SWARM_ENVS_NUMBA must be 0, 1 or auto, got {flag!r}")
+    if flag == "1" and not AVAILABLE:
+        raise ValueError("SWARM_ENVS_NUMBA=1 but numba does not import (pip install numba)")
+    return AVAILABLE and flag != "0"
+
+
+def _pair_pass(
+    coords: np.ndarray,
+    vel: np.ndarray,
+    cell: np.ndarray,
+    own_end: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    groups: np.ndarray,
+    n_groups: int,
+    r2: float,
+    close2: float,
+    consts: np.ndarray,
+    blocks: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The compiled kernel (see :func:`cell_pair_sums`); plain Python without numba."""
+    d, m = coords.shape
+    n_rows = lo.shape[0]
+    ca_la, cr_lr, ca, cr, inv_la, inv_lr, inv_lo, align, floor = consts
+    force = np.zeros((blocks, d, m))
+    pot = np.zeros((blocks, n_groups))
+    close = np.zeros((blocks, n_groups), dtype=np.int64)
+    dx = np.empty((blocks, d))
+    for b in prange(blocks):
+        start = b * m // blocks
+        stop = (b + 1) * m // blocks
+        for p in range(start, stop):
+            u = cell[p]
+            g = groups[p]
+            for r in range(n_rows + 1):
+                if r == 0:  # the rest of p's own row
+                    q0, q1 = p + 1, own_end[u]
+                else:
+                    q0, q1 = lo[r - 1, u], hi[r - 1, u]
+                for q in range(q0, q1):
+                    rho2 = 0.0
+                    for k in range(d):
+                        dx[b, k] = coords[k, q] - coords[k, p]
+                        rho2 += dx[b, k] * dx[b, k]
+                    if rho2 > r2:
+                        continue
+                    if rho2 < close2:
+                        close[b, g] += 1
+                    rho = np.sqrt(rho2)
+                    e_a = np.exp(rho * inv_la)
+                    e_r = np.exp(rho * inv_lr)
+                    pot[b, g] += cr * e_r - ca * e_a
+                    inv = 1.0 / max(rho, floor)
+                    s = ca_la * e_a - cr_lr * e_r
+                    if align:
+                        proj = 0.0
+                        for k in range(d):
+                            proj += (vel[k, p] - vel[k, q]) * dx[b, k]
+                        s -= proj * inv * np.exp(rho * inv_lo)
+                    s *= inv
+                    for k in range(d):
+                        w = s * dx[b, k]
+                        force[b, k, p] += w
+                        force[b, k, q] -= w
+    return force, pot, close
+
+
+if AVAILABLE:  # pragma: no branch
+    _kernel = numba.njit(parallel=True, cache=True, nogil=True)(_pair_pass)
+else:  # pragma: no cover
+    _kernel = _pair_pass
+
+
+def cell_pair_sums(
+    cells: CellList,
+    radius: float,
+    params: SocialPotentialParams,
+    v: np.ndarray | None,
+    *,
+    groups: np.ndarray | None = None,
+    n_groups: int = 1,
+    close_radius: float = 0.0,
+) -> PairSums:
+    """:class:`PairSums` over every pair within ``radius`` of ``cells``, in sorted order.
+
+    The same as ``PairAccumulator(params, M, v, groups=groups, n_groups=n_groups,
+    potential=True, close_radius=close_radius)`` fed with ``cells.iter_pairs(radius)``:
+    ``v`` (velocities ``(M, d)`` in the cells' sorted order, or ``None`` for no
+    alignment) and ``groups`` (``(M,)`` swarm of each sorted point) as there; the
+    force comes back ``(M, d)`` in sorted order, float64.
+    """
+    m_pts = cells.order.size
+    d = cells.dim
+    reach = cells.reach
+    r = cells._check_radius("cell_pair_sums", radius, reach)
+    rows = _rows(d, reach, half=True)
+    lo, hi = cells.row_runs(cells.keys, rows, reach)
+    own_end = cells.first_position(cells.keys + (reach + 1))
+    cell = np.repeat(np.arange(cells.keys.size), np.diff(cells.start))
+    coords = np.ascontiguousarray(np.stack(cells.coords), dtype=np.float64)
+    align = v is not None and params.C_o != 0
+    vel = (
+        np.ascontiguousarray(params.C_o * np.asarray(v, dtype=np.float64).T)
+        if align
+        else np.zeros((d, 1))
+    )
+    grp = np.zeros(m_pts, np.int64) if groups is None else np.asarray(groups, np.int64)
+    consts = np.array(
+        [
+            params.C_a / params.l_a,
+            params.C_r / params.l_r,
+            params.C_a,
+            params.C_r,
+            -1.0 / params.l_a,
+            -1.0 / params.l_r,
+            -1.0 / params.l_o if params.l_o > 0 else 0.0,
+            1.0 if align else 0.0,
+            RHO_FLOOR,
+        ]
+    )
+    global compile_seconds
+    with _KERNEL_LOCK:
+        first = compile_seconds is None
+        t0 = time.perf_counter()
+        force, pot, close = _kernel(
+            coords,
+            vel,
+            cell,
+            np.asarray(own_end, np.int64),
+            np.ascontiguousarray(lo, np.int64).reshape(len(rows), -1),
+            np.ascontiguousarray(hi, np.int64).reshape(len(rows), -1),
+            grp,
+            int(n_groups),
+            float(np.asarray(r, dtype=coords.dtype) ** 2),
+            float(close_radius) ** 2,
+            consts,
+            BLOCKS,
+        )
+        if first:
+            compile_seconds = time.perf_counter() - t0
+            logger.info("compiled_pairs: first numba call took %.1f s", compile_seconds)
+    total_force = force[0]
+    for b in range(1, BLOCKS):
+        total_force = total_force + force[b]
+    return PairSums(total_force.T.copy(), pot.sum(axis=0), close.sum(axis=0))
