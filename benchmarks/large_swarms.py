@@ -35,6 +35,7 @@ relative speed. ``--cutoff-tol``: the sparse core's tolerance (default
 from __future__ import annotations
 
 import argparse
+import importlib.metadata
 import math
 import os
 import platform
@@ -198,7 +199,7 @@ def main() -> None:
         f"cutoff_speed {probe.cutoff_speed}); SPARSE_MIN_AGENTS = {SPARSE_MIN_AGENTS}"
     )
     if compiled_pairs.numba_enabled():
-        pair_pass = f"compiled (numba {compiled_pairs.numba.__version__})"
+        pair_pass = f"compiled (numba {importlib.metadata.version('numba')})"
     else:
         pair_pass = "numpy (numba missing, or SWARM_ENVS_NUMBA=0)"
     print(f"sparse pair pass: {pair_pass}")

@@ -28,10 +28,12 @@ SB3's ``SubprocVecEnv`` and Ray do by default).
 
 from __future__ import annotations
 
+import importlib.util
 import logging
 import os
 import threading
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -54,15 +56,25 @@ compile_seconds: float | None = None
 # concurrent parallel calls; the kernel uses every core anyway.
 _KERNEL_LOCK = threading.Lock()
 
-try:  # pragma: no cover - which branch runs depends on the install
-    import numba
-    from numba import prange
+#: Whether numba is installed (found without importing it: numba's import costs about a
+#: quarter of a second, paid on the first :func:`cell_pair_sums` instead).
+AVAILABLE = importlib.util.find_spec("numba") is not None
 
-    AVAILABLE = True
-except ImportError:  # pragma: no cover
-    numba = None
-    prange = range
-    AVAILABLE = False
+# `range` until the kernel is compiled, then numba.prange (the kernel reads this global
+# when numba compiles it).
+prange = range
+_kernel: Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
+
+
+def _compiled_kernel() -> Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """:func:`_pair_pass` through ``numba.njit(parallel=True)``, made on first use."""
+    global _kernel, prange
+    if _kernel is None:
+        import numba
+
+        prange = numba.prange
+        _kernel = numba.njit(parallel=True, cache=True, nogil=True)(_pair_pass)
+    return _kernel
 
 
 def numba_enabled() -> bool:
@@ -89,7 +101,7 @@ def _pair_pass(
     consts: np.ndarray,
     blocks: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The compiled kernel (see :func:`cell_pair_sums`); plain Python without numba."""
+    """The kernel that numba compiles (see :func:`cell_pair_sums`)."""
     d, m = coords.shape
     n_rows = lo.shape[0]
     ca_la, cr_lr, ca, cr, inv_la, inv_lr, inv_lo, align, floor = consts
@@ -134,12 +146,6 @@ def _pair_pass(
                         force[b, k, p] += w
                         force[b, k, q] -= w
     return force, pot, close
-
-
-if AVAILABLE:  # pragma: no branch
-    _kernel = numba.njit(parallel=True, cache=True, nogil=True)(_pair_pass)
-else:  # pragma: no cover
-    _kernel = _pair_pass
 
 
 def cell_pair_sums(
@@ -193,7 +199,7 @@ def cell_pair_sums(
     with _KERNEL_LOCK:
         first = compile_seconds is None
         t0 = time.perf_counter()
-        force, pot, close = _kernel(
+        force, pot, close = _compiled_kernel()(
             coords,
             vel,
             cell,
