@@ -101,50 +101,63 @@ def _pair_pass(
     consts: np.ndarray,
     blocks: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The kernel that numba compiles (see :func:`cell_pair_sums`)."""
-    d, m = coords.shape
+    """The kernel that numba compiles (see :func:`cell_pair_sums`).
+
+    ``coords`` and ``vel`` are ``(3, M)``: 2-D points come with a zero third row, so
+    that one loop body, on scalars, serves both dimensions.
+    """
+    m = coords.shape[1]
     n_rows = lo.shape[0]
     ca_la, cr_lr, ca, cr, inv_la, inv_lr, inv_lo, align, floor = consts
-    force = np.zeros((blocks, d, m))
+    force = np.zeros((blocks, 3, m))
     pot = np.zeros((blocks, n_groups))
     close = np.zeros((blocks, n_groups), dtype=np.int64)
-    dx = np.empty((blocks, d))
     for b in prange(blocks):
         start = b * m // blocks
         stop = (b + 1) * m // blocks
         for p in range(start, stop):
             u = cell[p]
-            g = groups[p]
+            x0, x1, x2 = coords[0, p], coords[1, p], coords[2, p]
+            v0, v1, v2 = vel[0, p], vel[1, p], vel[2, p]
+            f0 = f1 = f2 = 0.0  # the force on p, added once at the end
+            pot_p = 0.0
+            close_p = 0
             for r in range(n_rows + 1):
                 if r == 0:  # the rest of p's own row
                     q0, q1 = p + 1, own_end[u]
                 else:
                     q0, q1 = lo[r - 1, u], hi[r - 1, u]
                 for q in range(q0, q1):
-                    rho2 = 0.0
-                    for k in range(d):
-                        dx[b, k] = coords[k, q] - coords[k, p]
-                        rho2 += dx[b, k] * dx[b, k]
+                    d0 = coords[0, q] - x0
+                    d1 = coords[1, q] - x1
+                    d2 = coords[2, q] - x2
+                    rho2 = d0 * d0 + d1 * d1 + d2 * d2
                     if rho2 > r2:
                         continue
                     if rho2 < close2:
-                        close[b, g] += 1
+                        close_p += 1
                     rho = np.sqrt(rho2)
                     e_a = np.exp(rho * inv_la)
                     e_r = np.exp(rho * inv_lr)
-                    pot[b, g] += cr * e_r - ca * e_a
+                    pot_p += cr * e_r - ca * e_a
                     inv = 1.0 / max(rho, floor)
                     s = ca_la * e_a - cr_lr * e_r
                     if align:
-                        proj = 0.0
-                        for k in range(d):
-                            proj += (vel[k, p] - vel[k, q]) * dx[b, k]
+                        proj = (v0 - vel[0, q]) * d0 + (v1 - vel[1, q]) * d1 + (v2 - vel[2, q]) * d2
                         s -= proj * inv * np.exp(rho * inv_lo)
                     s *= inv
-                    for k in range(d):
-                        w = s * dx[b, k]
-                        force[b, k, p] += w
-                        force[b, k, q] -= w
+                    w0, w1, w2 = s * d0, s * d1, s * d2
+                    f0 += w0
+                    f1 += w1
+                    f2 += w2
+                    force[b, 0, q] -= w0
+                    force[b, 1, q] -= w1
+                    force[b, 2, q] -= w2
+            force[b, 0, p] += f0
+            force[b, 1, p] += f1
+            force[b, 2, p] += f2
+            pot[b, groups[p]] += pot_p
+            close[b, groups[p]] += close_p
     return force, pot, close
 
 
@@ -174,13 +187,12 @@ def cell_pair_sums(
     lo, hi = cells.row_runs(cells.keys, rows, reach)
     own_end = cells.first_position(cells.keys + (reach + 1))
     cell = np.repeat(np.arange(cells.keys.size), np.diff(cells.start))
-    coords = np.ascontiguousarray(np.stack(cells.coords), dtype=np.float64)
+    coords = np.zeros((3, m_pts))  # 2-D: a zero third row (see _pair_pass)
+    coords[:d] = cells.coords
     align = v is not None and params.C_o != 0
-    vel = (
-        np.ascontiguousarray(params.C_o * np.asarray(v, dtype=np.float64).T)
-        if align
-        else np.zeros((d, 1))
-    )
+    vel = np.zeros((3, m_pts))  # read for every point; zero without alignment
+    if align:
+        vel[:d] = params.C_o * np.asarray(v, dtype=np.float64).T
     grp = np.zeros(m_pts, np.int64) if groups is None else np.asarray(groups, np.int64)
     consts = np.array(
         [
@@ -219,4 +231,4 @@ def cell_pair_sums(
     total_force = force[0]
     for b in range(1, BLOCKS):
         total_force = total_force + force[b]
-    return PairSums(total_force.T.copy(), pot.sum(axis=0), close.sum(axis=0))
+    return PairSums(total_force[:d].T.copy(), pot.sum(axis=0), close.sum(axis=0))
