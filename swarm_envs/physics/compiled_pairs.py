@@ -38,7 +38,7 @@ from collections.abc import Callable
 import numpy as np
 
 from swarm_envs.physics.cutoff import PairSums
-from swarm_envs.physics.neighbors import CellList, _rows
+from swarm_envs.physics.neighbors import CellList
 from swarm_envs.physics.social_potential import RHO_FLOOR, SocialPotentialParams
 
 __all__ = ["AVAILABLE", "BLOCKS", "cell_pair_sums", "compile_seconds", "numba_enabled"]
@@ -181,12 +181,7 @@ def cell_pair_sums(
     """
     m_pts = cells.order.size
     d = cells.dim
-    reach = cells.reach
-    r = cells._check_radius("cell_pair_sums", radius, reach)
-    rows = _rows(d, reach, half=True)
-    lo, hi = cells.row_runs(cells.keys, rows, reach)
-    own_end = cells.first_position(cells.keys + (reach + 1))
-    cell = np.repeat(np.arange(cells.keys.size), np.diff(cells.start))
+    stencil = cells.half_stencil(radius, "cell_pair_sums")
     coords = np.zeros((3, m_pts))  # 2-D: a zero third row (see _pair_pass)
     coords[:d] = cells.coords
     align = v is not None and params.C_o != 0
@@ -214,13 +209,13 @@ def cell_pair_sums(
         force, pot, close = _compiled_kernel()(
             coords,
             vel,
-            cell,
-            np.asarray(own_end, np.int64),
-            np.ascontiguousarray(lo, np.int64).reshape(len(rows), -1),
-            np.ascontiguousarray(hi, np.int64).reshape(len(rows), -1),
+            stencil.cell,
+            np.asarray(stencil.own_end, np.int64),
+            np.ascontiguousarray(stencil.lo, np.int64),
+            np.ascontiguousarray(stencil.hi, np.int64),
             grp,
             int(n_groups),
-            float(np.asarray(r, dtype=coords.dtype) ** 2),
+            float(stencil.radius) ** 2,
             float(close_radius) ** 2,
             consts,
             BLOCKS,

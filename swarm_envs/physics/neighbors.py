@@ -64,6 +64,7 @@ import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import cache
+from typing import NamedTuple
 
 import numpy as np
 
@@ -131,6 +132,21 @@ def _rows(d: int, reach: int, half: bool) -> tuple[tuple[int, ...], ...]:
             continue
         out.append(o)
     return tuple(out)
+
+
+class HalfStencil(NamedTuple):
+    """What :meth:`CellList.half_stencil` returns (tables per occupied cell)."""
+
+    radius: float
+    """The search radius, checked."""
+    cell: np.ndarray
+    """``(M,)`` occupied-cell index of the point at each sorted position."""
+    own_end: np.ndarray
+    """``(U,)`` end (exclusive) of each cell's own-row run."""
+    lo: np.ndarray
+    """``(R, U)`` start of each positive row's run, per cell."""
+    hi: np.ndarray
+    """``(R, U)`` end (exclusive) of each positive row's run, per cell."""
 
 
 @dataclass(frozen=True)
@@ -265,6 +281,24 @@ class CellList:
             )
         return r
 
+    def half_stencil(self, radius: float, owner: str = "CellList.half_stencil") -> HalfStencil:
+        """The position runs that hold every unordered pair within ``radius`` once.
+
+        Point ``p`` (a sorted position) pairs with the rest of its own row, positions
+        ``p + 1 … own_end[cell[p]] − 1`` (its own cell after itself, then the next
+        ``reach`` cells), and with each lexicographically positive row ``r``, positions
+        ``lo[r, cell[p]] … hi[r, cell[p]] − 1``: the candidates, a superset of the pairs
+        within ``radius``. ``radius`` must not exceed ``reach · cell_size / (1 +
+        CELL_MARGIN)``; ``owner`` names the caller in that error.
+        """
+        m = self.reach
+        r = self._check_radius(owner, radius, m)
+        rows = _rows(self.dim, m, half=True)
+        lo, hi = self.row_runs(self.keys, rows, m)
+        own_end = self.first_position(self.keys + (m + 1))
+        cell = np.repeat(np.arange(self.keys.size), np.diff(self.start))
+        return HalfStencil(r, cell, own_end, lo, hi)
+
     def iter_pairs(
         self, radius: float
     ) -> Iterator[tuple[np.ndarray, np.ndarray, list[np.ndarray], np.ndarray]]:
@@ -276,25 +310,18 @@ class CellList:
         the offsets ``dx[k] = x_q[k] − x_p[k]`` and ``rho2 = Σ_k dx[k]²`` (``≤
         radius²``). ``radius`` must not exceed ``reach · cell_size / (1 + CELL_MARGIN)``.
         """
-        m = self.reach
-        r = self._check_radius("CellList.iter_pairs", radius, m)
-        M = self.order.size
-        # Runs per point: the rest of its own row (its own cell after itself, then the
-        # next `reach` cells), then each positive row. Tables per occupied cell.
-        rows = _rows(self.dim, m, half=True)
-        lo, hi = self.row_runs(self.keys, rows, m)
-        own_end = self.first_position(self.keys + (m + 1))
-        cell = np.repeat(np.arange(self.keys.size), np.diff(self.start))
-        pos = np.arange(M, dtype=np.int64)
+        stencil = self.half_stencil(radius, "CellList.iter_pairs")
+        cell, own_end, lo, hi = stencil.cell, stencil.own_end, stencil.lo, stencil.hi
+        pos = np.arange(self.order.size, dtype=np.int64)
         per_point = own_end[cell] - pos - 1
-        if rows:
+        if lo.shape[0]:
             per_point += (hi - lo).sum(axis=0)[cell]
-        r2 = np.asarray(r, dtype=self.coords[0].dtype) ** 2
+        r2 = np.asarray(stencil.radius, dtype=self.coords[0].dtype) ** 2
         for a, b in _chunks_by_total(per_point, CHUNK):
             u = cell[a:b]
             run_lo = np.concatenate([pos[a:b] + 1, lo[:, u].ravel()])
             run_hi = np.concatenate([own_end[u], hi[:, u].ravel()])
-            owner = np.tile(pos[a:b], len(rows) + 1)
+            owner = np.tile(pos[a:b], lo.shape[0] + 1)
             p, q = _expand(owner, run_lo, run_hi - run_lo)
             dx, rho2 = _offsets_and_squares(self.coords, p, q)
             keep = np.flatnonzero(rho2 <= r2)
@@ -541,6 +568,7 @@ __all__ = [
     "MAX_CELLS",
     "REACH",
     "CellList",
+    "HalfStencil",
     "density_radius",
     "knn",
     "radius_pairs",
