@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pytest
 
@@ -107,6 +109,20 @@ def test_switch(monkeypatch) -> None:
     assert compiled_pairs.numba_enabled() is False
     monkeypatch.setenv("SWARM_ENVS_NUMBA", "1")
     with pytest.raises(ValueError, match="numba does not import"):
+        compiled_pairs.numba_enabled()
+
+
+def test_an_installed_numba_that_fails_to_import_falls_back_with_a_warning(monkeypatch) -> None:
+    monkeypatch.setitem(sys.modules, "numba", None)  # `import numba` now raises ImportError
+    monkeypatch.setattr(compiled_pairs, "_import_tried", False)
+    monkeypatch.setattr(compiled_pairs, "_import_error", None)
+    monkeypatch.setattr(compiled_pairs, "AVAILABLE", True)
+    monkeypatch.setenv("SWARM_ENVS_NUMBA", "auto")
+    with pytest.warns(RuntimeWarning, match="numba is installed but does not import"):
+        assert compiled_pairs.numba_enabled() is False
+    assert compiled_pairs.numba_enabled() is False  # tried once, warned once
+    monkeypatch.setenv("SWARM_ENVS_NUMBA", "1")
+    with pytest.raises(ValueError, match="does not import: ModuleNotFoundError"):
         compiled_pairs.numba_enabled()
 
 

@@ -33,6 +33,7 @@ import logging
 import os
 import threading
 import time
+import warnings
 from collections.abc import Callable
 
 import numpy as np
@@ -77,14 +78,45 @@ def _compiled_kernel() -> Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray
     return _kernel
 
 
+_import_error: str | None = None  # why an installed numba failed to import, once tried
+_import_tried = False
+
+
+def _numba_imports() -> bool:
+    """Whether numba imports; tried once. An installed numba may still fail (a numpy
+    newer than it supports, say): then warn once and keep the numpy pass."""
+    global _import_error, _import_tried
+    if not _import_tried:
+        _import_tried = True
+        try:
+            import numba  # noqa: F401
+        except Exception as err:  # numba raises ImportError, or others on a broken install
+            _import_error = f"{type(err).__name__}: {err}"
+            warnings.warn(
+                f"numba is installed but does not import ({_import_error}); the sparse "
+                "core's pair pass runs in numpy",
+                RuntimeWarning,
+                stacklevel=3,
+            )
+    return _import_error is None
+
+
 def numba_enabled() -> bool:
-    """Whether the compiled pass runs: numba imports and ``SWARM_ENVS_NUMBA`` is not ``0``."""
+    """Whether the compiled pass runs: numba imports and ``SWARM_ENVS_NUMBA`` is not ``0``.
+
+    ``SWARM_ENVS_NUMBA``: ``auto`` (default) uses numba where it imports; ``0`` never;
+    ``1`` always, and raises :class:`ValueError` where numba does not import.
+    """
     flag = os.environ.get("SWARM_ENVS_NUMBA", "auto").strip().lower()
     if flag not in ("auto", "0", "1"):
         raise ValueError(f"SWARM_ENVS_NUMBA must be 0, 1 or auto, got {flag!r}")
-    if flag == "1" and not AVAILABLE:
-        raise ValueError("SWARM_ENVS_NUMBA=1 but numba does not import (pip install numba)")
-    return AVAILABLE and flag != "0"
+    if flag == "0":
+        return False
+    usable = AVAILABLE and _numba_imports()
+    if flag == "1" and not usable:
+        reason = _import_error or "not installed (pip install numba)"
+        raise ValueError(f"SWARM_ENVS_NUMBA=1 but numba does not import: {reason}")
+    return usable
 
 
 def _pair_pass(
