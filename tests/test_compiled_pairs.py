@@ -11,7 +11,7 @@ from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.sparse_core import SparseSwarmNavCore
 from swarm_envs.physics import SocialPotentialParams, compiled_pairs
 from swarm_envs.physics.cutoff import PairAccumulator, PairSums
-from swarm_envs.physics.neighbors import CELL_MARGIN, REACH, CellList
+from swarm_envs.physics.neighbors import CELL_MARGIN, REACH, CellList, knn
 
 numba = pytest.importorskip("numba")
 
@@ -152,3 +152,28 @@ def test_first_call_time_is_recorded() -> None:
     x, v = swarms(1, 50, 2, seed=9)
     both(x, v, radius=3.0)
     assert compiled_pairs.compile_seconds is not None and compiled_pairs.compile_seconds > 0
+
+
+@pytest.mark.parametrize("d", [2, 3])
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+@pytest.mark.parametrize("radius", [None, 0.05])  # 0.05: most queries need more rounds
+def test_knn_rounds_equal_the_numpy_rounds(monkeypatch, d: int, dtype: type, radius) -> None:
+    rng = np.random.default_rng(d)
+    x = rng.uniform(-8.0, 8.0, (3, 700, d)).astype(dtype)
+    x[1, :5] = x[1, 5]  # coincident agents
+    out = {}
+    for flag in ("0", "1"):
+        monkeypatch.setenv("SWARM_ENVS_NUMBA", flag)
+        out[flag] = knn(x, 6, radius=radius)
+    (idx0, dist0), (idx1, dist1) = out["0"], out["1"]
+    np.testing.assert_array_equal(dist1, dist0)
+    assert dist1.dtype == dtype and np.isfinite(dist1).all()
+    # Swarms 0 and 2 have no equal distances: the same neighbours in the same order.
+    np.testing.assert_array_equal(idx1[[0, 2]], idx0[[0, 2]])
+    # Swarm 1's coincident agents tie: either order is right. Every index is another
+    # agent at the distance given, each listed once.
+    rows = np.arange(700)[:, None]
+    assert not (idx1[1] == rows).any()
+    assert all(len(set(r)) == 6 for r in idx1[1].tolist())
+    gap = x[1][idx1[1]].astype(np.float64) - x[1][:, None, :].astype(np.float64)
+    np.testing.assert_allclose(np.sqrt((gap**2).sum(-1)), dist1[1], rtol=1e-5, atol=1e-6)

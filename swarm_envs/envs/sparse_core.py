@@ -23,7 +23,8 @@ array. One step:
    round-off; ``SWARM_ENVS_NUMBA=0`` picks numpy;
 4. the k nearest neighbours (observations, nearest-neighbour distance) come from the
    same cell-list structure (:func:`swarm_envs.physics.neighbors.knn`), on demand and
-   cached per state; the search starts at the previous step's neighbour distances.
+   cached per state; the search starts at the previous step's neighbour distances
+   (each round compiled with numba where it imports).
    From :data:`KNN_AHEAD_MIN_AGENTS` agents it starts in a worker thread as soon as
    the positions are known, and runs while step 3 does.
 
@@ -40,8 +41,8 @@ the nearest-neighbour distance are exact. A state that is no longer finite raise
 
 The defaults, ``cutoff_tol = 0.03`` (1 % of the default action bound ``u_max = 3``) and
 ``cutoff_speed = 1``, give ``r_c ≈ 5.08`` with the navigation parameters and one swarm
-of 100,000 agents at about 0.26 s per full step in 2-D and 0.45–0.7 s in 3-D with the
-compiled pass (0.3–0.45 s and 1.1–1.6 s with numpy; on the 2-core development
+of 100,000 agents at about 0.2–0.26 s per full step in 2-D and 0.45–0.75 s in 3-D
+compiled (0.3–0.45 s and 1.1–1.6 s with numpy; on the 2-core development
 machine). What they cost in accuracy, measured at 2,000 agents at the default start
 density (``benchmarks/large_swarms.py --accuracy 2000``): per-agent force errors of
 median 0.1–0.3 and maximum 0.6–1.3 in the first 20 steps, mostly the alignment drag of
@@ -62,8 +63,8 @@ times denser.
 
 Below :data:`SPARSE_MIN_AGENTS` agents per swarm the dense core is as fast or faster
 (and exact); above it this one is faster, increasingly so (``benchmarks/large_swarms.py``
-measures the crossover: about 230 agents in 2-D and 300–400 in 3-D in float64 with the
-compiled pass; with numpy about 300 in 2-D and 500 in 3-D, 400 and 800 in float32).
+measures the crossover: about 250 agents in 2-D and 300–400 in 3-D in float64 with the
+compiled loops; with numpy about 300 in 2-D and 500 in 3-D, 400 and 800 in float32).
 :func:`use_sparse_core` is the selection rule.
 """
 

@@ -1,4 +1,5 @@
-"""The cut-off pair pass over a cell list as one compiled loop (numba), when numba imports.
+"""The cell list's two hot loops compiled with numba, when numba imports: the cut-off pair
+pass (:func:`cell_pair_sums`) and the k-nearest round (:func:`knearest_round`).
 
 :func:`cell_pair_sums` gives exactly what feeding every chunk of
 :meth:`swarm_envs.physics.neighbors.CellList.iter_pairs` to a
@@ -14,9 +15,17 @@ registers. Per pair within ``r`` (``ρ = |x_j − x_i|``, ``u_ij = (x_j − x_i)
 when ``ρ² < close_radius²``. ``ρ`` is floored at ``RHO_FLOOR`` in ``1/ρ``, so that
 coincident agents give no force (``x_j − x_i = 0``), never NaN.
 
-The points are split into :data:`BLOCKS` blocks of consecutive sorted positions, each
-summed into its own buffer by whichever thread takes it (``numba.prange``), and the
-buffers are added in block order: the result does not depend on the number of threads.
+:func:`knearest_round` does one round of
+:meth:`swarm_envs.physics.neighbors.CellList.knearest_round` per query, in parallel: it
+counts the other points within the radius and keeps the ``k`` nearest by insertion. The
+same neighbours and distances as the numpy round (tested); equally distant neighbours
+may come in another order (the numpy round's ``argpartition`` breaks such ties
+arbitrarily too).
+
+In :func:`cell_pair_sums` the points are split into :data:`BLOCKS` blocks of consecutive
+sorted positions, each summed into its own buffer by whichever thread takes it
+(``numba.prange``), and the buffers are added in block order: the result does not
+depend on the number of threads.
 Without numba (it is optional: ``pip install swarm-envs[fast]``) :data:`AVAILABLE` is
 false and the callers keep the numpy pass; ``SWARM_ENVS_NUMBA=0`` forces that too.
 The first call compiles (a few seconds; cached on disk by numba where it can write).
@@ -35,6 +44,7 @@ import threading
 import time
 import warnings
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -42,7 +52,14 @@ from swarm_envs.physics.cutoff import PairSums
 from swarm_envs.physics.neighbors import CellList
 from swarm_envs.physics.social_potential import RHO_FLOOR, SocialPotentialParams
 
-__all__ = ["AVAILABLE", "BLOCKS", "cell_pair_sums", "compile_seconds", "numba_enabled"]
+__all__ = [
+    "AVAILABLE",
+    "BLOCKS",
+    "cell_pair_sums",
+    "compile_seconds",
+    "knearest_round",
+    "numba_enabled",
+]
 
 #: Blocks of points summed separately, then added in order (see the module docstring).
 BLOCKS = 16
@@ -64,18 +81,18 @@ AVAILABLE = importlib.util.find_spec("numba") is not None
 # `range` until the kernel is compiled, then numba.prange (the kernel reads this global
 # when numba compiles it).
 prange = range
-_kernel: Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
+_compiled_fns: dict[Callable[..., Any], Callable[..., Any]] = {}
 
 
-def _compiled_kernel() -> Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """:func:`_pair_pass` through ``numba.njit(parallel=True)``, made on first use."""
-    global _kernel, prange
-    if _kernel is None:
+def _compiled(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """``fn`` through ``numba.njit(parallel=True)``, made on first use (under the lock)."""
+    global prange
+    if fn not in _compiled_fns:
         import numba
 
         prange = numba.prange
-        _kernel = numba.njit(parallel=True, cache=True, nogil=True)(_pair_pass)
-    return _kernel
+        _compiled_fns[fn] = numba.njit(parallel=True, cache=True, nogil=True)(fn)
+    return _compiled_fns[fn]
 
 
 _import_error: str | None = None  # why an installed numba failed to import, once tried
@@ -193,6 +210,77 @@ def _pair_pass(
     return force, pot, close
 
 
+def _knn_round(
+    coords: np.ndarray,
+    queries: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    k: int,
+    r2: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The kernel of :func:`knearest_round` that numba compiles.
+
+    Per query (in parallel; no query writes another's row): every candidate of its runs
+    within ``r2`` is counted, and the ``k`` smallest squared distances are kept sorted by
+    insertion, a later candidate after an equal earlier one (the numpy round's stable
+    sort, in the same visiting order).
+    """
+    d = coords.shape[0]
+    n_q, n_rows = lo.shape
+    count = np.zeros(n_q, np.int64)
+    best_q = np.full((n_q, k), -1, np.int64)
+    best_d = np.full((n_q, k), np.inf, coords.dtype)
+    for i in prange(n_q):
+        p = queries[i]
+        for r in range(n_rows):
+            for q in range(lo[i, r], hi[i, r]):
+                if q == p:
+                    continue
+                rho2 = (coords[0, q] - coords[0, p]) * (coords[0, q] - coords[0, p])
+                for c in range(1, d):
+                    rho2 += (coords[c, q] - coords[c, p]) * (coords[c, q] - coords[c, p])
+                if rho2 > r2:
+                    continue
+                count[i] += 1
+                if rho2 < best_d[i, k - 1]:
+                    j = k - 1
+                    while j > 0 and best_d[i, j - 1] > rho2:
+                        best_d[i, j] = best_d[i, j - 1]
+                        best_q[i, j] = best_q[i, j - 1]
+                        j -= 1
+                    best_d[i, j] = rho2
+                    best_q[i, j] = q
+    return count, best_q, best_d
+
+
+def knearest_round(
+    coords: np.ndarray,
+    queries: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    k: int,
+    r2: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One k-nearest round of :meth:`~swarm_envs.physics.neighbors.CellList.knearest_round`,
+    compiled: ``(count, positions (Q, k), squared distances (Q, k))`` per query.
+
+    ``coords`` ``(d, M)`` sorted, ``queries`` ``(Q,)`` sorted positions, ``lo, hi``
+    ``(Q, rows)`` their runs; ``count`` is the number of other points within ``r2``
+    (a query is resolved when it is at least ``k``), the rest its ``k`` nearest among
+    them, nearest first (``-1`` and ``inf`` where fewer).
+    """
+    with _KERNEL_LOCK:
+        kernel = _compiled(_knn_round)
+        return kernel(
+            np.ascontiguousarray(coords),
+            np.ascontiguousarray(queries, np.int64),
+            np.ascontiguousarray(lo, np.int64),
+            np.ascontiguousarray(hi, np.int64),
+            int(k),
+            coords.dtype.type(r2),
+        )
+
+
 def cell_pair_sums(
     cells: CellList,
     radius: float,
@@ -238,7 +326,7 @@ def cell_pair_sums(
     with _KERNEL_LOCK:
         first = compile_seconds is None
         t0 = time.perf_counter()
-        force, pot, close = _compiled_kernel()(
+        force, pot, close = _compiled(_pair_pass)(
             coords,
             vel,
             stencil.cell,

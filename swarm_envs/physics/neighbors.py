@@ -356,6 +356,9 @@ class CellList:
         at least ``k`` other points lie within ``radius``, which must not exceed
         ``reach · cell_size / (1 + CELL_MARGIN)``: its block then holds all of them.
         ``reach`` (default and at most the grid's padding :attr:`reach`) sets the block.
+        Where numba imports, one compiled pass does the round
+        (:func:`swarm_envs.physics.compiled_pairs.knearest_round`; the same neighbours
+        and distances, except that equally distant ones may come in another order).
         """
         m = self.reach if reach is None else _check_reach("CellList.knearest_round", reach)
         r = self._check_radius("CellList.knearest_round", radius, m)
@@ -365,6 +368,14 @@ class CellList:
         rows = tuple(dict.fromkeys(rows))  # the own row once
         lo, hi = self.row_runs(self.point_key[queries], rows, m)
         lo, hi = lo.T, hi.T  # (Q, rows): runs of one query together
+        from swarm_envs.physics import compiled_pairs  # imports this module
+
+        if compiled_pairs.numba_enabled():  # one compiled pass, the same answer
+            count, pos, d2 = compiled_pairs.knearest_round(
+                np.stack(self.coords), queries, lo, hi, k, float(r2)
+            )
+            resolved = count >= k
+            return resolved, self.order[pos[resolved]], d2[resolved]
         per_query = (hi - lo).sum(axis=1)
         resolved = np.zeros(queries.size, dtype=bool)
         idx_parts: list[np.ndarray] = []
