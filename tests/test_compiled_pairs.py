@@ -177,3 +177,10 @@ def test_knn_rounds_equal_the_numpy_rounds(monkeypatch, d: int, dtype: type, rad
     assert all(len(set(r)) == 6 for r in idx1[1].tolist())
     gap = x[1][idx1[1]].astype(np.float64) - x[1][:, None, :].astype(np.float64)
     np.testing.assert_allclose(np.sqrt((gap**2).sum(-1)), dist1[1], rtol=1e-5, atol=1e-6)
+
+
+def test_knearest_round_needs_k_of_at_least_one() -> None:
+    coords = np.zeros((2, 3))
+    runs = np.zeros((1, 1), np.int64)
+    with pytest.raises(ValueError, match="k must be >= 1"):
+        compiled_pairs.knearest_round(coords, np.zeros(1, np.int64), runs, runs, 0, 1.0)

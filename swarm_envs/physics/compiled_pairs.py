@@ -66,8 +66,8 @@ BLOCKS = 16
 
 logger = logging.getLogger(__name__)
 
-#: Wall time of the process's first kernel call (the compile, or loading numba's disk
-#: cache), logged once at INFO level; ``None`` until then.
+#: Wall time of the process's first kernel call, either kernel (the compile, or loading
+#: numba's disk cache), logged once at INFO level; ``None`` until then.
 compile_seconds: float | None = None
 
 # One kernel call at a time: numba's fallback threading layer (workqueue) aborts on
@@ -93,6 +93,19 @@ def _compiled(fn: Callable[..., Any]) -> Callable[..., Any]:
         prange = numba.prange
         _compiled_fns[fn] = numba.njit(parallel=True, cache=True, nogil=True)(fn)
     return _compiled_fns[fn]
+
+
+def _run(fn: Callable[..., Any], *args: Any) -> Any:
+    """``fn`` compiled, called under the lock; the process's first call is timed."""
+    global compile_seconds
+    with _KERNEL_LOCK:
+        first = compile_seconds is None
+        t0 = time.perf_counter()
+        out = _compiled(fn)(*args)
+        if first:
+            compile_seconds = time.perf_counter() - t0
+            logger.info("compiled_pairs: first numba call took %.1f s", compile_seconds)
+    return out
 
 
 _import_error: str | None = None  # why an installed numba failed to import, once tried
@@ -222,8 +235,8 @@ def _knn_round(
 
     Per query (in parallel; no query writes another's row): every candidate of its runs
     within ``r2`` is counted, and the ``k`` smallest squared distances are kept sorted by
-    insertion, a later candidate after an equal earlier one (the numpy round's stable
-    sort, in the same visiting order).
+    insertion, a later candidate after an equal earlier one (numpy's round may order
+    such ties otherwise: its ``argpartition`` is not stable).
     """
     d = coords.shape[0]
     n_q, n_rows = lo.shape
@@ -267,18 +280,19 @@ def knearest_round(
     ``coords`` ``(d, M)`` sorted, ``queries`` ``(Q,)`` sorted positions, ``lo, hi``
     ``(Q, rows)`` their runs; ``count`` is the number of other points within ``r2``
     (a query is resolved when it is at least ``k``), the rest its ``k`` nearest among
-    them, nearest first (``-1`` and ``inf`` where fewer).
+    them, nearest first (``-1`` and ``inf`` where fewer). ``k ≥ 1``.
     """
-    with _KERNEL_LOCK:
-        kernel = _compiled(_knn_round)
-        return kernel(
-            np.ascontiguousarray(coords),
-            np.ascontiguousarray(queries, np.int64),
-            np.ascontiguousarray(lo, np.int64),
-            np.ascontiguousarray(hi, np.int64),
-            int(k),
-            coords.dtype.type(r2),
-        )
+    if k < 1:
+        raise ValueError(f"knearest_round: k must be >= 1, got {k!r}")
+    return _run(
+        _knn_round,
+        np.ascontiguousarray(coords),
+        np.ascontiguousarray(queries, np.int64),
+        np.ascontiguousarray(lo, np.int64),
+        np.ascontiguousarray(hi, np.int64),
+        int(k),
+        coords.dtype.type(r2),
+    )
 
 
 def cell_pair_sums(
@@ -322,27 +336,21 @@ def cell_pair_sums(
             RHO_FLOOR,
         ]
     )
-    global compile_seconds
-    with _KERNEL_LOCK:
-        first = compile_seconds is None
-        t0 = time.perf_counter()
-        force, pot, close = _compiled(_pair_pass)(
-            coords,
-            vel,
-            stencil.cell,
-            np.asarray(stencil.own_end, np.int64),
-            np.ascontiguousarray(stencil.lo, np.int64),
-            np.ascontiguousarray(stencil.hi, np.int64),
-            grp,
-            int(n_groups),
-            float(stencil.radius) ** 2,
-            float(close_radius) ** 2,
-            consts,
-            BLOCKS,
-        )
-        if first:
-            compile_seconds = time.perf_counter() - t0
-            logger.info("compiled_pairs: first numba call took %.1f s", compile_seconds)
+    force, pot, close = _run(
+        _pair_pass,
+        coords,
+        vel,
+        stencil.cell,
+        np.asarray(stencil.own_end, np.int64),
+        np.ascontiguousarray(stencil.lo, np.int64),
+        np.ascontiguousarray(stencil.hi, np.int64),
+        grp,
+        int(n_groups),
+        float(stencil.radius) ** 2,
+        float(close_radius) ** 2,
+        consts,
+        BLOCKS,
+    )
     total_force = force[0]
     for b in range(1, BLOCKS):
         total_force = total_force + force[b]

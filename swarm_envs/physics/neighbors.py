@@ -370,7 +370,7 @@ class CellList:
         lo, hi = lo.T, hi.T  # (Q, rows): runs of one query together
         from swarm_envs.physics import compiled_pairs  # imports this module
 
-        if compiled_pairs.numba_enabled():  # one compiled pass, the same answer
+        if k >= 1 and compiled_pairs.numba_enabled():  # one compiled pass, the same answer
             count, pos, d2 = compiled_pairs.knearest_round(
                 np.stack(self.coords), queries, lo, hi, k, float(r2)
             )
