@@ -1,8 +1,10 @@
-"""Helpers shared by the env tests: strict warnings, global random generator snapshots."""
+"""Helpers shared by the env tests: strict warnings, global random generator snapshots,
+and seeded rollouts of the batched cores compared with each other."""
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import random
 import warnings
 from collections.abc import Iterator
@@ -10,6 +12,9 @@ from typing import Any
 
 import numpy as np
 import torch
+
+from swarm_envs.config import SwarmConfig
+from swarm_envs.envs.core import STAT_KEYS
 
 RngStates = tuple[Any, Any, torch.Tensor]
 
@@ -40,3 +45,81 @@ def strict_warnings() -> Iterator[None]:
         warnings.simplefilter("error")
         warnings.filterwarnings("ignore", message=NO_WINDOW, category=UserWarning)
         yield
+
+
+# ---------------------------------------------------------------- batched cores
+#: Tolerances of a batched core against the numpy core, per state dtype.
+CORE_TOL = {np.float32: dict(rtol=2e-4, atol=2e-4), np.float64: dict(rtol=1e-9, atol=1e-9)}
+
+
+def rollout(core, seed: int, steps: int, reset_every: int = 0, few: bool = False) -> list[tuple]:
+    """Observations, rewards, flags and stats of a seeded rollout with random actions.
+
+    Every ``reset_every`` steps, swarms whose episode ended or whose index is even are
+    reset on their own (the VecEnv's partial reset). With ``few``, one swarm in 16 (a
+    different one each time) instead of the even ones: the torch core's sub-batch reset.
+    """
+    rng = np.random.default_rng(seed)
+    core.reset(rng)
+    out = [(core.observe(), None, None, None, core.stats())]
+    shape = (core.batch, core.cfg.n_agents, core.cfg.dim)
+    actions = np.random.default_rng(seed + 1)
+    for n in range(steps):
+        a = actions.uniform(-1.2, 1.2, shape).astype(np.float32)
+        reward, terminated, truncated, stats = core.step(a)
+        # Copies: SwarmNavCore keeps two of these arrays as prev_distance/prev_arrived
+        # and a partial reset writes into them.
+        stats = {key: value.copy() for key, value in stats.items()}
+        out.append((core.observe(), reward, terminated, truncated, stats))
+        if reset_every and (n + 1) % reset_every == 0:
+            picked = np.arange(core.batch) % (16 if few else 2) == (n % 16 if few else 0)
+            which = terminated | truncated | picked
+            core.reset(rng, which=which)
+            out.append((core.observe(), None, None, None, core.stats()))
+    return out
+
+
+def assert_same_rollout(ours: list[tuple], ref: list[tuple], tol: dict) -> None:
+    assert len(ours) == len(ref)
+    for (obs, rew, term, trunc, stats), (obs_r, rew_r, term_r, trunc_r, stats_r) in zip(
+        ours, ref, strict=True
+    ):
+        assert obs.dtype == np.float32 and obs.shape == obs_r.shape
+        np.testing.assert_allclose(obs, obs_r, **tol)
+        if rew is not None:
+            assert rew.dtype == rew_r.dtype and rew.shape == rew_r.shape
+            np.testing.assert_allclose(rew, rew_r, **tol)
+            np.testing.assert_array_equal(term, term_r)
+            np.testing.assert_array_equal(trunc, trunc_r)
+        assert list(stats) == list(STAT_KEYS)
+        for key in STAT_KEYS:
+            assert stats[key].dtype == stats_r[key].dtype, key
+            scale = max(1.0, float(np.abs(stats_r[key]).max()))
+            np.testing.assert_allclose(
+                stats[key], stats_r[key], err_msg=key, **tol, equal_nan=False
+            )
+            assert np.abs(stats[key] - stats_r[key]).max() <= tol["atol"] * scale * 10
+
+
+CORE_CONFIGS = {
+    "default": dict(n_agents=10),
+    "padding_3d_goal_physics": dict(
+        n_agents=4, dim=3, goal_in_physics=True, collision_radius=1.0, max_steps=25
+    ),
+    "single_agent": dict(n_agents=1),
+    "no_neighbours_heavy": dict(
+        n_agents=6, n_neighbors=0, physics={"m": 2.0, "C_o": 0.0}, success_fraction=0.5
+    ),
+    "instant_success": dict(
+        n_agents=5, goal_distance_min=0.0, goal_distance_max=0.0, goal_radius=50.0
+    ),
+}
+
+
+def make_config(overrides: dict) -> SwarmConfig:
+    overrides = dict(overrides)
+    physics = overrides.pop("physics", None)
+    cfg = SwarmConfig(**overrides)
+    if physics:
+        cfg = dataclasses.replace(cfg, physics=dataclasses.replace(cfg.physics, **physics))
+    return cfg

@@ -137,7 +137,8 @@ def test_every_shipped_config_matches_the_package_data_glob():
 
 
 def test_named_configs_resolve_from_an_installed_wheel(tmp_path: Path):
-    # Build the wheel (offline, from this checkout) and import it from another folder.
+    # Build the wheel (offline, from this checkout) and import it from another folder;
+    # the named configs and the C step's sources must be in it.
     import shutil
     import subprocess
     import sys
@@ -170,6 +171,8 @@ def test_named_configs_resolve_from_an_installed_wheel(tmp_path: Path):
         "import swarm_envs, swarm_envs.config as c, train.demo as d;"
         f"assert swarm_envs.__file__.startswith({str(site)!r}), swarm_envs.__file__;"
         "assert not c.CONFIG_ROOT.is_symlink() and d.DEFAULT_CONFIG.is_file();"
+        "from swarm_envs.envs import native_step as n;"  # the C step's sources ship too
+        "assert all((n._source_dir() / f).is_file() for f in n._SOURCES);"
         "print(c.load_swarm_config('paper_navigation').n_agents)"
     )
     env = {"PYTHONPATH": str(site), "PATH": "/usr/bin:/bin"}

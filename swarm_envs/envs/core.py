@@ -49,6 +49,19 @@ STAT_KEYS = (
 )
 
 
+def success_count(n_agents: int, success_fraction: float) -> int:
+    """Smallest count c of arrived agents with ``c/N ≥ success_fraction − 1e-9``.
+
+    The success test of :meth:`SwarmNavCore.stats` as a count, for the batched cores
+    that count arrivals (``N + 1`` if no count reaches it, which ``success_fraction ≤ 1``
+    rules out).
+    """
+    for c in range(n_agents + 1):
+        if c / n_agents >= success_fraction - 1e-9:
+            return c
+    return n_agents + 1  # pragma: no cover - success_fraction ≤ 1 always reaches c = N
+
+
 def observation_size(cfg: SwarmConfig) -> int:
     """``2d + k (2d + 1)``: goal offset, own velocity, k × (offset, velocity, mask)."""
     d = cfg.dim

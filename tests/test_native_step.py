@@ -1,0 +1,193 @@
+"""The C step (swarm_envs.envs.native_step) behind TorchSwarmNavCore on the CPU.
+
+The same rollouts as the numpy core (every config of the torch core's tests, float32 and
+float64), and as plain torch at batch 64 (the sub-batch resets) for swarms that fill
+more than one block of 16 lanes; results independent of the thread count; coincident
+agents; pickling; the switches (``native=``, ``SWARM_ENVS_NATIVE``) and the fallbacks
+(no compiler, too many neighbours); the build cache.
+"""
+
+from __future__ import annotations
+
+import pickle
+
+import numpy as np
+import pytest
+import torch
+from helpers import CORE_CONFIGS, CORE_TOL, assert_same_rollout, make_config, rollout
+
+from swarm_envs import swarm_nav_v0
+from swarm_envs.config import SwarmConfig
+from swarm_envs.envs import native_step
+from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.native_step import NativeAdvance, native_support, resolve_native
+from swarm_envs.envs.torch_core import TorchSwarmNavCore
+from swarm_envs.physics import torch_backend as tb
+
+SUPPORTED, WHY = native_support()
+needs_native = pytest.mark.skipif(not SUPPORTED, reason=f"C step unavailable: {WHY}")
+
+
+@pytest.fixture
+def fresh_library(monkeypatch, tmp_path):
+    """The loader's state reset (and restored afterwards), its cache in ``tmp_path``."""
+    monkeypatch.setattr(native_step, "_LIBRARY", None)
+    monkeypatch.setattr(native_step, "_FAILURE", None)
+    monkeypatch.setenv("SWARM_ENVS_CACHE", str(tmp_path))
+    monkeypatch.delenv(native_step.NATIVE_ENV, raising=False)
+    return tmp_path
+
+
+@needs_native
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("name", list(CORE_CONFIGS))
+def test_same_rollout_as_the_numpy_core(name, dtype):
+    cfg = make_config(CORE_CONFIGS[name])
+    core = TorchSwarmNavCore(cfg, batch=4, dtype=dtype, native=True)
+    assert core.kernel == "native" and not core.compiled
+    ref = rollout(SwarmNavCore(cfg, batch=4, dtype=dtype), seed=7, steps=36, reset_every=12)
+    ours = rollout(core, seed=7, steps=36, reset_every=12)
+    assert_same_rollout(ours, ref, CORE_TOL[dtype])
+
+
+NATIVE_VS_PLAIN = {
+    # 20 and 37 agents: two and three blocks of 16 lanes, the last one padded.
+    "two_blocks": dict(n_agents=20, n_neighbors=8),
+    "three_blocks_3d_goal": dict(n_agents=37, dim=3, goal_in_physics=True, collision_radius=0.6),
+    "no_alignment_equal_lengths": dict(
+        n_agents=17, physics={"C_o": 0.0, "l_r": 1.0, "C_r": 0.5, "beta": 0.0}
+    ),
+    "many_neighbours": dict(n_agents=12, n_neighbors=15),  # k > N − 1: padding slots
+}
+
+
+@needs_native
+@pytest.mark.parametrize("name", list(NATIVE_VS_PLAIN))
+def test_same_rollout_as_plain_torch_with_sub_batch_resets(name):
+    cfg = make_config({**NATIVE_VS_PLAIN[name], "max_steps": 16})
+    native = TorchSwarmNavCore(cfg, batch=64, native=True)
+    assert native.reset_batch == 4 and native._advance_part is native._advance
+    plain = TorchSwarmNavCore(cfg, batch=64, compile=False, native=False)
+    assert plain.kernel == "plain"
+    assert_same_rollout(
+        rollout(native, seed=3, steps=20, reset_every=4, few=True),
+        rollout(plain, seed=3, steps=20, reset_every=4, few=True),
+        CORE_TOL[np.float32],
+    )
+
+
+@needs_native
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_results_do_not_depend_on_the_thread_count(dtype):
+    cfg = SwarmConfig(n_agents=9, dim=3)
+    np_dtype = np.float32 if dtype == torch.float32 else np.float64
+    core = TorchSwarmNavCore(cfg, batch=11, dtype=np_dtype, native=True)
+    core.reset(np.random.default_rng(1))
+    a = torch.from_numpy(np.random.default_rng(2).uniform(-1, 1, (11, 9, 3))).to(dtype)
+    args = core._args(a, core._move_all)
+    outs = [NativeAdvance(cfg, n_threads=n)(*args) for n in (1, 2, 5)]
+    for out in outs[1:]:
+        for ours, ref in zip(out[:7], outs[0][:7], strict=True):
+            assert torch.equal(ours, ref)
+
+
+@needs_native
+def test_coincident_agents_stay_finite():
+    cfg = SwarmConfig(n_agents=5, collision_radius=0.5)
+    core = TorchSwarmNavCore(cfg, batch=2, native=True)
+    core.reset(np.random.default_rng(0))
+    core.x = np.zeros((2, 5, 2))
+    core.v = np.zeros((2, 5, 2))
+    reward, *_, stats = core.step(np.ones((2, 5, 2)))
+    assert np.isfinite(core.observe()).all() and np.isfinite(reward).all()
+    assert all(np.isfinite(value).all() for value in stats.values())
+    ref = TorchSwarmNavCore(cfg, batch=2, compile=False, native=False)
+    ref.reset(np.random.default_rng(0))
+    ref.x, ref.v = np.zeros((2, 5, 2)), np.zeros((2, 5, 2))
+    ref_reward, *_, ref_stats = ref.step(np.ones((2, 5, 2)))
+    np.testing.assert_allclose(reward, ref_reward, **CORE_TOL[np.float32])
+    np.testing.assert_allclose(core.observe(), ref.observe(), **CORE_TOL[np.float32])
+    assert stats["collisions"].tolist() == ref_stats["collisions"].tolist() == [10.0, 10.0]
+
+
+@needs_native
+def test_pickle_round_trip_keeps_the_native_step():
+    core = TorchSwarmNavCore(SwarmConfig(n_agents=5), batch=3, native=True)
+    core.reset(np.random.default_rng(0))
+    clone = pickle.loads(pickle.dumps(core))
+    assert clone.kernel == "native"
+    for a in np.random.default_rng(4).uniform(-1, 1, (4, 3, 5, 2)):
+        np.testing.assert_array_equal(core.step(a)[0], clone.step(a)[0])
+        np.testing.assert_array_equal(core.observe(), clone.observe())
+
+
+@needs_native
+def test_auto_uses_it_unless_a_torch_path_is_asked_for(monkeypatch):
+    monkeypatch.delenv(native_step.NATIVE_ENV, raising=False)
+    cfg = SwarmConfig(n_agents=4)
+    assert TorchSwarmNavCore(cfg, batch=2).kernel == "native"
+    core = TorchSwarmNavCore(cfg, batch=2, compile=False)
+    assert core.kernel == "plain" and "compile=False" in core.native_reason
+    monkeypatch.setenv(native_step.NATIVE_ENV, "0")
+    monkeypatch.setenv(tb.COMPILE_ENV, "0")
+    assert TorchSwarmNavCore(cfg, batch=2).kernel == "plain"
+    monkeypatch.setenv(native_step.NATIVE_ENV, "sometimes")
+    with pytest.raises(ValueError, match="SWARM_ENVS_NATIVE must be 0, 1 or auto"):
+        TorchSwarmNavCore(cfg, batch=2)
+    with pytest.raises(ValueError, match="native must be 'auto', True or False"):
+        TorchSwarmNavCore(cfg, batch=2, native="yes")
+
+
+@needs_native
+def test_the_torch_vec_env_steps_through_it():
+    venv = swarm_nav_v0.vec_env(64, n_agents=8, backend="torch")
+    assert venv.core.kernel == "native"
+    venv.seed(0)
+    obs = venv.reset()
+    obs, rewards, _, _ = venv.step(np.zeros((venv.num_envs, 2), np.float32))
+    assert np.isfinite(rewards).all()
+    assert obs.shape == (64 * 8, venv.observation_space.shape[0]) and np.isfinite(obs).all()
+
+
+@needs_native
+def test_too_many_neighbours_fall_back_or_raise(monkeypatch):
+    monkeypatch.setenv(tb.COMPILE_ENV, "0")
+    cfg = SwarmConfig(n_agents=80, n_neighbors=70)
+    core = TorchSwarmNavCore(cfg, batch=1)
+    assert core.kernel == "plain" and "at most 64 neighbours" in core.native_reason
+    with pytest.raises(ValueError, match="at most 64 neighbours, got n_neighbors=70"):
+        TorchSwarmNavCore(cfg, batch=1, native=True)
+
+
+def test_without_a_compiler_the_torch_step_runs(monkeypatch, fresh_library):
+    monkeypatch.setattr(native_step, "_compiler", lambda: None)
+    monkeypatch.setenv(tb.COMPILE_ENV, "0")
+    assert resolve_native("auto") == (False, "no C compiler found ($CC, cc, gcc)")
+    core = TorchSwarmNavCore(SwarmConfig(n_agents=4), batch=2)
+    assert core.kernel == "plain" and "no C compiler" in core.native_reason
+    with pytest.raises(RuntimeError, match="required but cannot be used: no C compiler"):
+        TorchSwarmNavCore(SwarmConfig(n_agents=4), batch=2, native=True)
+    monkeypatch.setenv(native_step.NATIVE_ENV, "1")
+    with pytest.raises(RuntimeError, match="no C compiler"):
+        TorchSwarmNavCore(SwarmConfig(n_agents=4), batch=2)
+
+
+def test_a_failing_build_names_the_compiler_error(monkeypatch, fresh_library, tmp_path):
+    broken = tmp_path / "cc"
+    broken.write_text("#!/bin/sh\necho 'cc: fatal error: out of cheese' >&2\nexit 1\n")
+    broken.chmod(0o755)
+    monkeypatch.setattr(native_step, "_compiler", lambda: str(broken))
+    ok, why = native_support()
+    assert not ok and "out of cheese" in why
+    assert not list(tmp_path.glob("fused_step-*.so"))  # nothing half-built is left
+
+
+@needs_native
+def test_the_library_is_built_once_into_the_cache(fresh_library):
+    assert native_support() == (True, "supported")
+    built = list(fresh_library.glob("fused_step-*.so"))
+    assert len(built) == 1
+    stamp = built[0].stat().st_mtime_ns
+    native_step._LIBRARY = None  # a new process: loads the cached file
+    assert native_support() == (True, "supported")
+    assert built[0].stat().st_mtime_ns == stamp
