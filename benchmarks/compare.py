@@ -22,9 +22,10 @@ Rows, ours (all with random actions in [−1, 1], drawn once per row):
   observations, reward, statistics);
 - ``numpy vec_env``: :class:`SwarmNavVecEnv` ``step`` (adds SB3's per-slot infos and the
   auto-reset bookkeeping);
-- ``torch core (plain)`` / ``torch core (compiled)``: :class:`TorchSwarmNavCore`, the same
-  work as the numpy core in torch, without and with ``torch.compile``;
-- ``torch vec_env (compiled)``: the SB3 VecEnv stepping the compiled torch core;
+- ``torch core (plain)`` / ``(compiled)`` / ``(native)``: :class:`TorchSwarmNavCore`, the
+  same work as the numpy core, its step in plain torch, through ``torch.compile``, or
+  in C (:mod:`swarm_envs.envs.native_step`, where a C compiler builds it);
+- ``torch vec_env (compiled)`` / ``(native)``: the SB3 VecEnv stepping the torch core;
 - ``physics only``: one semi-implicit Euler step of the social potential model, numpy
   and torch plain/compiled (no observations, reward or statistics).
 
@@ -63,6 +64,7 @@ from swarm_envs import swarm_nav_v0
 from swarm_envs._malloc import keep_freed_memory
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.native_step import NATIVE_ENV, native_support
 from swarm_envs.envs.torch_core import TorchSwarmNavCore
 from swarm_envs.physics import SocialPotentialParams, random_swarm
 from swarm_envs.physics import step as numpy_step
@@ -113,20 +115,47 @@ def numpy_vec_env(n: int, b: int) -> Step:
     return lambda: venv.step(a)
 
 
-def torch_vec_env(n: int, b: int) -> Step:
-    """The SB3 VecEnv on the compiled torch core (``backend="torch"``)."""
-    venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, backend="torch")
-    venv.seed(0)
-    venv.reset()
-    a = actions_for((venv.num_envs, 2))
-    return lambda: venv.step(a)
+def torch_vec_env(kernel: str) -> Callable[[int, int], Step | None]:
+    """The SB3 VecEnv on the torch core (``backend="torch"``), its step run by ``kernel``:
+    ``"native"`` (the C step, the default where it builds) or ``"compiled"``."""
+
+    def make(n: int, b: int) -> Step | None:
+        if kernel == "native" and not native_support()[0]:
+            return None
+        previous = os.environ.get(NATIVE_ENV)
+        os.environ[NATIVE_ENV] = "1" if kernel == "native" else "0"
+        try:
+            venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, backend="torch")
+        finally:
+            if previous is None:
+                del os.environ[NATIVE_ENV]
+            else:
+                os.environ[NATIVE_ENV] = previous
+        assert venv.core.kernel == kernel, venv.core.kernel
+        venv.seed(0)
+        venv.reset()
+        a = actions_for((venv.num_envs, 2))
+        return lambda: venv.step(a)
+
+    return make
 
 
-def torch_core(compile: bool) -> Callable[[int, int], Step]:
-    def make(n: int, b: int) -> Step:
-        core = TorchSwarmNavCore(SwarmConfig(n_agents=n, max_steps=10**9), batch=b, compile=compile)
-        if compile:
-            print(f"    (torch core {b} x {n}: compiled in {core.compile_seconds:.1f} s)")
+def torch_core(kernel: str) -> Callable[[int, int], Step | None]:
+    """:class:`TorchSwarmNavCore` ``step`` + ``observe``, run by ``kernel``: ``"plain"``,
+    ``"compiled"`` (``torch.compile``) or ``"native"`` (the C step)."""
+
+    def make(n: int, b: int) -> Step | None:
+        if kernel == "native" and not native_support()[0]:
+            return None
+        cfg = SwarmConfig(n_agents=n, max_steps=10**9)
+        options = {
+            "plain": dict(compile=False, native=False),
+            "compiled": dict(compile=True, native=False),
+            "native": dict(native=True),
+        }[kernel]
+        core = TorchSwarmNavCore(cfg, batch=b, **options)
+        if kernel != "plain":
+            print(f"    (torch core {b} x {n}, {kernel}: ready in {core.compile_seconds:.1f} s)")
         core.reset(np.random.default_rng(0))
         a = actions_for((b, n, 2))
         return lambda: (core.step(a), core.observe())
@@ -248,9 +277,11 @@ ROWS: list[tuple[str, Callable[[int, int], Step | None], bool]] = [
     # (label, factory, physics-only row?)
     ("numpy core", numpy_core, False),
     ("numpy vec_env", numpy_vec_env, False),
-    ("torch core (plain)", torch_core(False), False),
-    ("torch core (compiled)", torch_core(True), False),
-    ("torch vec_env (compiled)", torch_vec_env, False),
+    ("torch core (plain)", torch_core("plain"), False),
+    ("torch core (compiled)", torch_core("compiled"), False),
+    ("torch core (native)", torch_core("native"), False),
+    ("torch vec_env (compiled)", torch_vec_env("compiled"), False),
+    ("torch vec_env (native)", torch_vec_env("native"), False),
     ("vmas navigation", vmas_navigation, False),
     ("vmas pairwise", vmas_pairwise, False),
     ("mpe2 simple_spread", mpe2_spread, False),
@@ -324,7 +355,9 @@ def print_table(results: list[dict]) -> None:
 #: (full-step row, physics-only row) pairs of the "cost of the full step" table.
 FULL_VS_PHYSICS = (
     ("torch core (compiled)", "physics only, torch compiled"),
+    ("torch core (native)", "physics only, torch compiled"),
     ("torch vec_env (compiled)", "physics only, torch compiled"),
+    ("torch vec_env (native)", "physics only, torch compiled"),
     ("numpy core", "physics only, numpy"),
 )
 

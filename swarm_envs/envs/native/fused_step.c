@@ -1,9 +1,9 @@
 /* The fused SwarmNav step of swarm_envs.envs.native_step, in C (float32 and float64).
  *
  * Compiled at first use by swarm_envs/envs/native_step.py with the system C compiler
- * (-O3 -march=native -fopenmp-simd): the loops over pairs are vectorised, and expf/exp
- * are declared SIMD so that the compiler calls glibc's vector versions (libmvec).
- * Called through ctypes, which releases the GIL: Python threads step disjoint swarms.
+ * (-O3 -march=native -fopenmp): the loops over pairs are vectorised (float32 with the
+ * inlined exp_f32 below; float64 calls glibc's vector exp, libmvec, declared SIMD), and
+ * the swarms are spread over OpenMP threads. Called through ctypes.
  */
 #include <math.h>
 #include <stdint.h>

@@ -308,7 +308,10 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
         }
 }
 
-/* Swarms [b0, b1); returns 0, or 1 if the scratch memory could not be allocated. */
+/* Swarms [b0, b1), spread over the OpenMP threads (torch's own pool when torch is
+ * loaded: its libgomp.so.1 is the one this library links to). Every swarm is stepped by
+ * one thread in the same way, so the results do not depend on the thread count.
+ * Returns 0, 1 if scratch memory could not be allocated, 2 if k_sort > KMAX_SORT. */
 int FUSED_STEP(const int64_t *ip, const double *dp, int64_t b0, int64_t b1, const REAL *x,
                const REAL *v, const REAL *f, const REAL *goal, const REAL *a,
                const uint8_t *move, const REAL *prev_distance, const REAL *prev_arrived,
@@ -317,20 +320,31 @@ int FUSED_STEP(const int64_t *ip, const double *dp, int64_t b0, int64_t b1, cons
     const int64_t N = ip[IP_N], d = ip[IP_D], k_sort = ip[IP_K_SORT];
     const int64_t NP = (N + LANES - 1) / LANES * LANES;
     if (k_sort > KMAX_SORT) return 2;
-    size_t n_real = (size_t)(4 * d * NP + N + N * NP + k_sort * N) + (size_t)k_sort * N;
-    REAL *scratch = (REAL *)malloc(n_real * sizeof(REAL) + 64);
-    if (!scratch) return 1;
-    /* d as a constant in each copy: the loops over components unroll. */
-    if (d == 2)
-        for (int64_t b = b0; b < b1; b++)
-            FUSED_SWARM(ip, dp, 2, b, scratch, x, v, f, goal, a, move, prev_distance,
-                        prev_arrived, start_distance, x_out, v_out, f_out, obs, packed, mean_dist,
-                        arrived);
-    else
-        for (int64_t b = b0; b < b1; b++)
-            FUSED_SWARM(ip, dp, 3, b, scratch, x, v, f, goal, a, move, prev_distance,
-                        prev_arrived, start_distance, x_out, v_out, f_out, obs, packed, mean_dist,
-                        arrived);
-    free(scratch);
-    return 0;
+    const size_t n_real = (size_t)(4 * d * NP + N + N * NP + 2 * k_sort * N);
+    int status = 0;
+#pragma omp parallel if (b1 - b0 > 1) reduction(| : status)
+    {
+        REAL *scratch = (REAL *)malloc(n_real * sizeof(REAL) + 64);
+        /* d as a constant in each copy: the loops over components unroll. Every thread
+         * reaches the loop (it ends in a barrier), with or without its scratch. */
+        if (d == 2) {
+#pragma omp for schedule(static)
+            for (int64_t b = b0; b < b1; b++) {
+                if (!scratch) { status |= 1; continue; }
+                FUSED_SWARM(ip, dp, 2, b, scratch, x, v, f, goal, a, move, prev_distance,
+                            prev_arrived, start_distance, x_out, v_out, f_out, obs, packed,
+                            mean_dist, arrived);
+            }
+        } else {
+#pragma omp for schedule(static)
+            for (int64_t b = b0; b < b1; b++) {
+                if (!scratch) { status |= 1; continue; }
+                FUSED_SWARM(ip, dp, 3, b, scratch, x, v, f, goal, a, move, prev_distance,
+                            prev_arrived, start_distance, x_out, v_out, f_out, obs, packed,
+                            mean_dist, arrived);
+            }
+        }
+        free(scratch);
+    }
+    return status;
 }
