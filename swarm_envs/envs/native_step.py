@@ -17,11 +17,12 @@ agents is 4 KB), selects the neighbours by insertion across 16 agents at a time,
 writes every observation row once.
 
 Build: the first use compiles the source with the C compiler (``$CC``, else ``cc`` or
-``gcc``), ``-O3 -march=native -fopenmp-simd``, into a per-user cache
-(``$SWARM_ENVS_CACHE`` or ``~/.cache/swarm_envs``), keyed by the source, the flags, the
-compiler and the machine; later processes load the cached library (about a second for
-the first build). ``exp`` is declared SIMD, so that GCC calls glibc's vector ``exp``
-(libmvec) in the pair loop. Where no compiler works, :func:`native_support` says why and
+``gcc``), ``-O3 -march=native -fopenmp``, into a per-user cache (``$SWARM_ENVS_CACHE``
+or ``~/.cache/swarm_envs``), keyed by the source, the flags, the compiler and the CPU;
+that takes about 8 s on the development machine, once, and later processes load the
+cached library at once. In the float32 pair loop ``exp`` is the inlined ``exp_f32`` of
+``fused_step.c`` (a call to glibc's vector ``exp`` spills every live register; the
+float64 loop does call it). Where no compiler works, :func:`native_support` says why and
 the torch core keeps its TorchInductor (or plain torch) step.
 
 Threads: the kernel spreads the swarms over OpenMP threads. It links ``libgomp.so.1``,

@@ -22,7 +22,7 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
     const REAL dt = (REAL)dp[DP_DT], m = (REAL)dp[DP_M], u_max = (REAL)dp[DP_U_MAX];
     const REAL C_a = (REAL)dp[DP_C_A], C_r = (REAL)dp[DP_C_R];
     const REAL l_a = (REAL)dp[DP_L_A], l_r = (REAL)dp[DP_L_R];
-    const REAL C_o = (REAL)dp[DP_C_O], l_o = (REAL)dp[DP_L_O];
+    const REAL C_o = (REAL)dp[DP_C_O];
     const REAL beta = (REAL)dp[DP_BETA], C_g = (REAL)dp[DP_C_G], l_g = (REAL)dp[DP_L_G];
     const REAL goal_radius = (REAL)dp[DP_GOAL_RADIUS];
     const REAL collision_radius = (REAL)dp[DP_COLLISION_RADIUS];
