@@ -1,6 +1,6 @@
 """The fused SwarmNav step in C: the CPU kernel behind the torch core, built at first use.
 
-:func:`build_native_advance` returns a function with the signature and results of
+:class:`NativeAdvance` is a function with the signature and results of
 :func:`swarm_envs.envs.torch_core.build_advance`'s ``advance`` (the same equations: the
 semi-implicit Euler step of MODELS.md §1 with the carried force, one pass over the pairs
 of the new state for the forces of eqs. 10–12, the pair energy of eq. 9 and the
@@ -65,7 +65,6 @@ from swarm_envs.physics.social_potential import RHO_FLOOR
 __all__ = [
     "NATIVE_ENV",
     "NativeAdvance",
-    "build_native_advance",
     "native_support",
     "resolve_native",
 ]
@@ -299,8 +298,3 @@ class NativeAdvance:
         if code:
             raise MemoryError("the C step could not allocate its scratch memory")
         return x_out, v_out, f_out, obs, packed, mean_dist, arrived, None
-
-
-def build_native_advance(cfg: Any) -> NativeAdvance:
-    """The C step for ``cfg``, or ``RuntimeError``/``ValueError`` (see :class:`NativeAdvance`)."""
-    return NativeAdvance(cfg)
