@@ -9,6 +9,9 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#ifdef __AVX512F__
+#include <immintrin.h>
+#endif
 
 #pragma omp declare simd notinbranch
 float expf(float);
@@ -31,7 +34,8 @@ enum {
  * so that results down to the smallest subnormal are right. x is clamped to
  * [-104, 88.7]: e^x is 0 below and would overflow above. */
 static inline float exp_f32(float x) {
-    x = x < -104.0f ? -104.0f : (x > 88.7f ? 88.7f : x);
+    x = x < -104.0f ? -104.0f : x; /* two statements: a max and a min */
+    x = x > 88.7f ? 88.7f : x;
     float n = floorf(x * 1.44269504088896341f + 0.5f);
     float r = fmaf(n, -0.693359375f, x);
     r = fmaf(n, 2.12194440e-4f, r);
@@ -68,6 +72,25 @@ typedef int32_t vindex_f32 __attribute__((vector_size(64)));
 #define FLOOR floorf
 #define FABS fabsf
 #define FUSED_SWARM fused_swarm_f32
+typedef uint64_t vkey __attribute__((vector_size(64)));
+typedef uint32_t vhalf_u32 __attribute__((vector_size(32)));
+/* Lanes [8h, 8h + 8) of a 16-lane int32 vector, zero-extended to 64 bits. */
+#define KEY_HALF(v, h)                                                                 \
+    __builtin_convertvector(                                                           \
+        (h) ? __builtin_shufflevector((v), (v), 8, 9, 10, 11, 12, 13, 14, 15)          \
+            : __builtin_shufflevector((v), (v), 0, 1, 2, 3, 4, 5, 6, 7),               \
+        vkey)
+#ifdef __AVX512F__
+static inline vkey key_min(vkey a, vkey b) { return (vkey)_mm512_min_epu64((__m512i)a, (__m512i)b); }
+static inline vkey key_max(vkey a, vkey b) { return (vkey)_mm512_max_epu64((__m512i)a, (__m512i)b); }
+#else
+static inline vkey key_min(vkey a, vkey b) { vkey lt = (vkey)(a < b); return (a & lt) | (b & ~lt); }
+static inline vkey key_max(vkey a, vkey b) { vkey lt = (vkey)(a < b); return (b & lt) | (a & ~lt); }
+#endif
+#define KEY_MIN key_min
+#define KEY_MAX key_max
+#define KNN_KEYS 1
+#define KNN_BLOCK knn_block_f32
 #define FUSED_STEP fused_step_f32
 #include "fused_step_body.h"
 #undef REAL
@@ -76,6 +99,8 @@ typedef int32_t vindex_f32 __attribute__((vector_size(64)));
 #undef FLOOR
 #undef FABS
 #undef FUSED_SWARM
+#undef KNN_BLOCK
+#undef KNN_KEYS
 #undef FUSED_STEP
 #undef INDEX
 #undef LANES
@@ -94,5 +119,6 @@ typedef int64_t vindex_f64 __attribute__((vector_size(64)));
 #define FLOOR floor
 #define FABS fabs
 #define FUSED_SWARM fused_swarm_f64
+#define KNN_BLOCK knn_block_f64
 #define FUSED_STEP fused_step_f64
 #include "fused_step_body.h"

@@ -8,6 +8,110 @@
  * the reward. Everything for one swarm stays in a few kilobytes of scratch memory.
  */
 
+/* The k_sort = K nearest neighbours of the agents of block I (MODELS.md §2's k-NN order:
+ * by (ρ, j)), from the distances that the pair pass stored per tile and offset. Each
+ * candidate is inserted into the sorted lists of its lane; the tiles hand candidates over
+ * in rotated order, so the comparison is on (ρ, j). Tile (J, I) with J < I holds agent
+ * I0 + m's partners rotated the other way: rotated back here. */
+static inline __attribute__((always_inline)) void KNN_BLOCK(
+    const int64_t K, const int64_t I, const int64_t nb, const int64_t N, const REAL *rho,
+    const VINDEX *rot, REAL *near_d, int32_t *near_i) {
+    const int64_t I0 = I * LANES;
+#ifdef KNN_KEYS
+    /* float32: each candidate as one 64-bit key, the bits of ρ (≥ 0, so they order as
+     * the numbers do) above its index j: (ρ, j) order is integer order, and the
+     * insertion is a min and a max per slot, in two halves of LANES / 2 lanes. */
+    vkey lo[KMAX_SORT], hi[KMAX_SORT];
+    for (int64_t q = 0; q < K; q++) lo[q] = hi[q] = (vkey){0} + UINT64_MAX;
+    for (int64_t J = 0; J < nb; J++) {
+        const int64_t J0 = J * LANES;
+        const REAL *tile = rho + (J < I ? J * nb + I : I * nb + J) * LANES * LANES;
+        const int s_first = J == I ? 1 : 0, s_end = J == I ? LANES / 2 + 1 : LANES;
+        for (int s = s_first; s < s_end; s++) {
+            VREAL row;
+            memcpy(&row, tile + s * LANES, sizeof row);
+            const VINDEX back = rot[(LANES - s) & (LANES - 1)];
+            for (int side = 0; side < 2; side++) {
+                VINDEX bits, ci;
+                if (side == 0) {
+                    if (J < I) continue;
+                    bits = (VINDEX)row;
+                    ci = (INDEX)J0 + rot[s];
+                } else {
+                    if (J > I || (J == I && s == LANES / 2)) continue;
+                    bits = (VINDEX)__builtin_shuffle(row, back);
+                    ci = (INDEX)J0 + back;
+                }
+                vkey c_lo = (KEY_HALF(bits, 0) << 32) | KEY_HALF(ci, 0);
+                vkey c_hi = (KEY_HALF(bits, 1) << 32) | KEY_HALF(ci, 1);
+                for (int64_t q = 0; q < K; q++) {
+                    vkey t = KEY_MIN(lo[q], c_lo);
+                    c_lo = KEY_MAX(lo[q], c_lo);
+                    lo[q] = t;
+                    t = KEY_MIN(hi[q], c_hi);
+                    c_hi = KEY_MAX(hi[q], c_hi);
+                    hi[q] = t;
+                }
+            }
+        }
+    }
+    const int64_t n_lanes = N - I0 < LANES ? N - I0 : LANES;
+    for (int64_t q = 0; q < K; q++)
+        for (int64_t l = 0; l < n_lanes; l++) {
+            uint64_t key = l < LANES / 2 ? lo[q][l] : hi[q][l - LANES / 2];
+            uint32_t rbits = (uint32_t)(key >> 32);
+            memcpy(&near_d[q * N + I0 + l], &rbits, sizeof rbits);
+            near_i[q * N + I0 + l] = (int32_t)(key & 0xffffffffu);
+        }
+#else
+    VREAL bd[KMAX_SORT];
+    VINDEX bi[KMAX_SORT];
+    for (int64_t q = 0; q < K; q++) {
+        bd[q] = (VREAL){0} + (REAL)INFINITY;
+        bi[q] = (VINDEX){0};
+    }
+    for (int64_t J = 0; J < nb; J++) {
+        const int64_t J0 = J * LANES;
+        const REAL *tile = rho + (J < I ? J * nb + I : I * nb + J) * LANES * LANES;
+        const int s_first = J == I ? 1 : 0, s_end = J == I ? LANES / 2 + 1 : LANES;
+        for (int s = s_first; s < s_end; s++) {
+            VREAL row;
+            memcpy(&row, tile + s * LANES, sizeof row);
+            const VINDEX back = rot[(LANES - s) & (LANES - 1)];
+            for (int side = 0; side < 2; side++) {
+                VREAL cd;
+                VINDEX ci;
+                if (side == 0) {
+                    if (J < I) continue;
+                    cd = row;
+                    ci = (INDEX)J0 + rot[s];
+                } else {
+                    if (J > I || (J == I && s == LANES / 2)) continue;
+                    cd = __builtin_shuffle(row, back);
+                    ci = (INDEX)J0 + back;
+                }
+                for (int64_t q = 0; q < K; q++) {
+                    /* lt: all ones where the candidate goes before slot q. */
+                    VINDEX lt = (VINDEX)(cd < bd[q]) | ((VINDEX)(cd == bd[q]) & (ci < bi[q]));
+                    VINDEX cbits = (VINDEX)cd, bbits = (VINDEX)bd[q];
+                    VINDEX old_i = bi[q];
+                    bd[q] = (VREAL)((cbits & lt) | (bbits & ~lt));
+                    bi[q] = (ci & lt) | (old_i & ~lt);
+                    cd = (VREAL)((bbits & lt) | (cbits & ~lt));
+                    ci = (old_i & lt) | (ci & ~lt);
+                }
+            }
+        }
+    }
+    const int64_t n_lanes = N - I0 < LANES ? N - I0 : LANES;
+    for (int64_t q = 0; q < K; q++)
+        for (int64_t l = 0; l < n_lanes; l++) {
+            near_d[q * N + I0 + l] = bd[q][l];
+            near_i[q * N + I0 + l] = (int32_t)bi[q][l];
+        }
+#endif
+}
+
 static inline __attribute__((always_inline)) void FUSED_SWARM(
     const int64_t *ip, const double *dp, const int64_t d, int64_t b, REAL *scratch,
                         const REAL *x, const REAL *v, const REAL *f, const REAL *goal,
@@ -42,7 +146,7 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
 
     /* Scratch: xs, vs, fs, offset (d × NP each), gd (N), rho (N × NP), near (k_sort × N). */
     REAL *xs = scratch, *vs = xs + d * S, *fs = vs + d * S, *off = fs + d * S;
-    REAL *gd = off + d * S, *rho = gd + N, *near_d = rho + N * NP;
+    REAL *gd = off + d * S, *rho = gd + N, *near_d = rho + NP * NP;
     int32_t *near_i = (int32_t *)(near_d + k_sort * N);
 
     /* 1. Semi-implicit Euler with the carried passive force. */
@@ -64,67 +168,105 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
         for (int64_t i = N; i < NP; i++) xs[c * S + i] = vs[c * S + i] = 0; /* padding lanes */
     }
 
-    /* 2. One pass over the ordered pairs of the new state: F(x', v'), pair energy, ρ.
-     * Agents i in blocks of LANES (the vector lanes), candidates j one at a time: every
-     * sum stays in its lane (no horizontal reductions), and ρ_ji = ρ_ij is stored as row
-     * j, the layout the k-NN below reads. Lanes past N are padding (position 0; their
-     * results are never read, their distances are set to inf). */
-    REAL E_lane[LANES], F_lane[3][LANES];
-    int32_t close_lane[LANES];
-    REAL energy_rows = 0;
-    int64_t close_pairs = 0;
-    const REAL *x0 = xs, *x1 = xs + S, *x2 = xs + 2 * S;
-    const REAL *v0 = vs, *v1 = vs + S, *v2 = vs + 2 * S;
-    for (int64_t i0 = 0; i0 < N; i0 += LANES) {
+    /* 2. One pass over the unordered pairs of the new state: F(x', v'), pair energy, ρ.
+     * Agents in tiles of LANES × LANES (I ≤ J blocks). In tile (I, J) the lanes hold
+     * agents i = I0 + l and, at offset s, the partners j = J0 + (l + s) mod LANES (block
+     * J rotated by s): every pair is evaluated once, its force added to i in its lane
+     * and, rotated back by s, subtracted from j. The diagonal tile (I, I) needs offsets
+     * 1 .. LANES/2 only (offset LANES/2 holds every pair twice, so it adds to i only).
+     * Lanes past N are padding: masked out, their distances inf. ρ is stored per tile
+     * and offset, the layout the k-NN below reads. */
+    const int64_t nb = NP / LANES;
+    VINDEX iota, rot[LANES];
+    for (int l = 0; l < LANES; l++) iota[l] = l;
+    for (int s = 0; s < LANES; s++) rot[s] = (iota + s) & (LANES - 1);
+    for (int64_t c = 0; c < d; c++)
+        for (int64_t i = 0; i < NP; i++) fs[c * S + i] = 0;
+    REAL energy_pairs = 0; /* the sum over ordered pairs i ≠ j of the pair energy */
+    int64_t close_pairs = 0; /* ordered pairs closer than the collision radius */
+    for (int64_t I = 0; I < nb; I++) {
+        const int64_t I0 = I * LANES;
+        REAL FI[3][LANES], E_lane[LANES];
+        int32_t close_lane[LANES];
         for (int l = 0; l < LANES; l++) {
-            F_lane[0][l] = F_lane[1][l] = F_lane[2][l] = E_lane[l] = 0;
+            FI[0][l] = FI[1][l] = FI[2][l] = E_lane[l] = 0;
             close_lane[l] = 0;
         }
-        for (int64_t j = 0; j < N; j++) {
-            const REAL xj0 = x0[j], xj1 = x1[j], xj2 = d == 3 ? x2[j] : 0;
-            const REAL vj0 = v0[j], vj1 = v1[j], vj2 = d == 3 ? v2[j] : 0;
-            REAL *row = rho + j * NP + i0;
+        const REAL *xi0 = xs + I0, *xi1 = xs + S + I0, *xi2 = xs + 2 * S + I0;
+        const REAL *vi0 = vs + I0, *vi1 = vs + S + I0, *vi2 = vs + 2 * S + I0;
+        for (int64_t J = I; J < nb; J++) {
+            const int64_t J0 = J * LANES;
+            VREAL xJ[3], vJ[3], FJ[3];
+            for (int64_t c = 0; c < d; c++) {
+                memcpy(&xJ[c], xs + c * S + J0, sizeof(VREAL));
+                memcpy(&vJ[c], vs + c * S + J0, sizeof(VREAL));
+                FJ[c] = (VREAL){0};
+            }
+            const int s_first = J == I ? 1 : 0, s_last = J == I ? LANES / 2 : LANES - 1;
+            for (int s = s_first; s <= s_last; s++) {
+                const int both = !(J == I && s == LANES / 2); /* else each pair twice */
+                const REAL w = both ? 2 : 1;
+                const int32_t wc = both ? 2 : 1;
+                REAL xj[3][LANES], vj[3][LANES], cx[3][LANES];
+                for (int64_t c = 0; c < d; c++) {
+                    VREAL t = __builtin_shuffle(xJ[c], rot[s]);
+                    memcpy(xj[c], &t, sizeof t);
+                    t = __builtin_shuffle(vJ[c], rot[s]);
+                    memcpy(vj[c], &t, sizeof t);
+                }
+                REAL *drow = rho + ((I * nb + J) * LANES + s) * LANES;
 #define PAIR_BODY(ALIGN, SAME)                                                             \
     _Pragma("omp simd") for (int l = 0; l < LANES; l++) {                                  \
-        const int64_t i = i0 + l;                                                          \
-        REAL dx0 = xj0 - x0[i], dx1 = xj1 - x1[i], dx2 = d == 3 ? xj2 - x2[i] : 0;         \
+        const int valid = (I0 + l < N) & (J0 + ((l + s) & (LANES - 1)) < N);               \
+        REAL dx0 = xj[0][l] - xi0[l], dx1 = xj[1][l] - xi1[l];                             \
+        REAL dx2 = d == 3 ? xj[2][l] - xi2[l] : 0;                                         \
         REAL r2 = dx0 * dx0 + dx1 * dx1;                                                   \
         if (d == 3) r2 = r2 + dx2 * dx2;                                                   \
         REAL r = SQRT(r2);                                                                 \
         REAL inv = (REAL)1 / (r > rho_floor ? r : rho_floor);                              \
         REAL ea = EXP(r * dec_a);                                                          \
         REAL er = SAME ? ea : EXP(r * dec_r);                                              \
-        REAL s = ea * ca_la - cr_lr * er;                                                  \
+        REAL sp = ea * ca_la - cr_lr * er;                                                 \
         if (ALIGN) {                                                                       \
-            REAL proj = (v0[i] - vj0) * dx0 + (v1[i] - vj1) * dx1;                         \
-            if (d == 3) proj = proj + (v2[i] - vj2) * dx2;                                 \
-            s = s - proj * inv * EXP(r * dec_o) * C_o;                                     \
+            REAL proj = (vi0[l] - vj[0][l]) * dx0 + (vi1[l] - vj[1][l]) * dx1;             \
+            if (d == 3) proj = proj + (vi2[l] - vj[2][l]) * dx2;                           \
+            sp = sp - proj * inv * EXP(r * dec_o) * C_o;                                   \
         }                                                                                  \
-        s = s * inv;                                                                       \
-        F_lane[0][l] += s * dx0;                                                           \
-        F_lane[1][l] += s * dx1;                                                           \
-        if (d == 3) F_lane[2][l] += s * dx2;                                               \
-        E_lane[l] += C_r * er - C_a * ea;                                                  \
-        int self = j == i;                                                                 \
-        close_lane[l] += (!self) & (r < collision_radius);                                 \
-        row[l] = self ? inf : r;                                                           \
+        sp = valid ? sp * inv : 0;                                                         \
+        cx[0][l] = sp * dx0;                                                               \
+        cx[1][l] = sp * dx1;                                                               \
+        FI[0][l] += cx[0][l];                                                              \
+        FI[1][l] += cx[1][l];                                                              \
+        if (d == 3) {                                                                      \
+            cx[2][l] = sp * dx2;                                                           \
+            FI[2][l] += cx[2][l];                                                          \
+        }                                                                                  \
+        E_lane[l] += valid ? w * (C_r * er - C_a * ea) : 0;                                \
+        close_lane[l] += valid & (r < collision_radius) ? wc : 0;                          \
+        drow[l] = valid ? r : inf;                                                         \
     }
-            if (alignment) {
-                if (same_decay) { PAIR_BODY(1, 1) } else { PAIR_BODY(1, 0) }
-            } else {
-                if (same_decay) { PAIR_BODY(0, 1) } else { PAIR_BODY(0, 0) }
-            }
+                if (alignment) {
+                    if (same_decay) { PAIR_BODY(1, 1) } else { PAIR_BODY(1, 0) }
+                } else {
+                    if (same_decay) { PAIR_BODY(0, 1) } else { PAIR_BODY(0, 0) }
+                }
 #undef PAIR_BODY
+                if (both)
+                    for (int64_t c = 0; c < d; c++) {
+                        VREAL t;
+                        memcpy(&t, cx[c], sizeof t);
+                        FJ[c] -= __builtin_shuffle(t, rot[(LANES - s) & (LANES - 1)]);
+                    }
+            }
+            for (int64_t c = 0; c < d; c++)
+                for (int l = 0; l < LANES; l++) fs[c * S + J0 + l] += FJ[c][l];
         }
         for (int64_t c = 0; c < d; c++)
-            for (int l = 0; l < LANES; l++) fs[c * S + i0 + l] = F_lane[c][l];
-        const int64_t n_lanes = N - i0 < LANES ? N - i0 : LANES; /* the rest is padding */
-        for (int64_t l = 0; l < n_lanes; l++) {
-            energy_rows += E_lane[l];
+            for (int l = 0; l < LANES; l++) fs[c * S + I0 + l] += FI[c][l];
+        for (int l = 0; l < LANES; l++) {
+            energy_pairs += E_lane[l];
             close_pairs += close_lane[l];
         }
-        for (int64_t j = 0; j < N; j++)
-            for (int64_t i = i0 + n_lanes; i < i0 + LANES; i++) rho[j * NP + i] = inf;
     }
 
     /* Dissipation, then the goal sink (eqs. 19-20), in the torch core's order. */
@@ -152,71 +294,87 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
     REAL kinetic = 0;
     for (int64_t c = 0; c < d; c++)
         for (int64_t i = 0; i < N; i++) kinetic += vs[c * S + i] * vs[c * S + i];
-    const REAL phi = (REAL)0.5 * m * kinetic + (REAL)0.5 * (energy_rows - Nr * (C_r - C_a)) + sink;
+    const REAL phi = (REAL)0.5 * m * kinetic + (REAL)0.5 * energy_pairs + sink;
     const REAL collisions = FLOOR((REAL)close_pairs * (REAL)0.5);
 
     /* 3. The k_sort nearest neighbours of every agent, ordered by (ρ, j): agents in blocks
-     * of LANES, each candidate j inserted into the sorted lists (strict <, so an equal
-     * distance keeps the lower index first). ρ is symmetric: row j holds ρ_ij for all i. */
+     * of LANES, each candidate inserted into the sorted lists of its lane (KNN_BLOCK; the
+     * usual list lengths are instantiated with constant K, so the lists stay in
+     * registers). */
     REAL nnd = 0;
     if (N > 1) {
-        VREAL bd[KMAX_SORT];
-        VINDEX bi[KMAX_SORT];
-        const VINDEX zero_i = {0};
-        for (int64_t i0 = 0; i0 < N; i0 += LANES) {
-            for (int64_t s = 0; s < k_sort; s++) {
-                bd[s] = (VREAL){0} + inf;
-                bi[s] = zero_i;
+        for (int64_t I = 0; I < nb; I++) {
+            switch (k_sort) {
+            case 1: KNN_BLOCK(1, I, nb, N, rho, rot, near_d, near_i); break;
+            case 2: KNN_BLOCK(2, I, nb, N, rho, rot, near_d, near_i); break;
+            case 3: KNN_BLOCK(3, I, nb, N, rho, rot, near_d, near_i); break;
+            case 4: KNN_BLOCK(4, I, nb, N, rho, rot, near_d, near_i); break;
+            case 5: KNN_BLOCK(5, I, nb, N, rho, rot, near_d, near_i); break;
+            case 6: KNN_BLOCK(6, I, nb, N, rho, rot, near_d, near_i); break;
+            case 7: KNN_BLOCK(7, I, nb, N, rho, rot, near_d, near_i); break;
+            case 8: KNN_BLOCK(8, I, nb, N, rho, rot, near_d, near_i); break;
+            default: KNN_BLOCK(k_sort, I, nb, N, rho, rot, near_d, near_i); break;
             }
-            for (int64_t j = 0; j < N; j++) {
-                VREAL cd;
-                memcpy(&cd, rho + j * NP + i0, sizeof cd);
-                VINDEX ci = zero_i + (INDEX)j;
-                for (int64_t s = 0; s < k_sort; s++) {
-                    /* lt: all ones where the candidate goes before slot s. */
-                    VINDEX lt = (VINDEX)(cd < bd[s]);
-                    VINDEX cbits = (VINDEX)cd, bbits = (VINDEX)bd[s];
-                    VINDEX old_i = bi[s];
-                    bd[s] = (VREAL)((cbits & lt) | (bbits & ~lt));
-                    bi[s] = (ci & lt) | (old_i & ~lt);
-                    cd = (VREAL)((bbits & lt) | (cbits & ~lt));
-                    ci = (old_i & lt) | (ci & ~lt);
-                }
-            }
-            int64_t n_lanes = N - i0 < LANES ? N - i0 : LANES;
-            for (int64_t s = 0; s < k_sort; s++)
-                for (int64_t l = 0; l < n_lanes; l++) {
-                    near_d[s * N + i0 + l] = bd[s][l];
-                    near_i[s * N + i0 + l] = (int32_t)bi[s][l];
-                }
         }
         for (int64_t i = 0; i < N; i++) nnd += near_d[i];
         nnd = nnd / Nr;
     }
 
-    /* 4. Observations (B, N, obs_dim), float32, clipped to ±obs_bound. */
+    /* 4. Observations (B, N, obs_dim), float32, clipped to ±obs_bound. Every agent j's
+     * position, velocity and a 1 sit in 8 lanes (tab, one neighbour block of the row:
+     * 2d + 1 ≤ 7 values); a neighbour's block is (tab_j − tab_i with its 1 kept) × scale,
+     * stored 8 wide in order so that the next block overwrites the spare lanes (the last
+     * block is stored at its own width). */
+    REAL *tab = near_d + k_sort * N + k_sort * N; /* after near_i (k_sort × N int32) */
+    const int64_t blk = 2 * d + 1;
+    REAL keep[8], scl[8];
+    for (int c = 0; c < 8; c++) {
+        keep[c] = c == blk - 1 ? 0 : 1;
+        scl[c] = c < d ? inv_nbr_scale : (c < 2 * d ? inv_vel_scale : 1);
+    }
+    for (int64_t j = 0; j < N; j++) {
+        REAL *t = tab + j * 8;
+        for (int c = 0; c < 8; c++) t[c] = 0;
+        for (int64_t c = 0; c < d; c++) {
+            t[c] = xs[c * S + j];
+            t[d + c] = vs[c * S + j];
+        }
+        t[blk - 1] = 1;
+    }
+    float *own = (float *)(tab + 8 * N); /* the row's first 2d values, (2d, NP) */
+    for (int64_t c = 0; c < d; c++) {
+#pragma omp simd
+        for (int64_t i = 0; i < N; i++) {
+            REAL val = off[c * S + i] / goal_scale;
+            own[c * NP + i] = (float)(val < -obs_bound ? -obs_bound : (val > obs_bound ? obs_bound : val));
+            val = vs[c * S + i] / vel_scale;
+            own[(d + c) * NP + i] = (float)(val < -obs_bound ? -obs_bound : (val > obs_bound ? obs_bound : val));
+        }
+    }
     for (int64_t i = 0; i < N; i++) {
         float *o = obs + (b * N + i) * obs_dim;
-        int64_t p = 0;
-#define PUT(value)                                                                 \
-    do {                                                                           \
-        REAL val_ = (value);                                                       \
-        val_ = val_ < -obs_bound ? -obs_bound : (val_ > obs_bound ? obs_bound : val_); \
-        o[p++] = (float)val_;                                                      \
-    } while (0)
-        for (int64_t c = 0; c < d; c++) PUT(off[c * S + i] / goal_scale);
-        for (int64_t c = 0; c < d; c++) PUT(vs[c * S + i] / vel_scale);
-        for (int64_t s = 0; s < k; s++) {
-            if (s < k_real) {
-                int64_t j = near_i[s * N + i];
-                for (int64_t c = 0; c < d; c++) PUT((xs[c * S + j] - xs[c * S + i]) * inv_nbr_scale);
-                for (int64_t c = 0; c < d; c++) PUT((vs[c * S + j] - vs[c * S + i]) * inv_vel_scale);
-                o[p++] = 1.0f;
+        for (int64_t c = 0; c < 2 * d; c++) o[c] = own[c * NP + i];
+        const REAL *self = tab + i * 8;
+        float *on = o + 2 * d;
+        for (int64_t q = 0; q < k; q++) {
+            float out[8];
+            if (q < k_real) {
+                const REAL *g = tab + near_i[q * N + i] * 8;
+#pragma omp simd
+                for (int c = 0; c < 8; c++) {
+                    REAL val = (g[c] - self[c] * keep[c]) * scl[c];
+                    out[c] = (float)(val < -obs_bound ? -obs_bound : (val > obs_bound ? obs_bound : val));
+                }
             } else {
-                for (int64_t c = 0; c < 2 * d + 1; c++) o[p++] = 0.0f;
+                for (int c = 0; c < 8; c++) out[c] = 0.0f;
             }
+            if (q + 1 < k)
+                memcpy(on + q * blk, out, 8 * sizeof(float));
+            else if (d == 2)
+                memcpy(on + q * blk, out, 5 * sizeof(float));
+            else
+                memcpy(on + q * blk, out, 7 * sizeof(float));
         }
-#undef PUT
     }
 
     /* 5. Statistics (swarm_envs.metrics, MODELS.md §2). */
@@ -320,7 +478,7 @@ int FUSED_STEP(const int64_t *ip, const double *dp, int64_t b0, int64_t b1, cons
     const int64_t N = ip[IP_N], d = ip[IP_D], k_sort = ip[IP_K_SORT];
     const int64_t NP = (N + LANES - 1) / LANES * LANES;
     if (k_sort > KMAX_SORT) return 2;
-    const size_t n_real = (size_t)(4 * d * NP + N + N * NP + 2 * k_sort * N);
+    const size_t n_real = (size_t)(4 * d * NP + N + NP * NP + 2 * k_sort * N + 8 * N + 2 * d * NP);
     int status = 0;
 #pragma omp parallel if (b1 - b0 > 1) reduction(| : status)
     {
