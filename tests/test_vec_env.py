@@ -510,3 +510,55 @@ def test_a_partial_reset_does_not_rewrite_the_returned_statistics():
     core.reset(np.random.default_rng(1), which=np.array([True, False, False]))
     for k in STAT_KEYS:
         np.testing.assert_array_equal(stats[k], before[k])
+
+
+def test_terminal_infos_read_their_step_are_writable_and_recycled():
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from swarm_envs.envs.infos import TERMINAL_KEYS, TerminalInfo
+
+    B, N, T = 2, 3, 2
+    venv = swarm_nav_v0.vec_env(B, n_agents=N, max_steps=T)
+    twin = swarm_nav_v0.vec_env(B, n_agents=N, max_steps=10 * T)  # no reset at T
+    zero = np.zeros((venv.num_envs, 2), np.float32)
+    for e in (venv, twin):
+        e.seed(5)
+        e.reset()
+    for _ in range(T):
+        _, _, dones, infos = venv.step(zero)
+        before, *_ = twin.step(zero)  # at T: the last observation of the episode
+    assert dones.all() and all(isinstance(info, TerminalInfo) for info in infos)
+    first, other = infos[0], infos[1]
+    assert list(first) == [*STAT_KEYS, *TERMINAL_KEYS] and len(first) == len(STAT_KEYS) + 4
+    assert list(other) == list(TERMINAL_KEYS) and "success" not in other
+    with pytest.raises(KeyError):
+        other["success"]
+    for i, info in enumerate(infos):
+        assert np.array_equal(info["terminal_observation"], before[i])
+    assert first["episode"] is first["swarm_episode"] and first["episode"]["l"] == T
+    assert first["mean_goal_distance"] == float(venv.last_stats["mean_goal_distance"][0])
+    # Writable: a write copies the info into a dict of its own (VecNormalize does this).
+    other["terminal_observation"] = np.zeros(3, np.float32)
+    del other["TimeLimit.truncated"]
+    assert other["terminal_observation"].shape == (3,) and "TimeLimit.truncated" not in other
+    assert isinstance(other.copy(), dict) and len(other) == 3
+    # A kept info keeps its step; the next end takes a free set, or a new one.
+    kept_first = first.copy()
+    for _ in range(T):
+        _, _, dones, later = venv.step(zero)
+    assert dones.all() and later[0] is not first
+    assert first.copy().keys() == kept_first.keys()
+    assert np.array_equal(first["terminal_observation"], kept_first["terminal_observation"])
+    written = id(other)
+    del first, other, info, infos, later
+    for _ in range(2 * T):  # sets recycled once dropped: a written info reads again
+        _, _, _, infos = venv.step(zero)
+    assert id(infos[1]) == written and list(infos[1]) == list(TERMINAL_KEYS)
+    assert infos[1]["TimeLimit.truncated"] is True
+    # SB3's VecNormalize normalises the terminal observations in place.
+    norm = VecNormalize(swarm_nav_v0.vec_env(B, n_agents=N, max_steps=T), norm_reward=False)
+    norm.reset()
+    for _ in range(T):
+        _, _, dones, infos = norm.step(zero)
+    assert dones.all()
+    assert all(np.all(np.abs(info["terminal_observation"]) <= norm.clip_obs) for info in infos)

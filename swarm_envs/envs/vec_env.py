@@ -41,11 +41,9 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import os
-import sys
 import time
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from types import MappingProxyType
 from typing import Any
 
 import gymnasium
@@ -55,79 +53,14 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from swarm_envs.envs.backends import make_core, select_backend
 from swarm_envs.envs.core import OBS_BOUND, SwarmNavCore
+from swarm_envs.envs.infos import (  # noqa: F401  (QUIET_INFO, SwarmInfo: re-exported)
+    QUIET_INFO,
+    SwarmInfo,
+    SwarmInfoPool,
+    TerminalInfoPool,
+    TerminalRecord,
+)
 from swarm_envs.envs.swarm_nav import make_config
-
-#: The info of every slot with nothing to report (not the first slot of a swarm, and
-#: its swarm did not just end): one shared, read-only empty mapping. Writing to it
-#: raises ``TypeError``; copy it first (``dict(info)``), as SB3's ``VecMonitor`` does.
-QUIET_INFO: Mapping[str, Any] = MappingProxyType({})
-
-
-class SwarmInfo(Mapping[str, float]):
-    """The statistics of swarm ``b`` as a read-only mapping ``{key: float}``.
-
-    The info of each swarm's first slot: values are read from one step's ``(B,)``
-    arrays on access (``holder[0]``, the step's statistics), so a step builds no dicts.
-    ``dict(info)`` or :meth:`copy` gives a plain dict. The VecEnv reuses these objects
-    from step to step while nothing outside it holds them (:class:`_SwarmInfoPool`).
-    """
-
-    __slots__ = ("_b", "_holder")
-
-    def __init__(self, holder: list[Mapping[str, np.ndarray]], b: int) -> None:
-        self._holder = holder
-        self._b = b
-
-    def __getitem__(self, key: str) -> float:
-        return float(self._holder[0][key][self._b])
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._holder[0])
-
-    def __len__(self) -> int:
-        return len(self._holder[0])
-
-    def copy(self) -> dict[str, float]:
-        return dict(self)
-
-    def __repr__(self) -> str:
-        return f"SwarmInfo({dict(self)!r})"
-
-
-class _SwarmInfoPool:
-    """The B :class:`SwarmInfo` of a step, recycled once nothing outside holds them.
-
-    Building B fresh objects per step costs little by itself, but at 1,024 swarms they
-    keep the garbage collector busy (gen-0 passes every step and, as they age, full
-    passes over every object of the process): about 0.7 ms per step. So a step takes a
-    set whose objects are referenced by this pool alone (the caller has dropped that
-    step's infos) and points it at the new statistics; if every set is still held, it
-    makes a new one. An info kept by the caller thus keeps its step's values.
-    """
-
-    def __init__(self, n_swarms: int) -> None:
-        self.n_swarms = n_swarms
-        self._sets: list[tuple[list[Any], list[SwarmInfo]]] = []
-        # What sys.getrefcount says of an object that one list alone holds, measured as
-        # below (interpreters differ in what the count includes).
-        self._free = max(map(sys.getrefcount, [object()]))
-
-    def infos(self, stats: Mapping[str, np.ndarray]) -> list[SwarmInfo]:
-        """B infos reading ``stats``: a free recycled set, or a new one."""
-        for holder, objects in self._sets:
-            if max(map(sys.getrefcount, objects)) <= self._free:  # the pool's list only
-                holder[0] = stats
-                return objects
-        holder = [stats]
-        objects = [SwarmInfo(holder, b) for b in range(self.n_swarms)]
-        if len(self._sets) < _MAX_INFO_SETS:
-            self._sets.append((holder, objects))
-        return objects
-
-
-#: Recycled sets of SwarmInfo per VecEnv: two cover a caller that keeps one step's infos
-#: while it takes the next (SB3's rollout loop); more sets are made fresh, not kept.
-_MAX_INFO_SETS = 3
 
 
 class SwarmNavVecEnv(VecEnv):
@@ -177,7 +110,8 @@ class SwarmNavVecEnv(VecEnv):
         self.last_stats: dict[str, np.ndarray] = {}
         self.episode_returns = np.zeros(self.n_swarms)
         self.episode_lengths = np.zeros(self.n_swarms, np.int64)
-        self._swarm_infos = _SwarmInfoPool(self.n_swarms)
+        self._swarm_infos = SwarmInfoPool(self.n_swarms)
+        self._terminal_infos = TerminalInfoPool(self.n_swarms, self.n_agents)
         self._t_start = time.time()  # the "t" of the episode infos, as VecMonitor's
 
     def _check_threads(self, n_threads: int | None) -> int:
@@ -222,7 +156,8 @@ class SwarmNavVecEnv(VecEnv):
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state["_pool"] = None  # threads do not pickle; recreated on first use
-        state["_swarm_infos"] = _SwarmInfoPool(self.n_swarms)  # no step's infos
+        state["_swarm_infos"] = SwarmInfoPool(self.n_swarms)  # no step's infos
+        state["_terminal_infos"] = TerminalInfoPool(self.n_swarms, self.n_agents)
         return state
 
     # ------------------------------------------------------------------ VecEnv API
@@ -275,19 +210,23 @@ class SwarmNavVecEnv(VecEnv):
         infos: list[Any] = [QUIET_INFO] * self.num_envs
         infos[::N] = self._swarm_infos.infos(stats)  # read on access; see the pool
         if done.any():
-            for b in np.flatnonzero(done):  # only the swarms that just ended
-                episode = {
-                    "r": float(self.episode_returns[b]),
-                    "l": int(self.episode_lengths[b]),
-                    "t": round(time.time() - self._t_start, 6),
-                }
-                time_limit = bool(truncated[b] and not terminated[b])
-                for i in range(N):
-                    info = dict(infos[b * N]) if i == 0 else {}
-                    info["terminal_observation"] = obs[b, i]
-                    info["TimeLimit.truncated"] = time_limit
-                    info["episode"] = info["swarm_episode"] = episode
-                    infos[b * N + i] = info
+            ended = np.flatnonzero(done)  # only the swarms that just ended
+            now = round(time.time() - self._t_start, 6)
+            record = TerminalRecord(
+                obs=obs,
+                stats=stats,
+                time_limit=truncated & ~terminated,
+                episodes={
+                    int(b): {"r": float(r), "l": int(n), "t": now}
+                    for b, r, n in zip(
+                        ended, self.episode_returns[ended], self.episode_lengths[ended], strict=True
+                    )
+                },
+            )
+            swarms = ended.tolist()
+            terminal = self._terminal_infos.infos(record, swarms)
+            for b in swarms:
+                infos[b * N : (b + 1) * N] = terminal[b * N : (b + 1) * N]
             # A core's observe() never hands out memory it writes to later, so the
             # terminal observations above (views of `obs`) keep the old rows.
             for c, (core, sl) in enumerate(zip(self.cores, self._slices, strict=True)):

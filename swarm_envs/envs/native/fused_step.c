@@ -34,8 +34,12 @@ enum {
  * so that results down to the smallest subnormal are right. x is clamped to
  * [-104, 88.7]: e^x is 0 below and would overflow above. */
 static inline float exp_f32(float x) {
-    x = x < -104.0f ? -104.0f : x; /* two statements: a max and a min */
-    x = x > 88.7f ? 88.7f : x;
+    uint32_t ub; /* the clamp on the bits: an unsigned and a signed integer min */
+    memcpy(&ub, &x, sizeof ub);
+    ub = ub < 0xC2D00000u ? ub : 0xC2D00000u; /* x >= -104 (a negative float's bits */
+    int32_t sb = (int32_t)ub;                 /* grow with its magnitude) */
+    sb = sb < 0x42B16666 ? sb : 0x42B16666;   /* x <= 88.7f */
+    memcpy(&x, &sb, sizeof x);
     float n = floorf(x * 1.44269504088896341f + 0.5f);
     float r = fmaf(n, -0.693359375f, x);
     r = fmaf(n, 2.12194440e-4f, r);

@@ -223,7 +223,13 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
         REAL r2 = dx0 * dx0 + dx1 * dx1;                                                   \
         if (d == 3) r2 = r2 + dx2 * dx2;                                                   \
         REAL r = SQRT(r2);                                                                 \
-        REAL inv = (REAL)1 / (r > rho_floor ? r : rho_floor);                              \
+        INDEX r_bits, floor_bits; /* max(r, ρ_floor) on the bits (both ≥ 0) */            \
+        memcpy(&r_bits, &r, sizeof r_bits);                                                \
+        memcpy(&floor_bits, &rho_floor, sizeof floor_bits);                                \
+        r_bits = r_bits > floor_bits ? r_bits : floor_bits;                                \
+        REAL r_safe;                                                                       \
+        memcpy(&r_safe, &r_bits, sizeof r_safe);                                           \
+        REAL inv = (REAL)1 / r_safe;                                                       \
         REAL ea = EXP(r * dec_a);                                                          \
         REAL er = SAME ? ea : EXP(r * dec_r);                                              \
         REAL sp = ea * ca_la - cr_lr * er;                                                 \

@@ -1,0 +1,224 @@
+"""The infos of :class:`~swarm_envs.envs.vec_env.SwarmNavVecEnv`: read-only views, recycled.
+
+At 1,024 swarms × 32 agents a step has 32,768 slots, and SB3 wants an info mapping per
+slot. Fresh dicts would cost more than the step itself, and not only to build: every
+tracked object a step leaves alive feeds the garbage collector, whose full passes over a
+process that imported torch take tens of milliseconds. So:
+
+- :data:`QUIET_INFO`: one shared read-only empty mapping, the info of every slot with
+  nothing to report;
+- :class:`SwarmInfo`: the statistics of a swarm, in the info of its first slot, read on
+  access from the step's ``(B,)`` arrays;
+- :class:`TerminalInfo`: the info of a slot whose swarm just ended (the terminal
+  observation, ``TimeLimit.truncated``, ``episode``), read on access from one record of
+  that step; writable (SB3's ``VecNormalize`` rewrites ``terminal_observation``).
+
+Both kinds are recycled by pools (:class:`SwarmInfoPool`, :class:`TerminalInfoPool`): a
+step reuses a set of objects that nothing outside the pool still references, so an info
+kept by the caller keeps its own step's values.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Iterator, Mapping, MutableMapping
+from dataclasses import dataclass
+from itertools import islice
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+
+__all__ = ["QUIET_INFO", "SwarmInfo", "SwarmInfoPool", "TerminalInfo", "TerminalInfoPool"]
+
+#: What ``sys.getrefcount`` says of an object that one list alone holds, measured as the
+#: pools measure (interpreters differ in what the count includes).
+_FREE_REFCOUNT = max(map(sys.getrefcount, [object()]))
+
+#: The info of every slot with nothing to report (not the first slot of a swarm, and
+#: its swarm did not just end): one shared, read-only empty mapping. Writing to it
+#: raises ``TypeError``; copy it first (``dict(info)``), as SB3's ``VecMonitor`` does.
+QUIET_INFO: Mapping[str, Any] = MappingProxyType({})
+
+
+class SwarmInfo(Mapping[str, float]):
+    """The statistics of swarm ``b`` as a read-only mapping ``{key: float}``.
+
+    The info of each swarm's first slot: values are read from one step's ``(B,)``
+    arrays on access (``holder[0]``, the step's statistics), so a step builds no dicts.
+    ``dict(info)`` or :meth:`copy` gives a plain dict. The VecEnv reuses these objects
+    from step to step while nothing outside it holds them (:class:`SwarmInfoPool`).
+    """
+
+    __slots__ = ("_b", "_holder")
+
+    def __init__(self, holder: list[Mapping[str, np.ndarray]], b: int) -> None:
+        self._holder = holder
+        self._b = b
+
+    def __getitem__(self, key: str) -> float:
+        return float(self._holder[0][key][self._b])
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._holder[0])
+
+    def __len__(self) -> int:
+        return len(self._holder[0])
+
+    def copy(self) -> dict[str, float]:
+        return dict(self)
+
+    def __repr__(self) -> str:
+        return f"SwarmInfo({dict(self)!r})"
+
+
+class SwarmInfoPool:
+    """The B :class:`SwarmInfo` of a step, recycled once nothing outside holds them.
+
+    Building B fresh objects per step costs little by itself, but at 1,024 swarms they
+    keep the garbage collector busy (gen-0 passes every step and, as they age, full
+    passes over every object of the process): about 0.7 ms per step. So a step takes a
+    set whose objects are referenced by this pool alone (the caller has dropped that
+    step's infos) and points it at the new statistics; if every set is still held, it
+    makes a new one. An info kept by the caller thus keeps its step's values.
+    """
+
+    def __init__(self, n_swarms: int) -> None:
+        self.n_swarms = n_swarms
+        self._sets: list[tuple[list[Any], list[SwarmInfo]]] = []
+
+    def infos(self, stats: Mapping[str, np.ndarray]) -> list[SwarmInfo]:
+        """B infos reading ``stats``: a free recycled set, or a new one."""
+        for holder, objects in self._sets:
+            if max(map(sys.getrefcount, objects)) <= _FREE_REFCOUNT:  # the pool's list only
+                holder[0] = stats
+                return objects
+        holder = [stats]
+        objects = [SwarmInfo(holder, b) for b in range(self.n_swarms)]
+        if len(self._sets) < _MAX_INFO_SETS:
+            self._sets.append((holder, objects))
+        return objects
+
+
+#: Recycled sets of SwarmInfo per VecEnv: two cover a caller that keeps one step's infos
+#: while it takes the next (SB3's rollout loop); more sets are made fresh, not kept.
+_MAX_INFO_SETS = 3
+
+
+#: The keys of every terminal info, after the statistics in a swarm's first slot.
+TERMINAL_KEYS = ("terminal_observation", "TimeLimit.truncated", "episode", "swarm_episode")
+
+
+@dataclass
+class TerminalRecord:
+    """What the terminal infos of one step read: that step's observations ``(B, N,
+    obs_dim)`` (before the reset), statistics, ``TimeLimit.truncated`` per swarm
+    ``(B,)`` and the ``episode`` dicts of the swarms that ended, by swarm."""
+
+    obs: np.ndarray
+    stats: Mapping[str, np.ndarray]
+    time_limit: np.ndarray
+    episodes: dict[int, dict[str, float]]
+
+
+class TerminalInfo(MutableMapping[str, Any]):
+    """The info of slot ``i`` (agent i) of swarm ``b`` at the step the swarm's episode ended.
+
+    Keys: the swarm's statistics (first slot, ``i == 0``, only), then
+    ``terminal_observation`` (the agent's last observation of the episode),
+    ``TimeLimit.truncated``, ``episode`` and ``swarm_episode`` (one dict per swarm),
+    read on access from the step's :class:`TerminalRecord`. Writing or deleting a key
+    first copies the info into a dict of its own (as ``VecNormalize`` does to
+    ``terminal_observation``); :meth:`copy` gives a plain dict.
+    """
+
+    __slots__ = ("_b", "_holder", "_i", "_own")
+
+    def __init__(self, holder: list[Any], b: int, i: int) -> None:
+        self._holder = holder  # [TerminalRecord, dirty list of the set]
+        self._b = b
+        self._i = i
+        self._own: dict[str, Any] | None = None
+
+    def __getitem__(self, key: str) -> Any:
+        if self._own is not None:
+            return self._own[key]
+        record: TerminalRecord = self._holder[0]
+        b = self._b
+        if key == "terminal_observation":
+            return record.obs[b, self._i]
+        if key == "TimeLimit.truncated":
+            return bool(record.time_limit[b])
+        if key == "episode" or key == "swarm_episode":
+            return record.episodes[b]
+        if self._i == 0 and key in record.stats:
+            return float(record.stats[key][b])
+        raise KeyError(key)
+
+    def _keys(self) -> Iterator[str]:
+        if self._i == 0:
+            yield from self._holder[0].stats
+        yield from TERMINAL_KEYS
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._own) if self._own is not None else self._keys()
+
+    def __len__(self) -> int:
+        if self._own is not None:
+            return len(self._own)
+        return len(TERMINAL_KEYS) + (len(self._holder[0].stats) if self._i == 0 else 0)
+
+    def _mine(self) -> dict[str, Any]:
+        if self._own is None:
+            self._own = {key: self[key] for key in self._keys()}
+            self._holder[1].append((self._b, self._i))  # reset when the set is reused
+        return self._own
+
+    def __setitem__(self, key: str, value: Any) -> None:
+        self._mine()[key] = value
+
+    def __delitem__(self, key: str) -> None:
+        del self._mine()[key]
+
+    def copy(self) -> dict[str, Any]:
+        return dict(self)
+
+    def __repr__(self) -> str:
+        return f"TerminalInfo(swarm={self._b}, agent={self._i}, keys={list(self)!r})"
+
+
+class TerminalInfoPool:
+    """The B × N :class:`TerminalInfo` of a step, recycled once nothing outside holds them.
+
+    When every swarm ends at once (all at the step limit), 32,768 fresh dicts per reset
+    cost about 45 ms at 1,024 × 32, and as they age, full garbage-collector passes. A
+    step takes a set whose objects only this pool references and points it at the new
+    :class:`TerminalRecord`; the slots of the swarms that ended get that set's objects.
+    """
+
+    def __init__(self, n_swarms: int, n_agents: int) -> None:
+        self.n_swarms, self.n_agents = n_swarms, n_agents
+        # (holder, objects, the swarms whose objects were handed out last)
+        self._sets: list[tuple[list[Any], list[TerminalInfo], list[int]]] = []
+
+    def infos(self, record: TerminalRecord, ended: list[int]) -> list[TerminalInfo]:
+        """B × N infos (slot b·N + i) reading ``record``, of which the caller hands out
+        those of the swarms ``ended``: a free recycled set, or a new one."""
+        N = self.n_agents
+        for holder, objects, given in self._sets:
+            # Only the objects handed out last time can be held outside (islice: no
+            # list of its own, which would add a reference).
+            if all(
+                max(map(sys.getrefcount, islice(objects, b * N, (b + 1) * N))) <= _FREE_REFCOUNT
+                for b in given
+            ):
+                for b, i in holder[1]:  # written to since: back to reading the record
+                    objects[b * N + i]._own = None
+                holder[:] = [record, []]
+                given[:] = ended
+                return objects
+        holder = [record, []]
+        objects = [TerminalInfo(holder, b, i) for b in range(self.n_swarms) for i in range(N)]
+        if len(self._sets) < _MAX_INFO_SETS:
+            self._sets.append((holder, objects, list(ended)))
+        return objects
