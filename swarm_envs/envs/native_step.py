@@ -13,8 +13,11 @@ agent-steps/s at 1,024 × 32 on the development machine) but not the rest of the
 the observation's gathers, the k-nearest passes over a stored distance matrix and the
 re-layout of the observation planes made its full step cost 4–5 times the physics. The C
 kernel keeps each swarm in a few kilobytes of scratch memory (the distance matrix of 32
-agents is 4 KB), selects the neighbours by insertion across 16 agents at a time, and
-writes every observation row once.
+agents is 4 KB); it evaluates each pair once (16 × 16 tiles, the partners rotated across
+the vector lanes, the force added to one agent and subtracted from the other), selects
+the neighbours by insertion across 16 agents at a time (float32: on 64-bit keys, the
+bits of ρ above the index, so the (ρ, j) order is integer order), and writes every
+observation row once.
 
 Build: the first use compiles the source with the C compiler (``$CC``, else ``cc`` or
 ``gcc``), ``-O3 -march=native -fopenmp``, into a per-user cache (``$SWARM_ENVS_CACHE``

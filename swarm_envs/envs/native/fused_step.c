@@ -3,7 +3,10 @@
  * Compiled at first use by swarm_envs/envs/native_step.py with the system C compiler
  * (-O3 -march=native -fopenmp): the loops over pairs are vectorised (float32 with the
  * inlined exp_f32 below; float64 calls glibc's vector exp, libmvec, declared SIMD), and
- * the swarms are spread over OpenMP threads. Called through ctypes.
+ * the swarms are spread over OpenMP threads. Called through ctypes. The GCC vector
+ * extensions used (vector_size, __builtin_shuffle, __builtin_convertvector) lower to
+ * narrower vectors or scalars where AVX-512 is missing; AVX-512 gets min/max intrinsics
+ * for the k-NN keys.
  */
 #include <math.h>
 #include <stdint.h>
@@ -32,7 +35,9 @@ enum {
  * Cephes' expf: x = n ln2 + r with |r| <= ln2/2 (ln2 in two parts), e^r by a degree-6
  * polynomial (relative error below 2e-7, about 2 ulp), times 2^n built in two factors
  * so that results down to the smallest subnormal are right. x is clamped to
- * [-104, 88.7]: e^x is 0 below and would overflow above. */
+ * [-104, 88.7] (e^x is 0 below and would overflow above) on its bits, by integer mins:
+ * as float compares GCC turned the clamp into chains of blends, twice the instructions.
+ * The same results for every x but NaN, which becomes a bound. */
 static inline float exp_f32(float x) {
     uint32_t ub; /* the clamp on the bits: an unsigned and a signed integer min */
     memcpy(&ub, &x, sizeof ub);
