@@ -118,6 +118,30 @@ def test_coincident_agents_stay_finite():
 
 
 @needs_native
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_equal_distances_rank_neighbours_by_index(dtype):
+    # Agents on a lattice: many pairs at exactly the same distance, and the tiles hand
+    # candidates over in rotated order. Distinct velocities make the order visible in
+    # the observations; it must be the (ρ, j) order of the torch step.
+    N = 37  # three blocks of 16 lanes (five of 8 in float64): tiles (J, I) with J < I
+    cfg = SwarmConfig(n_agents=N, n_neighbors=8)
+    idx = np.arange(N)
+    x = np.stack([idx % 7, idx // 7], axis=-1) * 0.5
+    v = np.stack([idx * 0.01, -idx * 0.02], axis=-1)
+    cores = [
+        TorchSwarmNavCore(cfg, batch=2, dtype=dtype, native=True),
+        TorchSwarmNavCore(cfg, batch=2, dtype=dtype, compile=False, native=False),
+    ]
+    for core in cores:
+        core.reset(np.random.default_rng(0))
+        core.x, core.v = np.stack([x, x[::-1]]), np.stack([v, v])
+    obs, ref = cores[0].observe(), cores[1].observe()
+    np.testing.assert_allclose(obs, ref, **CORE_TOL[dtype])
+    ranked = obs[..., 2 * 2 :].reshape(2, N, 8, 5)[..., 2:4]  # neighbours' relative velocity
+    assert np.unique(ranked.round(6), axis=2).shape[2] == 8  # the order is visible
+
+
+@needs_native
 def test_pickle_round_trip_keeps_the_native_step():
     core = TorchSwarmNavCore(SwarmConfig(n_agents=5), batch=3, native=True)
     core.reset(np.random.default_rng(0))
