@@ -191,7 +191,7 @@ class TerminalInfoPool:
     """The B × N :class:`TerminalInfo` of a step, recycled once nothing outside holds them.
 
     When every swarm ends at once (all at the step limit), 32,768 fresh dicts per reset
-    cost about 45 ms at 1,024 × 32, and as they age, full garbage-collector passes. A
+    cost about 43 ms at 1,024 × 32, and as they age, full garbage-collector passes. A
     step takes a set whose objects only this pool references and points it at the new
     :class:`TerminalRecord`; the slots of the swarms that ended get that set's objects.
     """

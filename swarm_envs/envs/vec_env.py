@@ -17,9 +17,11 @@ is the same dict under its older name.
 
 Infos: the swarm's statistics (:data:`swarm_envs.envs.core.STAT_KEYS`) are in the info
 of the swarm's first slot (``b·N``) only, as a read-only :class:`SwarmInfo` mapping; the
-slots of a swarm that just ended get fresh dicts (with the statistics in the first);
-every other slot's info is :data:`QUIET_INFO`, one shared read-only empty mapping
-(fresh dicts for 32k slots would cost more than the fused step).
+slots of a swarm that just ended get :class:`~swarm_envs.envs.infos.TerminalInfo`
+mappings (with the statistics in the first; writable, a write copies the info into a
+dict of its own); every other slot's info is :data:`QUIET_INFO`, one shared read-only
+empty mapping. None of them is built per step: fresh dicts for 32k slots would cost
+more than the fused step (see :mod:`swarm_envs.envs.infos`).
 :attr:`SwarmNavVecEnv.last_stats` holds the statistics as ``(B,)`` arrays.
 
 Large batches are split over worker threads (``n_threads``; default one per 512

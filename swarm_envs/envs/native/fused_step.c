@@ -82,7 +82,6 @@ typedef int32_t vindex_f32 __attribute__((vector_size(64)));
 #define FABS fabsf
 #define FUSED_SWARM fused_swarm_f32
 typedef uint64_t vkey __attribute__((vector_size(64)));
-typedef uint32_t vhalf_u32 __attribute__((vector_size(32)));
 /* Lanes [8h, 8h + 8) of a 16-lane int32 vector, zero-extended to 64 bits. */
 #define KEY_HALF(v, h)                                                                 \
     __builtin_convertvector(                                                           \
@@ -96,8 +95,6 @@ static inline vkey key_max(vkey a, vkey b) { return (vkey)_mm512_max_epu64((__m5
 static inline vkey key_min(vkey a, vkey b) { vkey lt = (vkey)(a < b); return (a & lt) | (b & ~lt); }
 static inline vkey key_max(vkey a, vkey b) { vkey lt = (vkey)(a < b); return (b & lt) | (a & ~lt); }
 #endif
-#define KEY_MIN key_min
-#define KEY_MAX key_max
 #define KNN_KEYS 1
 #define KNN_BLOCK knn_block_f32
 #define FUSED_STEP fused_step_f32

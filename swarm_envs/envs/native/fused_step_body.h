@@ -23,46 +23,6 @@ static inline __attribute__((always_inline)) void KNN_BLOCK(
      * insertion is a min and a max per slot, in two halves of LANES / 2 lanes. */
     vkey lo[KMAX_SORT], hi[KMAX_SORT];
     for (int64_t q = 0; q < K; q++) lo[q] = hi[q] = (vkey){0} + UINT64_MAX;
-    for (int64_t J = 0; J < nb; J++) {
-        const int64_t J0 = J * LANES;
-        const REAL *tile = rho + (J < I ? J * nb + I : I * nb + J) * LANES * LANES;
-        const int s_first = J == I ? 1 : 0, s_end = J == I ? LANES / 2 + 1 : LANES;
-        for (int s = s_first; s < s_end; s++) {
-            VREAL row;
-            memcpy(&row, tile + s * LANES, sizeof row);
-            const VINDEX back = rot[(LANES - s) & (LANES - 1)];
-            for (int side = 0; side < 2; side++) {
-                VINDEX bits, ci;
-                if (side == 0) {
-                    if (J < I) continue;
-                    bits = (VINDEX)row;
-                    ci = (INDEX)J0 + rot[s];
-                } else {
-                    if (J > I || (J == I && s == LANES / 2)) continue;
-                    bits = (VINDEX)__builtin_shuffle(row, back);
-                    ci = (INDEX)J0 + back;
-                }
-                vkey c_lo = (KEY_HALF(bits, 0) << 32) | KEY_HALF(ci, 0);
-                vkey c_hi = (KEY_HALF(bits, 1) << 32) | KEY_HALF(ci, 1);
-                for (int64_t q = 0; q < K; q++) {
-                    vkey t = KEY_MIN(lo[q], c_lo);
-                    c_lo = KEY_MAX(lo[q], c_lo);
-                    lo[q] = t;
-                    t = KEY_MIN(hi[q], c_hi);
-                    c_hi = KEY_MAX(hi[q], c_hi);
-                    hi[q] = t;
-                }
-            }
-        }
-    }
-    const int64_t n_lanes = N - I0 < LANES ? N - I0 : LANES;
-    for (int64_t q = 0; q < K; q++)
-        for (int64_t l = 0; l < n_lanes; l++) {
-            uint64_t key = l < LANES / 2 ? lo[q][l] : hi[q][l - LANES / 2];
-            uint32_t rbits = (uint32_t)(key >> 32);
-            memcpy(&near_d[q * N + I0 + l], &rbits, sizeof rbits);
-            near_i[q * N + I0 + l] = (int32_t)(key & 0xffffffffu);
-        }
 #else
     VREAL bd[KMAX_SORT];
     VINDEX bi[KMAX_SORT];
@@ -70,6 +30,7 @@ static inline __attribute__((always_inline)) void KNN_BLOCK(
         bd[q] = (VREAL){0} + (REAL)INFINITY;
         bi[q] = (VINDEX){0};
     }
+#endif
     for (int64_t J = 0; J < nb; J++) {
         const int64_t J0 = J * LANES;
         const REAL *tile = rho + (J < I ? J * nb + I : I * nb + J) * LANES * LANES;
@@ -90,6 +51,19 @@ static inline __attribute__((always_inline)) void KNN_BLOCK(
                     cd = __builtin_shuffle(row, back);
                     ci = (INDEX)J0 + back;
                 }
+#ifdef KNN_KEYS
+                const VINDEX bits = (VINDEX)cd;
+                vkey c_lo = (KEY_HALF(bits, 0) << 32) | KEY_HALF(ci, 0);
+                vkey c_hi = (KEY_HALF(bits, 1) << 32) | KEY_HALF(ci, 1);
+                for (int64_t q = 0; q < K; q++) {
+                    vkey t = key_min(lo[q], c_lo);
+                    c_lo = key_max(lo[q], c_lo);
+                    lo[q] = t;
+                    t = key_min(hi[q], c_hi);
+                    c_hi = key_max(hi[q], c_hi);
+                    hi[q] = t;
+                }
+#else
                 for (int64_t q = 0; q < K; q++) {
                     /* lt: all ones where the candidate goes before slot q. */
                     VINDEX lt = (VINDEX)(cd < bd[q]) | ((VINDEX)(cd == bd[q]) & (ci < bi[q]));
@@ -100,16 +74,23 @@ static inline __attribute__((always_inline)) void KNN_BLOCK(
                     cd = (VREAL)((bbits & lt) | (cbits & ~lt));
                     ci = (old_i & lt) | (ci & ~lt);
                 }
+#endif
             }
         }
     }
     const int64_t n_lanes = N - I0 < LANES ? N - I0 : LANES;
     for (int64_t q = 0; q < K; q++)
         for (int64_t l = 0; l < n_lanes; l++) {
+#ifdef KNN_KEYS
+            uint64_t key = l < LANES / 2 ? lo[q][l] : hi[q][l - LANES / 2];
+            uint32_t rbits = (uint32_t)(key >> 32);
+            memcpy(&near_d[q * N + I0 + l], &rbits, sizeof rbits);
+            near_i[q * N + I0 + l] = (int32_t)(key & 0xffffffffu);
+#else
             near_d[q * N + I0 + l] = bd[q][l];
             near_i[q * N + I0 + l] = (int32_t)bi[q][l];
-        }
 #endif
+        }
 }
 
 static inline __attribute__((always_inline)) void FUSED_SWARM(
@@ -144,7 +125,9 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
     const REAL Nr = (REAL)N;
     const int64_t S = NP; /* component stride of the scratch state (padded to LANES) */
 
-    /* Scratch: xs, vs, fs, offset (d × NP each), gd (N), rho (N × NP), near (k_sort × N). */
+    /* Scratch: xs, vs, fs, offset (d × NP each), gd (N), rho (NP × NP, per tile and
+     * offset), near (k_sort × N each, distances and int32 indices), tab (8 × N) and own
+     * (2d × NP float32) for the observations. */
     REAL *xs = scratch, *vs = xs + d * S, *fs = vs + d * S, *off = fs + d * S;
     REAL *gd = off + d * S, *rho = gd + N, *near_d = rho + NP * NP;
     int32_t *near_i = (int32_t *)(near_d + k_sort * N);
@@ -348,13 +331,14 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
         t[blk - 1] = 1;
     }
     float *own = (float *)(tab + 8 * N); /* the row's first 2d values, (2d, NP) */
+#define CLIP_OBS(val) ((float)((val) < -obs_bound ? -obs_bound : ((val) > obs_bound ? obs_bound : (val))))
     for (int64_t c = 0; c < d; c++) {
 #pragma omp simd
         for (int64_t i = 0; i < N; i++) {
             REAL val = off[c * S + i] / goal_scale;
-            own[c * NP + i] = (float)(val < -obs_bound ? -obs_bound : (val > obs_bound ? obs_bound : val));
+            own[c * NP + i] = CLIP_OBS(val);
             val = vs[c * S + i] / vel_scale;
-            own[(d + c) * NP + i] = (float)(val < -obs_bound ? -obs_bound : (val > obs_bound ? obs_bound : val));
+            own[(d + c) * NP + i] = CLIP_OBS(val);
         }
     }
     for (int64_t i = 0; i < N; i++) {
@@ -369,7 +353,7 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
 #pragma omp simd
                 for (int c = 0; c < 8; c++) {
                     REAL val = (g[c] - self[c] * keep[c]) * scl[c];
-                    out[c] = (float)(val < -obs_bound ? -obs_bound : (val > obs_bound ? obs_bound : val));
+                    out[c] = CLIP_OBS(val);
                 }
             } else {
                 for (int c = 0; c < 8; c++) out[c] = 0.0f;
@@ -382,6 +366,7 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
                 memcpy(on + q * blk, out, 7 * sizeof(float));
         }
     }
+#undef CLIP_OBS
 
     /* 5. Statistics (swarm_envs.metrics, MODELS.md §2). */
     REAL hsum[3] = {0, 0, 0}, centre[3] = {0, 0, 0}, scale = 0;
