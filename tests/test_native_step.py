@@ -77,6 +77,40 @@ def test_same_rollout_as_plain_torch_with_sub_batch_resets(name):
 
 
 @needs_native
+def test_resets_measure_exactly_the_reset_swarms_and_observe_which_hands_out_nothing(
+    monkeypatch,
+):
+    # The C step takes any batch: a reset of n < B swarms runs it on those n, unpadded
+    # (10 > reset_batch = 4 too); a reset of all B runs it on B.
+    cfg = SwarmConfig(n_agents=6, n_neighbors=3)
+    core = TorchSwarmNavCore(cfg, batch=64, native=True)
+    ref = SwarmNavCore(cfg, batch=64, dtype=np.float32)
+    calls: list[int] = []
+    inner = NativeAdvance.__call__
+    monkeypatch.setattr(
+        NativeAdvance, "__call__", lambda self, *a: calls.append(a[0].shape[1]) or inner(self, *a)
+    )
+    rng, ref_rng = np.random.default_rng(4), np.random.default_rng(4)
+    core.reset(rng)
+    ref.reset(ref_rng)
+    actions = np.random.default_rng(5).uniform(-1, 1, (64, 6, 2)).astype(np.float32)
+    for n in (1, 10, 63, 64):
+        core.step(actions)
+        ref.step(actions)
+        which = np.arange(64) < n
+        last = core.observe(which=which)  # a copy of those rows
+        np.testing.assert_allclose(last, ref.observe(which=which), **CORE_TOL[np.float32])
+        obs_memory = core._obs.data_ptr()
+        core.reset(rng, which=which)
+        ref.reset(ref_rng, which=which)
+        if n < 64:  # nothing was handed out: the new rows went in place
+            assert core._obs.data_ptr() == obs_memory
+        assert calls[-1] == n
+        assert not np.array_equal(core.observe()[:n], last)  # new starts
+        np.testing.assert_allclose(core.observe(), ref.observe(), **CORE_TOL[np.float32])
+
+
+@needs_native
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
 def test_results_do_not_depend_on_the_thread_count(dtype):
     cfg = SwarmConfig(n_agents=9, dim=3)
@@ -96,6 +130,31 @@ def test_results_do_not_depend_on_the_thread_count(dtype):
     for out in outs[1:]:
         for ours, ref in zip(out[:7], outs[0][:7], strict=True):
             assert torch.equal(ours, ref)
+
+
+@needs_native
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf], ids=["nan", "inf", "-inf"])
+def test_non_finite_actions_raise_in_the_c_step_and_change_nothing(dtype, bad):
+    # The C step checks the actions itself (the core skips numpy's isfinite and clip):
+    # any NaN or inf, in the first or the last swarm, raises before anything is
+    # written; finite values beyond [-1, 1] are clipped as numpy clips them.
+    cfg = SwarmConfig(n_agents=5, max_steps=50)
+    core = TorchSwarmNavCore(cfg, batch=3, dtype=dtype, native=True)
+    core.reset(np.random.default_rng(0))
+    x, v, t, obs = core.x, core.v, core.t.copy(), core.observe().copy()
+    for where in [(0, 0, 0), (2, 4, 1)]:
+        actions = np.zeros((3, 5, 2), dtype)
+        actions[where] = bad
+        with pytest.raises(ValueError, match="finite"):
+            core.step(actions)
+        assert np.array_equal(core.x, x) and np.array_equal(core.v, v)
+        assert np.array_equal(core.t, t) and np.array_equal(core.observe(), obs)
+    big = np.random.default_rng(1).uniform(-4, 4, (3, 5, 2)).astype(dtype)
+    twin = pickle.loads(pickle.dumps(core))
+    got, ref = core.step(big), twin.step(np.clip(big, -1, 1))
+    assert np.array_equal(got[0], ref[0]) and np.array_equal(core.x, twin.x)
+    assert np.array_equal(core.observe(), twin.observe())
 
 
 @needs_native

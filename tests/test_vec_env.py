@@ -551,8 +551,8 @@ def test_terminal_infos_read_their_step_are_writable_and_recycled():
     assert np.array_equal(first["terminal_observation"], kept_first["terminal_observation"])
     written = id(other)
     del first, other, info, infos, later
-    for _ in range(2 * T):  # sets recycled once dropped: a written info reads again
-        _, _, _, infos = venv.step(zero)
+    for _ in range(T):  # sets recycled once dropped, the oldest first: a written info
+        _, _, _, infos = venv.step(zero)  # reads the record again
     assert id(infos[1]) == written and list(infos[1]) == list(TERMINAL_KEYS)
     assert infos[1]["TimeLimit.truncated"] is True
     # SB3's VecNormalize normalises the terminal observations in place.

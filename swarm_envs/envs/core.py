@@ -68,11 +68,13 @@ def observation_size(cfg: SwarmConfig) -> int:
     return 2 * d + cfg.n_neighbors * (2 * d + 1)
 
 
-def check_actions(actions: Any, shape: tuple[int, ...]) -> np.ndarray:
-    """Actions as a float array of exactly ``shape``; NaN/inf or wrong shape → ValueError.
+#: The error message for NaN or infinite actions (every core and the C step raise it).
+NON_FINITE_ACTIONS = "actions must be finite (got NaN or inf); allowed range [-1, 1]"
 
-    Finite values outside [−1, 1] are clipped (the Box convention of SB3 and RLlib).
-    """
+
+def check_action_shape(actions: Any, shape: tuple[int, ...]) -> np.ndarray:
+    """Actions as a numeric array of exactly ``shape`` (a same-size array of another
+    rank is reshaped); a non-numeric dtype or another size → :class:`ValueError`."""
     a = np.asarray(actions)
     if a.dtype == object or not (
         np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)
@@ -83,8 +85,17 @@ def check_actions(actions: Any, shape: tuple[int, ...]) -> np.ndarray:
             a = a.reshape(shape)
         else:
             raise ValueError(f"actions must have shape {shape}, got {a.shape}")
+    return a
+
+
+def check_actions(actions: Any, shape: tuple[int, ...]) -> np.ndarray:
+    """Actions as a float array of exactly ``shape``; NaN/inf or wrong shape → ValueError.
+
+    Finite values outside [−1, 1] are clipped (the Box convention of SB3 and RLlib).
+    """
+    a = check_action_shape(actions, shape)
     if not np.isfinite(a).all():
-        raise ValueError("actions must be finite (got NaN or inf); allowed range [-1, 1]")
+        raise ValueError(NON_FINITE_ACTIONS)
     return np.clip(a, -1.0, 1.0)
 
 
@@ -277,14 +288,18 @@ class SwarmNavCore:
             "success": (arrived >= cfg.success_fraction - 1e-9).astype(np.float64),
         }
 
-    def observe(self) -> np.ndarray:
+    def observe(self, which: np.ndarray | None = None) -> np.ndarray:
         """Local observations ``(B, N, obs_dim)``, float32, inside ``[−OBS_BOUND, OBS_BOUND]``.
 
         Per agent i: ``(r_g − r_i)/obs_goal_scale`` (d), ``v_i/obs_velocity_scale`` (d),
         then for each of the k nearest neighbours j, nearest first:
         ``(r_j − r_i)/obs_neighbor_scale`` (d), ``(v_j − v_i)/obs_velocity_scale`` (d)
         and a mask (1 = real neighbour, 0 = padding when N − 1 < k; padded slots are 0).
+        ``which`` (bool mask ``(B,)``): those swarms' observations only, ``(n, N,
+        obs_dim)``. Every call returns a new array.
         """
+        if which is not None:
+            return self.observe()[np.flatnonzero(which)]
         cfg = self.cfg
         B, N, d = self.x.shape
         k = cfg.n_neighbors

@@ -23,7 +23,6 @@ from __future__ import annotations
 import sys
 from collections.abc import Iterator, Mapping, MutableMapping
 from dataclasses import dataclass
-from itertools import islice
 from types import MappingProxyType
 from typing import Any
 
@@ -88,10 +87,16 @@ class SwarmInfoPool:
         self._sets: list[tuple[list[Any], list[SwarmInfo]]] = []
 
     def infos(self, stats: Mapping[str, np.ndarray]) -> list[SwarmInfo]:
-        """B infos reading ``stats``: a free recycled set, or a new one."""
-        for holder, objects in self._sets:
+        """B infos reading ``stats``: a free recycled set, or a new one.
+
+        The set handed out longest ago is tried first (a caller like SB3's rollout
+        loop still holds the last one while it takes the next), so a step usually
+        scans one set.
+        """
+        for n, (holder, objects) in enumerate(self._sets):
             if max(map(sys.getrefcount, objects)) <= _FREE_REFCOUNT:  # the pool's list only
                 holder[0] = stats
+                self._sets.append(self._sets.pop(n))  # now the newest
                 return objects
         holder = [stats]
         objects = [SwarmInfo(holder, b) for b in range(self.n_swarms)]
@@ -111,11 +116,12 @@ TERMINAL_KEYS = ("terminal_observation", "TimeLimit.truncated", "episode", "swar
 
 @dataclass
 class TerminalRecord:
-    """What the terminal infos of one step read: that step's observations ``(B, N,
-    obs_dim)`` (before the reset), statistics, ``TimeLimit.truncated`` per swarm
-    ``(B,)`` and the ``episode`` dicts of the swarms that ended, by swarm."""
+    """What the terminal infos of one step read: the last observations ``(N, obs_dim)``
+    of the swarms that ended (before their reset), by swarm; the step's statistics;
+    ``TimeLimit.truncated`` per swarm ``(B,)``; and the ``episode`` dicts of the swarms
+    that ended, by swarm."""
 
-    obs: np.ndarray
+    obs: Mapping[int, np.ndarray]
     stats: Mapping[str, np.ndarray]
     time_limit: np.ndarray
     episodes: dict[int, dict[str, float]]
@@ -146,7 +152,7 @@ class TerminalInfo(MutableMapping[str, Any]):
         record: TerminalRecord = self._holder[0]
         b = self._b
         if key == "terminal_observation":
-            return record.obs[b, self._i]
+            return record.obs[b][self._i]
         if key == "TimeLimit.truncated":
             return bool(record.time_limit[b])
         if key == "episode" or key == "swarm_episode":
@@ -194,31 +200,31 @@ class TerminalInfoPool:
     cost about 43 ms at 1,024 × 32, and as they age, full garbage-collector passes. A
     step takes a set whose objects only this pool references and points it at the new
     :class:`TerminalRecord`; the slots of the swarms that ended get that set's objects.
+    A set holds one list of N objects per swarm, so that checking the swarms handed out
+    last looks at their objects alone.
     """
 
     def __init__(self, n_swarms: int, n_agents: int) -> None:
         self.n_swarms, self.n_agents = n_swarms, n_agents
-        # (holder, objects, the swarms whose objects were handed out last)
-        self._sets: list[tuple[list[Any], list[TerminalInfo], list[int]]] = []
+        # (holder, objects by swarm, the swarms whose objects were handed out last)
+        self._sets: list[tuple[list[Any], list[list[TerminalInfo]], list[int]]] = []
 
-    def infos(self, record: TerminalRecord, ended: list[int]) -> list[TerminalInfo]:
-        """B × N infos (slot b·N + i) reading ``record``, of which the caller hands out
-        those of the swarms ``ended``: a free recycled set, or a new one."""
-        N = self.n_agents
-        for holder, objects, given in self._sets:
-            # Only the objects handed out last time can be held outside (islice: no
-            # list of its own, which would add a reference).
-            if all(
-                max(map(sys.getrefcount, islice(objects, b * N, (b + 1) * N))) <= _FREE_REFCOUNT
-                for b in given
-            ):
+    def infos(self, record: TerminalRecord, ended: list[int]) -> list[list[TerminalInfo]]:
+        """The N infos of each swarm (slot b·N + i is ``[b][i]``) reading ``record``, of
+        which the caller hands out those of the swarms ``ended``: a free recycled set
+        (the one handed out longest ago first), or a new one."""
+        for n, (holder, by_swarm, given) in enumerate(self._sets):
+            # Only the objects handed out last time can be held outside.
+            if all(max(map(sys.getrefcount, by_swarm[b])) <= _FREE_REFCOUNT for b in given):
                 for b, i in holder[1]:  # written to since: back to reading the record
-                    objects[b * N + i]._own = None
+                    by_swarm[b][i]._own = None
                 holder[:] = [record, []]
                 given[:] = ended
-                return objects
+                self._sets.append(self._sets.pop(n))  # now the newest
+                return by_swarm
         holder = [record, []]
-        objects = [TerminalInfo(holder, b, i) for b in range(self.n_swarms) for i in range(N)]
+        N = self.n_agents
+        by_swarm = [[TerminalInfo(holder, b, i) for i in range(N)] for b in range(self.n_swarms)]
         if len(self._sets) < _MAX_INFO_SETS:
-            self._sets.append((holder, objects, list(ended)))
-        return objects
+            self._sets.append((holder, by_swarm, list(ended)))
+        return by_swarm

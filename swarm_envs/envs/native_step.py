@@ -61,7 +61,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from swarm_envs.envs.core import OBS_BOUND, success_count
+from swarm_envs.envs.core import NON_FINITE_ACTIONS, OBS_BOUND, success_count
 from swarm_envs.metrics import CENTRE_RTOL
 from swarm_envs.physics.social_potential import RHO_FLOOR
 
@@ -298,6 +298,8 @@ class NativeAdvance:
         fn, ip, dp = self._fns[dtype], ints.ctypes.data, self._reals[dtype].ctypes.data
         ptrs = [t.data_ptr() for t in tensors]
         code = fn(ip, dp, 0, B, *ptrs)
+        if code == 3:
+            raise ValueError(NON_FINITE_ACTIONS)
         if code:
             raise MemoryError("the C step could not allocate its scratch memory")
         return x_out, v_out, f_out, obs, packed, mean_dist, arrived, None

@@ -36,7 +36,8 @@ observations, statistics and carried force always describe the current state. A 
 of a few swarms (at most :attr:`TorchSwarmNavCore.reset_batch`, 1/16 of a batch of 64
 or more) evaluates them alone, through the same function compiled for that sub-batch:
 in a VecEnv some swarm ends on most steps, and re-measuring all B swarms each time
-would cost a second full step.
+would cost a second full step. The C step takes any batch size, so with it a reset of
+any proper subset of the swarms evaluates those alone, unpadded.
 
 Compile time: the constructor makes the first (compiling) call, on the all-zero state,
 and stores its wall time in :attr:`TorchSwarmNavCore.compile_seconds` (also logged once
@@ -66,8 +67,10 @@ import torch
 
 from swarm_envs._malloc import keep_freed_memory
 from swarm_envs.envs.core import (
+    NON_FINITE_ACTIONS,
     OBS_BOUND,
     STAT_KEYS,
+    check_action_shape,
     check_actions,
     check_batch,
     draw_starts,
@@ -369,7 +372,8 @@ class TorchSwarmNavCore:
         compile_seconds: wall time of the first calls, made by the constructor (the
             compile time when compiled).
         reset_batch: resets of at most this many swarms evaluate only those
-            (:func:`partial_reset_batch`); ``None`` below 64 swarms.
+            (:func:`partial_reset_batch`); ``None`` below 64 swarms. The C step
+            evaluates only the reset swarms whenever they are not all of them.
 
     ``x``, ``v``, ``goal`` read as fresh read-only numpy arrays; assigning one of them
     (a whole array) moves it to the device and re-measures the state. ``t`` is the
@@ -567,17 +571,23 @@ class TorchSwarmNavCore:
     def _measure_rows(
         self, idx: np.ndarray, rows: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """:meth:`_measure` for swarms ``idx`` (at most :attr:`reset_batch`) only.
+        """:meth:`_measure` for swarms ``idx`` only (see :meth:`_measures_rows`).
 
         ``rows`` holds the same indices on the device.
 
-        The rows are padded to ``reset_batch`` with copies of the first; the results of
-        the real ones are written into the force, observations and statistics.
+        For the torch function the rows are padded to ``reset_batch`` with copies of
+        the first (its shapes are static); the C step takes them as they are. The
+        results of the real ones are written into the force, observations and
+        statistics.
         """
-        assert self._advance_part is not None and self.reset_batch is not None
         n = rows.shape[0]
-        padded = torch.cat([rows, rows[:1].expand(self.reset_batch - n)])
-        _, _, f, obs, packed, mean_dist, arrived, _ = self._advance_part(*self._row_args(padded))
+        if self._native is not None:
+            part, padded = self._native, rows
+        else:
+            assert self._advance_part is not None and self.reset_batch is not None
+            part = self._advance_part
+            padded = torch.cat([rows, rows[:1].expand(self.reset_batch - n)])
+        _, _, f, obs, packed, mean_dist, arrived, _ = part(*self._row_args(padded))
         self._f[:, rows] = f[:, :n]
         if self._obs_given or self._obs_shared:  # handed out: leave that memory alone
             self._obs = self._obs.clone()
@@ -608,7 +618,7 @@ class TorchSwarmNavCore:
         goal_t[rows] = self._to_device(goal)
         self._goal = goal_t
         self.t[idx] = 0
-        if self.reset_batch is not None and idx.size <= self.reset_batch:
+        if self._measures_rows(idx.size):
             mean_dist, arrived = self._measure_rows(idx, rows)
         else:
             mean_dist, arrived = self._measure()
@@ -619,6 +629,13 @@ class TorchSwarmNavCore:
         )
         self._prev_distance = self._prev_distance.index_put((rows,), mean_dist)
         self._prev_arrived = self._prev_arrived.index_put((rows,), arrived)
+
+    def _measures_rows(self, n: int) -> bool:
+        """Whether a reset of ``n`` swarms evaluates those alone: with the C step
+        when they are not all of them, else when they fit in :attr:`reset_batch`."""
+        if self._native is not None:
+            return n < self.batch
+        return self.reset_batch is not None and n <= self.reset_batch
 
     def _put(self, state: torch.Tensor, rows: torch.Tensor, new: np.ndarray) -> torch.Tensor:
         """A copy of ``state`` ``(d, B, N)`` with swarms ``rows`` set from ``new`` ``(n, N, d)``."""
@@ -651,8 +668,12 @@ class TorchSwarmNavCore:
                     raise ValueError(f"actions must have shape {shape}, got {tuple(a.shape)}")
             a = a.to(self.device, self._tdtype)
             if not bool(torch.isfinite(a).all()):
-                raise ValueError("actions must be finite (got NaN or inf); allowed range [-1, 1]")
+                raise ValueError(NON_FINITE_ACTIONS)
             return a.clamp(-1.0, 1.0)
+        if self._native is not None:
+            # The C step checks finiteness and clips as it reads the actions (raising
+            # before anything is written): two numpy passes over them saved per step.
+            return self._to_device(check_action_shape(actions, shape))
         a = check_actions(actions, shape)  # numpy: shape, finiteness, clipping
         return self._to_device(a)
 
@@ -695,7 +716,7 @@ class TorchSwarmNavCore:
             for i, key in enumerate(STAT_KEYS)
         }
 
-    def observe(self) -> np.ndarray:
+    def observe(self, which: np.ndarray | None = None) -> np.ndarray:
         """Local observations ``(B, N, obs_dim)``, float32, inside ``[−OBS_BOUND, OBS_BOUND]``.
 
         The layout of :meth:`SwarmNavCore.observe`: ``(r_g − r_i)/obs_goal_scale`` (d),
@@ -706,7 +727,16 @@ class TorchSwarmNavCore:
         call on the same state measures it again. From a GPU the observations are copied
         into page-locked host memory (torch's caching host allocator), several times
         faster than into a fresh numpy array for large batches.
+
+        ``which`` (bool mask ``(B,)``): the observations of those swarms only, ``(n, N,
+        obs_dim)``, copied out. This hands out no memory of the core, so a reset that
+        follows writes its swarms' rows in place rather than into a copy of the whole
+        array (what the VecEnv does when some swarms end: it keeps their last
+        observations, resets them and then observes).
         """
+        if which is not None:
+            rows = torch.as_tensor(np.flatnonzero(which), device=self.device)
+            return self._obs[rows].cpu().numpy()
         if self.device.type == "cpu":
             if self._obs_given:
                 self._measure()  # the array handed out shares memory with self._obs

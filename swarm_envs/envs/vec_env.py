@@ -149,7 +149,8 @@ class SwarmNavVecEnv(VecEnv):
         return list(self._pool.map(fn, self.cores, self._slices))
 
     def _observe(self) -> np.ndarray:
-        return np.concatenate(self._map(lambda core, _: core.observe()), axis=0)
+        parts = self._map(lambda core, _: core.observe())
+        return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=0)
 
     def _stats(self) -> dict[str, np.ndarray]:
         parts = [core.stats() for core in self.cores]
@@ -193,16 +194,21 @@ class SwarmNavVecEnv(VecEnv):
             raise ValueError(f"actions must have shape {(self.num_envs, d)}, got {actions.shape}")
         self._actions = None
         a = actions.reshape(B, N, d)
-        parts = self._map(lambda core, sl: (*core.step(a[sl]), core.observe()))
-        obs_parts = [p[4] for p in parts]
+
+        def step(core: SwarmNavCore, sl: slice) -> tuple:
+            reward, terminated, truncated, stats = core.step(a[sl])
+            # A core with swarms to reset observes after the reset, in step_wait.
+            ended = terminated.any() or truncated.any()
+            return reward, terminated, truncated, stats, None if ended else core.observe()
+
+        parts = self._map(step)
         if len(parts) == 1:  # one core: its arrays as they are, no copies
-            reward, terminated, truncated, stats, obs = parts[0]
+            reward, terminated, truncated, stats, _ = parts[0]
         else:
             reward, terminated, truncated = (
                 np.concatenate([p[i] for p in parts]) for i in range(3)
             )
             stats = {k: np.concatenate([p[3][k] for p in parts]) for k in parts[0][3]}
-            obs = np.concatenate(obs_parts, axis=0)
         self.last_stats = stats
         self.episode_returns += reward
         self.episode_lengths += 1
@@ -212,35 +218,62 @@ class SwarmNavVecEnv(VecEnv):
         infos: list[Any] = [QUIET_INFO] * self.num_envs
         infos[::N] = self._swarm_infos.infos(stats)  # read on access; see the pool
         if done.any():
-            ended = np.flatnonzero(done)  # only the swarms that just ended
-            now = round(time.time() - self._t_start, 6)
-            record = TerminalRecord(
-                obs=obs,
-                stats=stats,
-                time_limit=truncated & ~terminated,
-                episodes={
-                    int(b): {"r": float(r), "l": int(n), "t": now}
-                    for b, r, n in zip(
-                        ended, self.episode_returns[ended], self.episode_lengths[ended], strict=True
-                    )
-                },
-            )
-            swarms = ended.tolist()
-            terminal = self._terminal_infos.infos(record, swarms)
-            for b in swarms:
-                infos[b * N : (b + 1) * N] = terminal[b * N : (b + 1) * N]
-            # A core's observe() never hands out memory it writes to later, so the
-            # terminal observations above (views of `obs`) keep the old rows.
-            for c, (core, sl) in enumerate(zip(self.cores, self._slices, strict=True)):
-                if done[sl].any():  # in order: seeded
-                    core.reset(self._rng, which=done[sl])
-                    obs_parts[c] = core.observe()
-            obs = obs_parts[0] if len(obs_parts) == 1 else np.concatenate(obs_parts, axis=0)
-            self.episode_returns[done] = 0.0
-            self.episode_lengths[done] = 0
-        rewards = np.repeat(reward, N).astype(np.float32)
-        dones = np.repeat(done, N)
-        return obs.reshape(self.num_envs, -1), rewards, dones, infos
+            self._end_episodes(done, truncated & ~terminated, stats, infos)
+        obs_parts = [
+            core.observe() if p[4] is None else p[4]
+            for core, p in zip(self.cores, parts, strict=True)
+        ]
+        obs = obs_parts[0] if len(obs_parts) == 1 else np.concatenate(obs_parts, axis=0)
+        rewards = np.empty((B, N), np.float32)
+        rewards[:] = reward[:, None]
+        dones = np.empty((B, N), bool)
+        dones[:] = done[:, None]
+        return obs.reshape(self.num_envs, -1), rewards.reshape(-1), dones.reshape(-1), infos
+
+    def _end_episodes(
+        self,
+        done: np.ndarray,
+        time_limit: np.ndarray,
+        stats: dict[str, np.ndarray],
+        infos: list[Any],
+    ) -> None:
+        """Terminal infos for the swarms ``done`` (into ``infos``), then reset them.
+
+        Their last observations are copied out first (only their rows), so that each
+        core's reset writes the new rows in place of the old ones.
+        """
+        N = self.n_agents
+        ended = np.flatnonzero(done)  # only the swarms that just ended
+        swarms = ended.tolist()
+        last = [core.observe(which=done[sl]) for core, sl in self._cores_with(done)]
+        now = round(time.time() - self._t_start, 6)
+        record = TerminalRecord(
+            obs=dict(zip(swarms, itertools.chain.from_iterable(last), strict=True)),
+            stats=stats,
+            time_limit=time_limit,
+            episodes={
+                b: {"r": r, "l": n, "t": now}
+                for b, r, n in zip(
+                    swarms,
+                    self.episode_returns[ended].tolist(),
+                    self.episode_lengths[ended].tolist(),
+                    strict=True,
+                )
+            },
+        )
+        terminal = self._terminal_infos.infos(record, swarms)
+        for b in swarms:
+            infos[b * N : (b + 1) * N] = terminal[b]
+        for core, sl in self._cores_with(done):  # in order: seeded
+            core.reset(self._rng, which=done[sl])
+        self.episode_returns[done] = 0.0
+        self.episode_lengths[done] = 0
+
+    def _cores_with(self, done: np.ndarray) -> list[tuple[SwarmNavCore, slice]]:
+        """The cores (with their slices) that step at least one swarm of ``done``."""
+        return [
+            (core, sl) for core, sl in zip(self.cores, self._slices, strict=True) if done[sl].any()
+        ]
 
     def close(self) -> None:
         if self._pool is not None:

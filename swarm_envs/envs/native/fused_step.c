@@ -63,6 +63,9 @@ static inline float exp_f32(float x) {
     return y * s1 * s2;
 }
 
+/* An action x clipped to [-1, 1] (x finite). */
+#define UNIT_CLIP(x) ((x) < -1 ? (REAL)-1 : (x) > 1 ? (REAL)1 : (x))
+
 #define N_PACKED 11
 #define KMAX_SORT 64
 
@@ -70,6 +73,8 @@ int fused_step_abi(void) { return 1000 * IP_SIZE + 10 * DP_SIZE + N_PACKED * 0 +
 int fused_step_kmax(void) { return KMAX_SORT; }
 
 #define REAL float
+#define ABITS uint32_t /* a REAL's bits, and its exponent's */
+#define EXP_MASK 0x7F800000u
 #define INDEX int32_t
 #define LANES 16
 typedef float vreal_f32 __attribute__((vector_size(64)));
@@ -100,6 +105,8 @@ static inline vkey key_max(vkey a, vkey b) { vkey lt = (vkey)(a < b); return (b 
 #define FUSED_STEP fused_step_f32
 #include "fused_step_body.h"
 #undef REAL
+#undef ABITS
+#undef EXP_MASK
 #undef EXP
 #undef SQRT
 #undef FLOOR
@@ -114,6 +121,8 @@ static inline vkey key_max(vkey a, vkey b) { vkey lt = (vkey)(a < b); return (b 
 #undef VINDEX
 
 #define REAL double
+#define ABITS uint64_t
+#define EXP_MASK 0x7FF0000000000000u
 #define INDEX int64_t
 #define LANES 8
 typedef double vreal_f64 __attribute__((vector_size(64)));

@@ -132,13 +132,14 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
     REAL *gd = off + d * S, *rho = gd + N, *near_d = rho + NP * NP;
     int32_t *near_i = (int32_t *)(near_d + k_sort * N);
 
-    /* 1. Semi-implicit Euler with the carried passive force. */
+    /* 1. Semi-implicit Euler with the carried passive force; actions clipped to [-1, 1]
+     * (FUSED_STEP has checked that they are finite). */
     for (int64_t c = 0; c < d; c++) {
         const REAL *xc = x + (c * B + b) * N, *vc = v + (c * B + b) * N, *fc = f + (c * B + b) * N;
         const REAL *ab = a + b * N * d;
         for (int64_t i = 0; i < N; i++) {
             if (move[b]) {
-                REAL accel = fc[i] + u_max * ab[i * d + c];
+                REAL accel = fc[i] + u_max * UNIT_CLIP(ab[i * d + c]);
                 if (m != (REAL)1) accel = accel / m;
                 REAL vn = vc[i] + dt * accel;
                 vs[c * S + i] = vn;
@@ -427,7 +428,10 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
     const REAL success = arrived_count >= need ? 1 : 0;
     const REAL mean_goal_distance = gd_sum / Nr;
     REAL effort = 0;
-    for (int64_t t = 0; t < N * d; t++) effort += a[b * N * d + t] * a[b * N * d + t];
+    for (int64_t t = 0; t < N * d; t++) {
+        const REAL at = UNIT_CLIP(a[b * N * d + t]);
+        effort += at * at;
+    }
     const REAL reward = (REAL)dp[DP_W_PROGRESS] * (prev_distance[b] - mean_goal_distance) /
                             start_distance[b] +
                         (REAL)dp[DP_W_ARRIVAL] * (arrived - prev_arrived[b]) +
@@ -460,7 +464,9 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
 /* Swarms [b0, b1), spread over the OpenMP threads (torch's own pool when torch is
  * loaded: its libgomp.so.1 is the one this library links to). Every swarm is stepped by
  * one thread in the same way, so the results do not depend on the thread count.
- * Returns 0, 1 if scratch memory could not be allocated, 2 if k_sort > KMAX_SORT. */
+ * Returns 0, 1 if scratch memory could not be allocated, 2 if k_sort > KMAX_SORT, 3 if
+ * an action of these swarms is NaN or infinite (checked first: nothing is written).
+ * Finite actions outside [-1, 1] are clipped, as numpy's clip would. */
 int FUSED_STEP(const int64_t *ip, const double *dp, int64_t b0, int64_t b1, const REAL *x,
                const REAL *v, const REAL *f, const REAL *goal, const REAL *a,
                const uint8_t *move, const REAL *prev_distance, const REAL *prev_arrived,
@@ -469,6 +475,12 @@ int FUSED_STEP(const int64_t *ip, const double *dp, int64_t b0, int64_t b1, cons
     const int64_t N = ip[IP_N], d = ip[IP_D], k_sort = ip[IP_K_SORT];
     const int64_t NP = (N + LANES - 1) / LANES * LANES;
     if (k_sort > KMAX_SORT) return 2;
+    /* Non-finite actions: exponent bits all ones (an integer OR reduction, vectorised). */
+    const ABITS *abits = (const ABITS *)(a + b0 * N * d);
+    ABITS nonfinite = 0;
+    for (int64_t t = 0; t < (b1 - b0) * N * d; t++)
+        nonfinite |= (ABITS)((abits[t] & EXP_MASK) == EXP_MASK);
+    if (nonfinite) return 3;
     const size_t n_real = (size_t)(4 * d * NP + N + NP * NP + 2 * k_sort * N + 8 * N + 2 * d * NP);
     int status = 0;
 #pragma omp parallel if (b1 - b0 > 1) reduction(| : status)
