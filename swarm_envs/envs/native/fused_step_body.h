@@ -134,22 +134,24 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
 
     /* 1. Semi-implicit Euler with the carried passive force; actions clipped to [-1, 1]
      * (FUSED_STEP has checked that they are finite). */
+    const REAL *ab = a + b * N * d;
+    const int moving = move[b];
     for (int64_t c = 0; c < d; c++) {
         const REAL *xc = x + (c * B + b) * N, *vc = v + (c * B + b) * N, *fc = f + (c * B + b) * N;
-        const REAL *ab = a + b * N * d;
-        for (int64_t i = 0; i < N; i++) {
-            if (move[b]) {
+        REAL *xn = xs + c * S, *vn = vs + c * S;
+        if (moving) {
+#pragma omp simd
+            for (int64_t i = 0; i < N; i++) {
                 REAL accel = fc[i] + u_max * UNIT_CLIP(ab[i * d + c]);
                 if (m != (REAL)1) accel = accel / m;
-                REAL vn = vc[i] + dt * accel;
-                vs[c * S + i] = vn;
-                xs[c * S + i] = xc[i] + dt * vn;
-            } else {
-                vs[c * S + i] = vc[i];
-                xs[c * S + i] = xc[i];
+                vn[i] = vc[i] + dt * accel;
+                xn[i] = xc[i] + dt * vn[i];
             }
+        } else {
+            memcpy(vn, vc, N * sizeof(REAL));
+            memcpy(xn, xc, N * sizeof(REAL));
         }
-        for (int64_t i = N; i < NP; i++) xs[c * S + i] = vs[c * S + i] = 0; /* padding lanes */
+        for (int64_t i = N; i < NP; i++) xn[i] = vn[i] = 0; /* padding lanes */
     }
 
     /* 2. One pass over the unordered pairs of the new state: F(x', v'), pair energy, ρ.
@@ -266,24 +268,32 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
             if (beta > 0) fs[c * S + i] = fs[c * S + i] - beta * vs[c * S + i];
             off[c * S + i] = g[c] - xs[c * S + i];
         }
-    REAL sink = 0;
+    REAL sink = 0, kinetic = 0;
+#pragma omp simd
     for (int64_t i = 0; i < N; i++) {
         REAL s2 = 0;
         for (int64_t c = 0; c < d; c++) s2 += off[c * S + i] * off[c * S + i];
         gd[i] = SQRT(s2);
     }
     if (physics_goal) {
+#pragma omp simd
         for (int64_t i = 0; i < N; i++) {
             REAL scale = cg_lg * EXP(-gd[i] / l_g);
             scale = scale / (gd[i] > rho_floor ? gd[i] : rho_floor);
             for (int64_t c = 0; c < d; c++) fs[c * S + i] = fs[c * S + i] + off[c * S + i] * scale;
         }
     }
-    if (C_g > 0)
+    /* The sums below and in 5. are vectorised (omp simd reductions): their order is
+     * fixed by the build, not by the thread count. */
+    if (C_g > 0) {
+#pragma omp simd reduction(+ : sink)
         for (int64_t i = 0; i < N; i++) sink += -C_g * EXP(-gd[i] / l_g);
-    REAL kinetic = 0;
-    for (int64_t c = 0; c < d; c++)
-        for (int64_t i = 0; i < N; i++) kinetic += vs[c * S + i] * vs[c * S + i];
+    }
+    for (int64_t c = 0; c < d; c++) {
+        const REAL *vc = vs + c * S;
+#pragma omp simd reduction(+ : kinetic)
+        for (int64_t i = 0; i < N; i++) kinetic += vc[i] * vc[i];
+    }
     const REAL phi = (REAL)0.5 * m * kinetic + (REAL)0.5 * energy_pairs + sink;
     const REAL collisions = FLOOR((REAL)close_pairs * (REAL)0.5);
 
@@ -306,6 +316,7 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
             default: KNN_BLOCK(k_sort, I, nb, N, rho, rot, near_d, near_i); break;
             }
         }
+#pragma omp simd reduction(+ : nnd)
         for (int64_t i = 0; i < N; i++) nnd += near_d[i];
         nnd = nnd / Nr;
     }
@@ -369,57 +380,61 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
     }
 #undef CLIP_OBS
 
-    /* 5. Statistics (swarm_envs.metrics, MODELS.md §2). */
-    REAL hsum[3] = {0, 0, 0}, centre[3] = {0, 0, 0}, scale = 0;
+    /* 5. Statistics (swarm_envs.metrics, MODELS.md §2). Headings v/|v| (0 at rest) and
+     * unit offsets from the centroid (0 within the centring tolerance) as quotients
+     * whose divisor is replaced by 1 where they are 0: the loops vectorise. */
+    const REAL *x0 = xs, *x1 = xs + S, *x2 = xs + 2 * S;
+    const REAL *v0 = vs, *v1 = vs + S, *v2 = vs + 2 * S;
+    REAL hs0 = 0, hs1 = 0, hs2 = 0, cs0 = 0, cs1 = 0, cs2 = 0, scale = 0;
+#pragma omp simd reduction(+ : hs0, hs1, hs2, cs0, cs1, cs2) reduction(max : scale)
     for (int64_t i = 0; i < N; i++) {
-        REAL s2 = 0;
-        for (int64_t c = 0; c < d; c++) s2 += vs[c * S + i] * vs[c * S + i];
-        REAL speed = SQRT(s2);
-        for (int64_t c = 0; c < d; c++) {
-            hsum[c] += speed > 0 ? vs[c * S + i] / speed : 0;
-            centre[c] += xs[c * S + i];
-            REAL ax = FABS(xs[c * S + i]);
-            scale = ax > scale ? ax : scale;
-        }
+        const REAL vz = d == 3 ? v2[i] : 0, xz = d == 3 ? x2[i] : 0;
+        const REAL speed = SQRT(v0[i] * v0[i] + v1[i] * v1[i] + vz * vz);
+        const int moves = speed > 0;
+        const REAL den = moves ? speed : 1;
+        hs0 += (moves ? v0[i] : 0) / den;
+        hs1 += (moves ? v1[i] : 0) / den;
+        hs2 += (moves ? vz : 0) / den;
+        cs0 += x0[i];
+        cs1 += x1[i];
+        cs2 += xz;
+        REAL ax = FABS(x0[i]) > FABS(x1[i]) ? FABS(x0[i]) : FABS(x1[i]);
+        ax = FABS(xz) > ax ? FABS(xz) : ax;
+        scale = ax > scale ? ax : scale;
     }
-    REAL pol2 = 0;
-    for (int64_t c = 0; c < d; c++) {
-        pol2 += hsum[c] * hsum[c];
-        centre[c] = centre[c] / Nr;
-    }
-    REAL polarization = SQRT(pol2) / Nr;
+    const REAL centre[3] = {cs0 / Nr, cs1 / Nr, cs2 / Nr};
+    REAL polarization = SQRT(hs0 * hs0 + hs1 * hs1 + hs2 * hs2) / Nr;
     polarization = polarization > 1 ? 1 : polarization;
     const REAL tol = centre_tol * scale;
-    REAL cross[3] = {0, 0, 0}, radius_sum = 0;
+    REAL cross0 = 0, cross1 = 0, cross2 = 0, radius_sum = 0;
+#pragma omp simd reduction(+ : cross0, cross1, cross2, radius_sum)
     for (int64_t i = 0; i < N; i++) {
-        REAL rel[3] = {0, 0, 0}, h[3] = {0, 0, 0}, r2 = 0, s2 = 0;
-        for (int64_t c = 0; c < d; c++) {
-            rel[c] = xs[c * S + i] - centre[c];
-            r2 += rel[c] * rel[c];
-            s2 += vs[c * S + i] * vs[c * S + i];
-        }
-        REAL radius = SQRT(r2), speed = SQRT(s2);
+        const REAL vz = d == 3 ? v2[i] : 0;
+        const REAL r0 = x0[i] - centre[0], r1 = x1[i] - centre[1];
+        const REAL r2 = d == 3 ? x2[i] - centre[2] : 0;
+        const REAL radius = SQRT(r0 * r0 + r1 * r1 + r2 * r2);
+        const REAL speed = SQRT(v0[i] * v0[i] + v1[i] * v1[i] + vz * vz);
         radius_sum += radius;
-        for (int64_t c = 0; c < d; c++) {
-            h[c] = speed > 0 ? vs[c * S + i] / speed : 0;
-            rel[c] = radius > tol ? rel[c] / radius : 0;
-        }
-        if (d == 2) {
-            cross[2] += rel[0] * h[1] - rel[1] * h[0];
-        } else {
-            cross[0] += rel[1] * h[2] - rel[2] * h[1];
-            cross[1] += rel[2] * h[0] - rel[0] * h[2];
-            cross[2] += rel[0] * h[1] - rel[1] * h[0];
+        const int moves = speed > 0, off_centre = radius > tol;
+        const REAL sden = moves ? speed : 1, rden = off_centre ? radius : 1;
+        const REAL h0 = (moves ? v0[i] : 0) / sden, h1 = (moves ? v1[i] : 0) / sden;
+        const REAL h2 = (moves ? vz : 0) / sden;
+        const REAL e0 = (off_centre ? r0 : 0) / rden, e1 = (off_centre ? r1 : 0) / rden;
+        const REAL e2 = (off_centre ? r2 : 0) / rden;
+        cross2 += e0 * h1 - e1 * h0;
+        if (d == 3) {
+            cross0 += e1 * h2 - e2 * h1;
+            cross1 += e2 * h0 - e0 * h2;
         }
     }
-    REAL turn = d == 2 ? FABS(cross[2])
-                       : SQRT(cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2]);
+    REAL turn = d == 2 ? FABS(cross2) : SQRT(cross0 * cross0 + cross1 * cross1 + cross2 * cross2);
     REAL angular = turn / Nr;
     angular = angular > 1 ? 1 : angular;
     REAL cd2 = 0;
     for (int64_t c = 0; c < d; c++) cd2 += (centre[c] - g[c]) * (centre[c] - g[c]);
     int64_t arrived_count = 0;
     REAL gd_sum = 0;
+#pragma omp simd reduction(+ : arrived_count, gd_sum)
     for (int64_t i = 0; i < N; i++) {
         arrived_count += gd[i] <= goal_radius;
         gd_sum += gd[i];
@@ -428,8 +443,9 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
     const REAL success = arrived_count >= need ? 1 : 0;
     const REAL mean_goal_distance = gd_sum / Nr;
     REAL effort = 0;
+#pragma omp simd reduction(+ : effort)
     for (int64_t t = 0; t < N * d; t++) {
-        const REAL at = UNIT_CLIP(a[b * N * d + t]);
+        const REAL at = UNIT_CLIP(ab[t]);
         effort += at * at;
     }
     const REAL reward = (REAL)dp[DP_W_PROGRESS] * (prev_distance[b] - mean_goal_distance) /
