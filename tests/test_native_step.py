@@ -77,37 +77,54 @@ def test_same_rollout_as_plain_torch_with_sub_batch_resets(name):
 
 
 @needs_native
-def test_resets_measure_exactly_the_reset_swarms_and_observe_which_hands_out_nothing(
-    monkeypatch,
-):
-    # The C step takes any batch: a reset of n < B swarms runs it on those n, unpadded
-    # (10 > reset_batch = 4 too); a reset of all B runs it on B.
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_resets_measure_exactly_the_reset_swarms_in_place(monkeypatch, dtype):
+    # A reset of n < B swarms re-measures those n alone, in place (measure_rows: no
+    # step of the batch, no copy of the observations when none were handed out; 10 >
+    # reset_batch = 4 too); a reset of all B measures the whole batch. The results
+    # match the numpy core, and observe(which=...) hands out nothing.
     cfg = SwarmConfig(n_agents=6, n_neighbors=3)
-    core = TorchSwarmNavCore(cfg, batch=64, native=True)
-    ref = SwarmNavCore(cfg, batch=64, dtype=np.float32)
-    calls: list[int] = []
-    inner = NativeAdvance.__call__
+    core = TorchSwarmNavCore(cfg, batch=64, dtype=dtype, native=True)
+    ref = SwarmNavCore(cfg, batch=64, dtype=dtype)
+    rows_measured: list[int] = []
+    batches: list[int] = []
+    measure_rows, call = NativeAdvance.measure_rows, NativeAdvance.__call__
     monkeypatch.setattr(
-        NativeAdvance, "__call__", lambda self, *a: calls.append(a[0].shape[1]) or inner(self, *a)
+        NativeAdvance,
+        "measure_rows",
+        lambda self, rows, *a: rows_measured.append(len(rows)) or measure_rows(self, rows, *a),
+    )
+    monkeypatch.setattr(
+        NativeAdvance, "__call__", lambda self, *a: batches.append(a[0].shape[1]) or call(self, *a)
     )
     rng, ref_rng = np.random.default_rng(4), np.random.default_rng(4)
     core.reset(rng)
     ref.reset(ref_rng)
-    actions = np.random.default_rng(5).uniform(-1, 1, (64, 6, 2)).astype(np.float32)
-    for n in (1, 10, 63, 64):
+    actions = np.random.default_rng(5).uniform(-1, 1, (64, 6, 2)).astype(dtype)
+    for swarms in ([0], [1, 3, 5, 7, 9, 10, 11, 12, 13, 14], list(range(63)), list(range(64))):
         core.step(actions)
         ref.step(actions)
-        which = np.arange(64) < n
+        which = np.isin(np.arange(64), swarms)
+        n = len(swarms)
         last = core.observe(which=which)  # a copy of those rows
-        np.testing.assert_allclose(last, ref.observe(which=which), **CORE_TOL[np.float32])
+        np.testing.assert_allclose(last, ref.observe(which=which), **CORE_TOL[dtype])
         obs_memory = core._obs.data_ptr()
+        rows_measured.clear()
+        batches.clear()
         core.reset(rng, which=which)
         ref.reset(ref_rng, which=which)
-        if n < 64:  # nothing was handed out: the new rows went in place
-            assert core._obs.data_ptr() == obs_memory
-        assert calls[-1] == n
-        assert not np.array_equal(core.observe()[:n], last)  # new starts
-        np.testing.assert_allclose(core.observe(), ref.observe(), **CORE_TOL[np.float32])
+        if n < 64:
+            assert rows_measured == [n] and batches == []
+            assert core._obs.data_ptr() == obs_memory  # nothing handed out: in place
+        else:
+            assert rows_measured == [] and batches == [64]
+        assert not np.array_equal(core.observe(which=which), last)  # new starts
+        np.testing.assert_allclose(core.observe(), ref.observe(), **CORE_TOL[dtype])
+        for key, value in core.stats().items():
+            np.testing.assert_allclose(value, ref.stats()[key], **CORE_TOL[dtype], err_msg=key)
+        np.testing.assert_allclose(core.start_distance, ref.start_distance, **CORE_TOL[dtype])
+        np.testing.assert_allclose(core.prev_distance, ref.prev_distance, **CORE_TOL[dtype])
+        np.testing.assert_allclose(core.prev_arrived, ref.prev_arrived, **CORE_TOL[dtype])
 
 
 @needs_native

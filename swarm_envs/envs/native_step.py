@@ -89,8 +89,8 @@ CFLAGS = (
     "-shared",
 )
 #: ``fused_step_abi()`` of a library built from the current sources (9 integer and 27
-#: real parameters); checked on load.
-_ABI = 9 * 1000 + 10 * 27 + 1
+#: real parameters, version 2: the row list); checked on load.
+_ABI = 9 * 1000 + 10 * 27 + 2
 _SOURCES = ("fused_step.c", "fused_step_body.h")
 
 _LOCK = threading.Lock()
@@ -173,7 +173,7 @@ def _load() -> ctypes.CDLL:
             for name in ("fused_step_f32", "fused_step_f64"):
                 fn = getattr(lib, name)
                 fn.restype = ctypes.c_int
-                fn.argtypes = [ctypes.c_void_p] * 2 + [ctypes.c_int64] * 2 + [ctypes.c_void_p] * 16
+                fn.argtypes = [ctypes.c_void_p] * 2 + [ctypes.c_int64] * 2 + [ctypes.c_void_p] * 17
         except (OSError, RuntimeError) as err:
             _FAILURE = str(err)
             raise RuntimeError(_FAILURE) from err
@@ -280,8 +280,6 @@ class NativeAdvance:
             t.contiguous() for t in args
         )
         dtype = x.dtype
-        if dtype not in self._fns or x.device.type != "cpu":
-            raise ValueError(f"the C step needs float32 or float64 CPU tensors, got {dtype}")
         _, B, N = x.shape
         x_out, v_out, f_out = torch.empty_like(x), torch.empty_like(x), torch.empty_like(x)
         obs = torch.empty((B, N, self.obs_dim), dtype=torch.float32)
@@ -290,6 +288,50 @@ class NativeAdvance:
         inputs = (x, v, f, goal, a, move.to(torch.bool), prev_distance, prev_arrived)
         outputs = (x_out, v_out, f_out, obs, packed, mean_dist, arrived)
         tensors = (*inputs, start_distance, *outputs)
+        self._call(dtype, B, None, tensors)
+        return x_out, v_out, f_out, obs, packed, mean_dist, arrived, None
+
+    def measure_rows(
+        self,
+        rows: np.ndarray,
+        x: torch.Tensor,
+        v: torch.Tensor,
+        f: torch.Tensor,
+        goal: torch.Tensor,
+        a: torch.Tensor,
+        move: torch.Tensor,
+        prev_distance: torch.Tensor,
+        prev_arrived: torch.Tensor,
+        start_distance: torch.Tensor,
+        obs: torch.Tensor,
+        packed: torch.Tensor,
+    ) -> None:
+        """Re-measure swarms ``rows`` of a whole batch's state in place (a reset).
+
+        The arguments of :meth:`__call__` (``move`` false for ``rows``, to measure),
+        then the observations ``(B, N, obs_dim)`` and statistics ``(B, 11)`` to write
+        the rows' results into; the state goes back into ``x``, ``v`` and ``f``, the mean
+        goal distance and the arrived fraction into ``prev_distance`` and
+        ``prev_arrived``. The C step reads a swarm's inputs before it writes its
+        outputs, so the aliasing is safe. Every tensor must be contiguous: nothing is
+        copied.
+        """
+        dtype, B = x.dtype, x.shape[1]
+        idx = np.ascontiguousarray(rows, dtype=np.int64)
+        if idx.size and not (0 <= idx.min() and idx.max() < B):
+            raise ValueError(f"rows must be swarms in [0, {B}), got {idx.min()}..{idx.max()}")
+        inputs = (x, v, f, goal, a, move, prev_distance, prev_arrived, start_distance)
+        tensors = (*inputs, x, v, f, obs, packed, prev_distance, prev_arrived)
+        if not all(t.is_contiguous() for t in tensors):
+            raise ValueError("measure_rows writes in place: every tensor must be contiguous")
+        self._call(dtype, B, idx, tensors)
+
+    def _call(
+        self, dtype: torch.dtype, B: int, rows: np.ndarray | None, tensors: tuple[torch.Tensor, ...]
+    ) -> None:
+        """The C step on swarms ``rows`` (all B if None); its error codes as exceptions."""
+        if dtype not in self._fns or tensors[0].device.type != "cpu":
+            raise ValueError(f"the C step needs float32 or float64 CPU tensors, got {dtype}")
         for t in tensors[:9]:
             if t.dtype != dtype and t.dtype != torch.bool:
                 raise ValueError(f"the C step needs one dtype, got {t.dtype} and {dtype}")
@@ -297,9 +339,11 @@ class NativeAdvance:
         ints[0] = B
         fn, ip, dp = self._fns[dtype], ints.ctypes.data, self._reals[dtype].ctypes.data
         ptrs = [t.data_ptr() for t in tensors]
-        code = fn(ip, dp, 0, B, *ptrs)
+        if rows is None:
+            code = fn(ip, dp, 0, B, None, *ptrs)
+        else:
+            code = fn(ip, dp, 0, rows.size, rows.ctypes.data, *ptrs)
         if code == 3:
             raise ValueError(NON_FINITE_ACTIONS)
         if code:
             raise MemoryError("the C step could not allocate its scratch memory")
-        return x_out, v_out, f_out, obs, packed, mean_dist, arrived, None

@@ -36,8 +36,8 @@ observations, statistics and carried force always describe the current state. A 
 of a few swarms (at most :attr:`TorchSwarmNavCore.reset_batch`, 1/16 of a batch of 64
 or more) evaluates them alone, through the same function compiled for that sub-batch:
 in a VecEnv some swarm ends on most steps, and re-measuring all B swarms each time
-would cost a second full step. The C step takes any batch size, so with it a reset of
-any proper subset of the swarms evaluates those alone, unpadded.
+would cost a second full step. The C step re-measures any proper subset of the swarms
+alone, in place (:meth:`~swarm_envs.envs.native_step.NativeAdvance.measure_rows`).
 
 Compile time: the constructor makes the first (compiling) call, on the all-zero state,
 and stores its wall time in :attr:`TorchSwarmNavCore.compile_seconds` (also logged once
@@ -372,8 +372,8 @@ class TorchSwarmNavCore:
         compile_seconds: wall time of the first calls, made by the constructor (the
             compile time when compiled).
         reset_batch: resets of at most this many swarms evaluate only those
-            (:func:`partial_reset_batch`); ``None`` below 64 swarms. The C step
-            evaluates only the reset swarms whenever they are not all of them.
+            (:func:`partial_reset_batch`); ``None`` below 64 swarms. With the C step
+            a reset evaluates only its swarms whenever they are not all of them.
 
     ``x``, ``v``, ``goal`` read as fresh read-only numpy arrays; assigning one of them
     (a whole array) moves it to the device and re-measures the state. ``t`` is the
@@ -571,23 +571,17 @@ class TorchSwarmNavCore:
     def _measure_rows(
         self, idx: np.ndarray, rows: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """:meth:`_measure` for swarms ``idx`` only (see :meth:`_measures_rows`).
+        """:meth:`_measure` for swarms ``idx`` (at most :attr:`reset_batch`) only.
 
         ``rows`` holds the same indices on the device.
 
-        For the torch function the rows are padded to ``reset_batch`` with copies of
-        the first (its shapes are static); the C step takes them as they are. The
-        results of the real ones are written into the force, observations and
-        statistics.
+        The rows are padded to ``reset_batch`` with copies of the first; the results of
+        the real ones are written into the force, observations and statistics.
         """
+        assert self._advance_part is not None and self.reset_batch is not None
         n = rows.shape[0]
-        if self._native is not None:
-            part, padded = self._native, rows
-        else:
-            assert self._advance_part is not None and self.reset_batch is not None
-            part = self._advance_part
-            padded = torch.cat([rows, rows[:1].expand(self.reset_batch - n)])
-        _, _, f, obs, packed, mean_dist, arrived, _ = part(*self._row_args(padded))
+        padded = torch.cat([rows, rows[:1].expand(self.reset_batch - n)])
+        _, _, f, obs, packed, mean_dist, arrived, _ = self._advance_part(*self._row_args(padded))
         self._f[:, rows] = f[:, :n]
         if self._obs_given or self._obs_shared:  # handed out: leave that memory alone
             self._obs = self._obs.clone()
@@ -610,6 +604,10 @@ class TorchSwarmNavCore:
         if idx.size == 0:
             return
         x, v, goal = draw_starts(cfg, rng, idx.size)
+        self.t[idx] = 0
+        if self._native is not None and idx.size < self.batch:
+            self._reset_rows_in_place(idx, x, v, goal)
+            return
         # Out of place: the old tensors may share memory with arrays handed out.
         rows = torch.as_tensor(idx, device=self.device)
         self._x = self._put(self._x, rows, x)
@@ -617,8 +615,7 @@ class TorchSwarmNavCore:
         goal_t = self._goal.clone()
         goal_t[rows] = self._to_device(goal)
         self._goal = goal_t
-        self.t[idx] = 0
-        if self._measures_rows(idx.size):
+        if self.reset_batch is not None and idx.size <= self.reset_batch:
             mean_dist, arrived = self._measure_rows(idx, rows)
         else:
             mean_dist, arrived = self._measure()
@@ -630,12 +627,25 @@ class TorchSwarmNavCore:
         self._prev_distance = self._prev_distance.index_put((rows,), mean_dist)
         self._prev_arrived = self._prev_arrived.index_put((rows,), arrived)
 
-    def _measures_rows(self, n: int) -> bool:
-        """Whether a reset of ``n`` swarms evaluates those alone: with the C step
-        when they are not all of them, else when they fit in :attr:`reset_batch`."""
-        if self._native is not None:
-            return n < self.batch
-        return self.reset_batch is not None and n <= self.reset_batch
+    def _reset_rows_in_place(
+        self, idx: np.ndarray, x: np.ndarray, v: np.ndarray, goal: np.ndarray
+    ) -> None:
+        """The C step's reset of swarms ``idx`` (not all B): the new starts written
+        into the state, then those swarms re-measured in place
+        (:meth:`NativeAdvance.measure_rows`). On the CPU path every state tensor is the
+        core's own (``x``, ``v``, ``goal`` and the distances read as copies; each step
+        makes new ones), so only observations handed out need a copy first."""
+        assert self._native is not None
+        if self._obs_given or self._obs_shared:  # handed out: leave that memory alone
+            self._obs = self._obs.clone()
+            self._obs_given = self._obs_shared = False
+        rows = torch.from_numpy(idx)
+        self._x[:, rows] = self._to_device(x).permute(2, 0, 1)
+        self._v[:, rows] = self._to_device(v).permute(2, 0, 1)
+        self._goal[rows] = self._to_device(goal)
+        args = self._args(self._no_action, self._move_none)
+        self._native.measure_rows(idx, *args, self._obs, torch.from_numpy(self._packed))
+        self._start_distance[rows] = torch.clamp(self._prev_distance[rows], min=1e-6)
 
     def _put(self, state: torch.Tensor, rows: torch.Tensor, new: np.ndarray) -> torch.Tensor:
         """A copy of ``state`` ``(d, B, N)`` with swarms ``rows`` set from ``new`` ``(n, N, d)``."""

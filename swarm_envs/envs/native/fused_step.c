@@ -69,7 +69,7 @@ static inline float exp_f32(float x) {
 #define N_PACKED 11
 #define KMAX_SORT 64
 
-int fused_step_abi(void) { return 1000 * IP_SIZE + 10 * DP_SIZE + N_PACKED * 0 + 1; }
+int fused_step_abi(void) { return 1000 * IP_SIZE + 10 * DP_SIZE + N_PACKED * 0 + 2; }
 int fused_step_kmax(void) { return KMAX_SORT; }
 
 #define REAL float

@@ -477,13 +477,17 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
         }
 }
 
-/* Swarms [b0, b1), spread over the OpenMP threads (torch's own pool when torch is
- * loaded: its libgomp.so.1 is the one this library links to). Every swarm is stepped by
- * one thread in the same way, so the results do not depend on the thread count.
+/* Swarms [b0, b1) (or rows[b0 .. b1) where rows is not NULL: a reset re-measures the
+ * swarms it drew in place, outputs aliasing inputs, which is safe as FUSED_SWARM reads
+ * a swarm's inputs before it writes its outputs), spread over the OpenMP
+ * threads (torch's own pool when torch is loaded: its libgomp.so.1 is the one this
+ * library links to). Every swarm is stepped by one thread in the same way, so the
+ * results do not depend on the thread count.
  * Returns 0, 1 if scratch memory could not be allocated, 2 if k_sort > KMAX_SORT, 3 if
  * an action of these swarms is NaN or infinite (checked first: nothing is written).
  * Finite actions outside [-1, 1] are clipped, as numpy's clip would. */
-int FUSED_STEP(const int64_t *ip, const double *dp, int64_t b0, int64_t b1, const REAL *x,
+int FUSED_STEP(const int64_t *ip, const double *dp, int64_t b0, int64_t b1,
+               const int64_t *rows, const REAL *x,
                const REAL *v, const REAL *f, const REAL *goal, const REAL *a,
                const uint8_t *move, const REAL *prev_distance, const REAL *prev_arrived,
                const REAL *start_distance, REAL *x_out, REAL *v_out, REAL *f_out, float *obs,
@@ -492,10 +496,12 @@ int FUSED_STEP(const int64_t *ip, const double *dp, int64_t b0, int64_t b1, cons
     const int64_t NP = (N + LANES - 1) / LANES * LANES;
     if (k_sort > KMAX_SORT) return 2;
     /* Non-finite actions: exponent bits all ones (an integer OR reduction, vectorised). */
-    const ABITS *abits = (const ABITS *)(a + b0 * N * d);
     ABITS nonfinite = 0;
-    for (int64_t t = 0; t < (b1 - b0) * N * d; t++)
-        nonfinite |= (ABITS)((abits[t] & EXP_MASK) == EXP_MASK);
+    for (int64_t t = b0; t < b1; t++) {
+        const ABITS *abits = (const ABITS *)(a + (rows ? rows[t] : t) * N * d);
+        for (int64_t u = 0; u < N * d; u++)
+            nonfinite |= (ABITS)((abits[u] & EXP_MASK) == EXP_MASK);
+    }
     if (nonfinite) return 3;
     const size_t n_real = (size_t)(4 * d * NP + N + NP * NP + 2 * k_sort * N + 8 * N + 2 * d * NP);
     int status = 0;
@@ -506,17 +512,17 @@ int FUSED_STEP(const int64_t *ip, const double *dp, int64_t b0, int64_t b1, cons
          * reaches the loop (it ends in a barrier), with or without its scratch. */
         if (d == 2) {
 #pragma omp for schedule(static)
-            for (int64_t b = b0; b < b1; b++) {
+            for (int64_t t = b0; t < b1; t++) {
                 if (!scratch) { status |= 1; continue; }
-                FUSED_SWARM(ip, dp, 2, b, scratch, x, v, f, goal, a, move, prev_distance,
+                FUSED_SWARM(ip, dp, 2, rows ? rows[t] : t, scratch, x, v, f, goal, a, move, prev_distance,
                             prev_arrived, start_distance, x_out, v_out, f_out, obs, packed,
                             mean_dist, arrived);
             }
         } else {
 #pragma omp for schedule(static)
-            for (int64_t b = b0; b < b1; b++) {
+            for (int64_t t = b0; t < b1; t++) {
                 if (!scratch) { status |= 1; continue; }
-                FUSED_SWARM(ip, dp, 3, b, scratch, x, v, f, goal, a, move, prev_distance,
+                FUSED_SWARM(ip, dp, 3, rows ? rows[t] : t, scratch, x, v, f, goal, a, move, prev_distance,
                             prev_arrived, start_distance, x_out, v_out, f_out, obs, packed,
                             mean_dist, arrived);
             }
