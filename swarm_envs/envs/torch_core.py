@@ -639,13 +639,15 @@ class TorchSwarmNavCore:
         if self._obs_given or self._obs_shared:  # handed out: leave that memory alone
             self._obs = self._obs.clone()
             self._obs_given = self._obs_shared = False
-        rows = torch.from_numpy(idx)
-        self._x[:, rows] = self._to_device(x).permute(2, 0, 1)
-        self._v[:, rows] = self._to_device(v).permute(2, 0, 1)
-        self._goal[rows] = self._to_device(goal)
+        # numpy views of the CPU tensors: cheaper indexing than torch's for a few rows
+        # (assignment casts as numpy casts, like _to_device).
+        self._x.numpy()[:, idx] = x.transpose(2, 0, 1)
+        self._v.numpy()[:, idx] = v.transpose(2, 0, 1)
+        self._goal.numpy()[idx] = goal
         args = self._args(self._no_action, self._move_none)
         self._native.measure_rows(idx, *args, self._obs, torch.from_numpy(self._packed))
-        self._start_distance[rows] = torch.clamp(self._prev_distance[rows], min=1e-6)
+        start = self._start_distance.numpy()
+        start[idx] = np.maximum(self._prev_distance.numpy()[idx], 1e-6)
 
     def _put(self, state: torch.Tensor, rows: torch.Tensor, new: np.ndarray) -> torch.Tensor:
         """A copy of ``state`` ``(d, B, N)`` with swarms ``rows`` set from ``new`` ``(n, N, d)``."""
@@ -745,6 +747,8 @@ class TorchSwarmNavCore:
         observations, resets them and then observes).
         """
         if which is not None:
+            if self.device.type == "cpu":
+                return self._obs.numpy()[np.flatnonzero(which)]
             rows = torch.as_tensor(np.flatnonzero(which), device=self.device)
             return self._obs[rows].cpu().numpy()
         if self.device.type == "cpu":

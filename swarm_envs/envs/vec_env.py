@@ -224,11 +224,9 @@ class SwarmNavVecEnv(VecEnv):
             for core, p in zip(self.cores, parts, strict=True)
         ]
         obs = obs_parts[0] if len(obs_parts) == 1 else np.concatenate(obs_parts, axis=0)
-        rewards = np.empty((B, N), np.float32)
-        rewards[:] = reward[:, None]
-        dones = np.empty((B, N), bool)
-        dones[:] = done[:, None]
-        return obs.reshape(self.num_envs, -1), rewards.reshape(-1), dones.reshape(-1), infos
+        rewards = np.repeat(reward.astype(np.float32), N)
+        dones = np.repeat(done, N)
+        return obs.reshape(self.num_envs, -1), rewards, dones, infos
 
     def _end_episodes(
         self,

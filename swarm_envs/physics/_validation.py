@@ -30,18 +30,22 @@ def check_real(
     Raises:
         ValueError: naming ``owner.name``, the value and the allowed interval.
     """
-    left = "[" if low_inclusive else "("
-    right = "]" if high_inclusive and math.isfinite(high) else ")"
-    allowed = f"{left}{low:g}, {high:g}{right}" if math.isfinite(high) else f"{left}{low:g}, inf)"
+
+    def allowed() -> str:  # formatted only for an error (this check runs in resets)
+        left = "[" if low_inclusive else "("
+        if not math.isfinite(high):
+            return f"{left}{low:g}, inf)"
+        return f"{left}{low:g}, {high:g}{']' if high_inclusive else ')'}"
+
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ValueError(f"{owner}.{name} must be a real number in {allowed}, got {value!r}")
+        raise ValueError(f"{owner}.{name} must be a real number in {allowed()}, got {value!r}")
     value = float(value)
     if not math.isfinite(value):
-        raise ValueError(f"{owner}.{name} must be finite and in {allowed}, got {value!r}")
+        raise ValueError(f"{owner}.{name} must be finite and in {allowed()}, got {value!r}")
     too_low = value < low if low_inclusive else value <= low
     too_high = value > high if high_inclusive else value >= high
     if too_low or too_high:
-        raise ValueError(f"{owner}.{name} must be in {allowed}, got {value!r}")
+        raise ValueError(f"{owner}.{name} must be in {allowed()}, got {value!r}")
     return value
 
 
