@@ -58,6 +58,8 @@ NATIVE_VS_PLAIN = {
         n_agents=17, physics={"C_o": 0.0, "l_r": 1.0, "C_r": 0.5, "beta": 0.0}
     ),
     "many_neighbours": dict(n_agents=12, n_neighbors=15),  # k > N − 1: padding slots
+    # An odd k with no padding: the observation's last block is one of a pair's lanes.
+    "odd_neighbours_3d": dict(n_agents=9, n_neighbors=7, dim=3),
 }
 
 

@@ -101,6 +101,13 @@ static inline vkey key_min(vkey a, vkey b) { vkey lt = (vkey)(a < b); return (a 
 static inline vkey key_max(vkey a, vkey b) { vkey lt = (vkey)(a < b); return (b & lt) | (a & ~lt); }
 #endif
 #define KNN_KEYS 1
+#ifdef __AVX512F__
+#define OBS_PAIRS_AVX512 1
+/* Two 8-float blocks as one 16-lane vector (AVX-512F only). */
+#define PAIR8(a, b)                                                                    \
+    _mm512_castpd_ps(_mm512_insertf64x4(_mm512_castps_pd(_mm512_castps256_ps512(a)),  \
+                                        _mm256_castps_pd(b), 1))
+#endif
 #define KNN_BLOCK knn_block_f32
 #define FUSED_STEP fused_step_f32
 #include "fused_step_body.h"
@@ -114,6 +121,7 @@ static inline vkey key_max(vkey a, vkey b) { vkey lt = (vkey)(a < b); return (b 
 #undef FUSED_SWARM
 #undef KNN_BLOCK
 #undef KNN_KEYS
+#undef OBS_PAIRS_AVX512
 #undef FUSED_STEP
 #undef INDEX
 #undef LANES

@@ -323,9 +323,11 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
 
     /* 4. Observations (B, N, obs_dim), float32, clipped to ±obs_bound. Every agent j's
      * position, velocity and a 1 sit in 8 lanes (tab, one neighbour block of the row:
-     * 2d + 1 ≤ 7 values); a neighbour's block is (tab_j − tab_i with its 1 kept) × scale,
-     * stored 8 wide in order so that the next block overwrites the spare lanes (the last
-     * block is stored at its own width). */
+     * 2d + 1 ≤ 7 values); a neighbour's block is (tab_j − tab_i with its 1 kept) × scale.
+     * float32 with AVX-512 handles two blocks per 16-lane vector and compresses their
+     * values together (OBS_PAIRS_AVX512); otherwise each block is stored 8 wide in order
+     * so that the next block overwrites the spare lanes (the last one at its own
+     * width). */
     REAL *tab = near_d + k_sort * N + k_sort * N; /* after near_i (k_sort × N int32) */
     const int64_t blk = 2 * d + 1;
     REAL keep[8], scl[8];
@@ -353,6 +355,38 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
             own[(d + c) * NP + i] = CLIP_OBS(val);
         }
     }
+#ifdef OBS_PAIRS_AVX512
+    /* float32 with AVX-512: two neighbour blocks per 16-lane vector, their 2 x blk
+     * values compressed together and stored with a mask (no spill past the pair). */
+    const __mmask16 blk_lanes = (__mmask16)((1u << blk) - 1);
+    const __mmask16 pair_lanes = (__mmask16)(blk_lanes | (blk_lanes << 8));
+    const __mmask16 pair_out = (__mmask16)((1u << (2 * blk)) - 1);
+    const __m512 scl16 = PAIR8(_mm256_loadu_ps(scl), _mm256_loadu_ps(scl));
+    const __m512 lo16 = _mm512_set1_ps(-obs_bound), hi16 = _mm512_set1_ps(obs_bound);
+    for (int64_t i = 0; i < N; i++) {
+        float *o = obs + (b * N + i) * obs_dim;
+        for (int64_t c = 0; c < 2 * d; c++) o[c] = own[c * NP + i];
+        const __m256 selfk = _mm256_mul_ps(_mm256_loadu_ps(tab + i * 8), _mm256_loadu_ps(keep));
+        const __m512 self16 = PAIR8(selfk, selfk);
+        float *on = o + 2 * d;
+        int64_t q = 0;
+        for (; q + 1 < k_real; q += 2) {
+            const __m256 g0 = _mm256_loadu_ps(tab + near_i[q * N + i] * 8);
+            const __m256 g1 = _mm256_loadu_ps(tab + near_i[(q + 1) * N + i] * 8);
+            __m512 val = _mm512_mul_ps(_mm512_sub_ps(PAIR8(g0, g1), self16), scl16);
+            val = _mm512_min_ps(hi16, _mm512_max_ps(lo16, val)); /* NaN stays NaN */
+            _mm512_mask_storeu_ps(on + q * blk, pair_out, _mm512_maskz_compress_ps(pair_lanes, val));
+        }
+        if (q < k_real) { /* an odd last real block */
+            const __m256 g0 = _mm256_loadu_ps(tab + near_i[q * N + i] * 8);
+            __m512 val = _mm512_mul_ps(_mm512_sub_ps(PAIR8(g0, g0), self16), scl16);
+            val = _mm512_min_ps(hi16, _mm512_max_ps(lo16, val));
+            _mm512_mask_storeu_ps(on + q * blk, blk_lanes, val);
+            q++;
+        }
+        for (int64_t t = q * blk; t < k * blk; t++) on[t] = 0.0f; /* padding blocks */
+    }
+#else
     for (int64_t i = 0; i < N; i++) {
         float *o = obs + (b * N + i) * obs_dim;
         for (int64_t c = 0; c < 2 * d; c++) o[c] = own[c * NP + i];
@@ -378,6 +412,7 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
                 memcpy(on + q * blk, out, 7 * sizeof(float));
         }
     }
+#endif
 #undef CLIP_OBS
 
     /* 5. Statistics (swarm_envs.metrics, MODELS.md §2). Headings v/|v| (0 at rest) and
