@@ -17,7 +17,10 @@ agents is 4 KB); it evaluates each pair once (16 × 16 tiles, the partners rotat
 the vector lanes, the force added to one agent and subtracted from the other), selects
 the neighbours by insertion across 16 agents at a time (float32: on 64-bit keys, the
 bits of ρ above the index, so the (ρ, j) order is integer order), and writes every
-observation row once.
+observation row once. It checks the actions itself (NaN or inf: ``ValueError`` before
+anything is written) and clips them to [−1, 1] as it reads them, so the core skips
+numpy's passes over them. :meth:`NativeAdvance.measure_rows` re-measures a list of
+swarms in place: a reset of a few swarms costs those swarms only.
 
 Build: the first use compiles the source with the C compiler (``$CC``, else ``cc`` or
 ``gcc``), ``-O3 -march=native -fopenmp``, into a per-user cache (``$SWARM_ENVS_CACHE``
