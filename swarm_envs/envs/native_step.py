@@ -297,28 +297,21 @@ class NativeAdvance:
     def measure_rows(
         self,
         rows: np.ndarray,
-        x: torch.Tensor,
-        v: torch.Tensor,
-        f: torch.Tensor,
-        goal: torch.Tensor,
-        a: torch.Tensor,
-        move: torch.Tensor,
-        prev_distance: torch.Tensor,
-        prev_arrived: torch.Tensor,
-        start_distance: torch.Tensor,
+        args: tuple[torch.Tensor, ...],
         obs: torch.Tensor,
         packed: torch.Tensor,
     ) -> None:
         """Re-measure swarms ``rows`` of a whole batch's state in place (a reset).
 
-        The arguments of :meth:`__call__` (``move`` false for ``rows``, to measure),
-        then the observations ``(B, N, obs_dim)`` and statistics ``(B, 11)`` to write
-        the rows' results into; the state goes back into ``x``, ``v`` and ``f``, the mean
-        goal distance and the arrived fraction into ``prev_distance`` and
-        ``prev_arrived``. The C step reads a swarm's inputs before it writes its
-        outputs, so the aliasing is safe. Every tensor must be contiguous: nothing is
-        copied.
+        ``args``: the arguments of :meth:`__call__` for the whole batch (``move`` false
+        for ``rows``, to measure); ``obs`` ``(B, N, obs_dim)`` and ``packed`` ``(B, 11)``:
+        the observations and statistics to write the rows' results into. The state
+        goes back into ``x``, ``v`` and ``f``, the mean goal distance and the arrived
+        fraction into ``prev_distance`` and ``prev_arrived``. The C step reads a swarm's
+        inputs before it writes its outputs, so the aliasing is safe. Every tensor must
+        be contiguous: nothing is copied.
         """
+        x, v, f, goal, a, move, prev_distance, prev_arrived, start_distance = args
         dtype, B = x.dtype, x.shape[1]
         idx = np.ascontiguousarray(rows, dtype=np.int64)
         if idx.size and not (0 <= idx.min() and idx.max() < B):

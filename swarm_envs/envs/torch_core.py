@@ -645,7 +645,7 @@ class TorchSwarmNavCore:
         self._v.numpy()[:, idx] = v.transpose(2, 0, 1)
         self._goal.numpy()[idx] = goal
         args = self._args(self._no_action, self._move_none)
-        self._native.measure_rows(idx, *args, self._obs, torch.from_numpy(self._packed))
+        self._native.measure_rows(idx, args, self._obs, torch.from_numpy(self._packed))
         start = self._start_distance.numpy()
         start[idx] = np.maximum(self._prev_distance.numpy()[idx], 1e-6)
 
