@@ -243,7 +243,8 @@ class SwarmNavVecEnv(VecEnv):
         N = self.n_agents
         ended = np.flatnonzero(done)  # only the swarms that just ended
         swarms = ended.tolist()
-        last = [core.observe(which=done[sl]) for core, sl in self._cores_with(done)]
+        cores = self._cores_with(done)
+        last = [core.observe(which=done[sl]) for core, sl in cores]
         now = round(time.time() - self._t_start, 6)
         record = TerminalRecord(
             obs=dict(zip(swarms, itertools.chain.from_iterable(last), strict=True)),
@@ -262,7 +263,7 @@ class SwarmNavVecEnv(VecEnv):
         terminal = self._terminal_infos.infos(record, swarms)
         for b in swarms:
             infos[b * N : (b + 1) * N] = terminal[b]
-        for core, sl in self._cores_with(done):  # in order: seeded
+        for core, sl in cores:  # in order: seeded
             core.reset(self._rng, which=done[sl])
         self.episode_returns[done] = 0.0
         self.episode_lengths[done] = 0
