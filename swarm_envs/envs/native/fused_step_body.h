@@ -189,6 +189,7 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
                 FJ[c] = (VREAL){0};
             }
             const int s_first = J == I ? 1 : 0, s_last = J == I ? LANES / 2 : LANES - 1;
+            const int full = I0 + LANES <= N && J0 + LANES <= N; /* no padding lanes */
             for (int s = s_first; s <= s_last; s++) {
                 const int both = !(J == I && s == LANES / 2); /* else each pair twice */
                 const REAL w = both ? 2 : 1;
@@ -201,9 +202,9 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
                     memcpy(vj[c], &t, sizeof t);
                 }
                 REAL *drow = rho + ((I * nb + J) * LANES + s) * LANES;
-#define PAIR_BODY(ALIGN, SAME)                                                             \
+#define PAIR_BODY(ALIGN, SAME, FULL)                                                       \
     _Pragma("omp simd") for (int l = 0; l < LANES; l++) {                                  \
-        const int valid = (I0 + l < N) & (J0 + ((l + s) & (LANES - 1)) < N);               \
+        const int valid = FULL || ((I0 + l < N) & (J0 + ((l + s) & (LANES - 1)) < N));     \
         REAL dx0 = xj[0][l] - xi0[l], dx1 = xj[1][l] - xi1[l];                             \
         REAL dx2 = d == 3 ? xj[2][l] - xi2[l] : 0;                                         \
         REAL r2 = dx0 * dx0 + dx1 * dx1;                                                   \
@@ -237,10 +238,18 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
         close_lane[l] += valid & (r < collision_radius) ? wc : 0;                          \
         drow[l] = valid ? r : inf;                                                         \
     }
-                if (alignment) {
-                    if (same_decay) { PAIR_BODY(1, 1) } else { PAIR_BODY(1, 0) }
+                /* Constant flags: alignment, equal decay lengths, and no padding lane
+                 * in the tile (the masks fold away). */
+                if (full) {
+                    if (alignment) {
+                        if (same_decay) { PAIR_BODY(1, 1, 1) } else { PAIR_BODY(1, 0, 1) }
+                    } else {
+                        if (same_decay) { PAIR_BODY(0, 1, 1) } else { PAIR_BODY(0, 0, 1) }
+                    }
+                } else if (alignment) {
+                    if (same_decay) { PAIR_BODY(1, 1, 0) } else { PAIR_BODY(1, 0, 0) }
                 } else {
-                    if (same_decay) { PAIR_BODY(0, 1) } else { PAIR_BODY(0, 0) }
+                    if (same_decay) { PAIR_BODY(0, 1, 0) } else { PAIR_BODY(0, 0, 0) }
                 }
 #undef PAIR_BODY
                 if (both)
