@@ -177,6 +177,31 @@ def test_non_finite_actions_raise_in_the_c_step_and_change_nothing(dtype, bad):
 
 
 @needs_native
+def test_inlined_float32_exp_is_within_3_ulp_and_flushes_below_the_normal_range():
+    # exp_f32, the exponential of the float32 pair loop (its arguments are -r/l <= 0):
+    # within 4e-7 relative of the float64 exp from -87.28 (e^x = 1.2e-38, the smallest
+    # normal numbers) up to 88.3, 0 below (the subnormal range, flushed), finite and
+    # clamped above.
+    import ctypes
+
+    lib = native_step._load()
+    fn = lib.fused_exp_f32
+    fn.restype = None
+    fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int64]
+    x = np.concatenate(
+        [np.linspace(-120, 95, 400_001), [-87.28, -87.279, 0.0, -0.0, 88.3, 1e30, -1e30]]
+    ).astype(np.float32)
+    y = np.empty_like(x)
+    fn(x.ctypes.data, y.ctypes.data, x.size)
+    with np.errstate(over="ignore"):
+        ref = np.exp(x.astype(np.float64))
+    normal = (x >= np.float32(-87.28)) & (x <= np.float32(88.3))
+    np.testing.assert_allclose(y[normal], ref[normal], rtol=4e-7, atol=0)
+    assert (y[x < np.float32(-87.28)] == 0).all()
+    assert np.isfinite(y).all() and (y[x > 88.3] == y[x == np.float32(88.3)][0]).all()
+
+
+@needs_native
 def test_coincident_agents_stay_finite():
     cfg = SwarmConfig(n_agents=5, collision_radius=0.5)
     core = TorchSwarmNavCore(cfg, batch=2, native=True)
