@@ -360,7 +360,7 @@ class TorchSwarmNavCore:
             ``torch.compile`` (see :mod:`swarm_envs.physics.torch_backend`).
         native: ``"auto"`` (default), ``True`` or ``False``: run the step on the CPU
             through the C step of :mod:`swarm_envs.envs.native_step` (the same results,
-            about 2.4× as fast as the compiled step at 1,024 × 32, and built in a
+            about 2.5× as fast as the compiled step at 1,024 × 32, and built in a
             second instead of compiled per batch size). ``"auto"`` uses it wherever it
             builds unless ``compile`` is given as ``True``/``False``;
             ``SWARM_ENVS_NATIVE=0`` turns it off.
