@@ -130,6 +130,22 @@ def test_resets_measure_exactly_the_reset_swarms_in_place(monkeypatch, dtype):
 
 
 @needs_native
+def test_measure_rows_checks_what_it_writes_in_place_and_compile_time_counts_once():
+    core = TorchSwarmNavCore(SwarmConfig(n_agents=5), batch=64, native=True)
+    assert core.compile_seconds == core._native.compile_seconds  # one function, once
+    core.reset(np.random.default_rng(0))
+    args = core._args(core._no_action, core._move_none)
+    packed = torch.from_numpy(core._packed)
+    rows = np.array([1, 2])
+    with pytest.raises(ValueError, match="obs must be float32"):
+        core._native.measure_rows(rows, args, core._obs[:10], packed)
+    with pytest.raises(ValueError, match="packed must be"):
+        core._native.measure_rows(rows, args, core._obs, packed[:, :5])
+    with pytest.raises(ValueError, match="rows must be swarms"):
+        core._native.measure_rows(np.array([64]), args, core._obs, packed)
+
+
+@needs_native
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
 def test_results_do_not_depend_on_the_thread_count(dtype):
     cfg = SwarmConfig(n_agents=9, dim=3)

@@ -555,6 +555,9 @@ def test_terminal_infos_read_their_step_are_writable_and_recycled():
         _, _, _, infos = venv.step(zero)  # reads the record again
     assert id(infos[1]) == written and list(infos[1]) == list(TERMINAL_KEYS)
     assert infos[1]["TimeLimit.truncated"] is True
+    # Pickled, the pools carry their sizes only, not their sets of infos.
+    assert len(pickle.dumps(venv._terminal_infos)) < 200
+    assert len(pickle.dumps(venv._swarm_infos)) < 200
     # SB3's VecNormalize normalises the terminal observations in place.
     norm = VecNormalize(swarm_nav_v0.vec_env(B, n_agents=N, max_steps=T), norm_reward=False)
     norm.reset()

@@ -86,6 +86,9 @@ class SwarmInfoPool:
         self.n_swarms = n_swarms
         self._sets: list[tuple[list[Any], list[SwarmInfo]]] = []
 
+    def __reduce__(self) -> tuple[type, tuple[int]]:
+        return SwarmInfoPool, (self.n_swarms,)  # pickled without its sets (no step's infos)
+
     def infos(self, stats: Mapping[str, np.ndarray]) -> list[SwarmInfo]:
         """B infos reading ``stats``: a free recycled set, or a new one.
 
@@ -211,13 +214,15 @@ class TerminalInfoPool:
         # The first set now, not at the first episode end: at 1,024 × 32 making it takes
         # about 0.1 s (with the garbage collector's passes), a hitch in the middle of a
         # rollout otherwise.
-        self._sets.append(self._new_set([]))
+        self._sets.append(self._new_set(None, []))
 
     def __reduce__(self) -> tuple[type, tuple[int, int]]:
         return TerminalInfoPool, (self.n_swarms, self.n_agents)  # pickled without its sets
 
-    def _new_set(self, ended: list[int]) -> tuple[list[Any], list[list[TerminalInfo]], list[int]]:
-        holder: list[Any] = [None, []]
+    def _new_set(
+        self, record: TerminalRecord | None, ended: list[int]
+    ) -> tuple[list[Any], list[list[TerminalInfo]], list[int]]:
+        holder: list[Any] = [record, []]  # [record, the (b, i) written to since]
         N = self.n_agents
         by_swarm = [[TerminalInfo(holder, b, i) for i in range(N)] for b in range(self.n_swarms)]
         return holder, by_swarm, list(ended)
@@ -235,8 +240,7 @@ class TerminalInfoPool:
                 given[:] = ended
                 self._sets.append(self._sets.pop(n))  # now the newest
                 return by_swarm
-        new = self._new_set(ended)
-        new[0][0] = record
+        new = self._new_set(record, ended)
         if len(self._sets) < _MAX_INFO_SETS:
             self._sets.append(new)
         return new[1]

@@ -311,13 +311,19 @@ class NativeAdvance:
         inputs before it writes its outputs, so the aliasing is safe. Every tensor must
         be contiguous: nothing is copied.
         """
-        x, v, f, goal, a, move, prev_distance, prev_arrived, start_distance = args
-        dtype, B = x.dtype, x.shape[1]
+        x, v, f, _, _, move, prev_distance, prev_arrived, _ = args
+        dtype, B, N = x.dtype, x.shape[1], x.shape[2]
         idx = np.ascontiguousarray(rows, dtype=np.int64)
         if idx.size and not (0 <= idx.min() and idx.max() < B):
             raise ValueError(f"rows must be swarms in [0, {B}), got {idx.min()}..{idx.max()}")
-        inputs = (x, v, f, goal, a, move, prev_distance, prev_arrived, start_distance)
-        tensors = (*inputs, x, v, f, obs, packed, prev_distance, prev_arrived)
+        # Written in place: their layout must be the one the C step writes.
+        if obs.shape != (B, N, self.obs_dim) or obs.dtype != torch.float32:
+            raise ValueError(
+                f"obs must be float32 {(B, N, self.obs_dim)}, got {obs.dtype} {tuple(obs.shape)}"
+            )
+        if packed.shape != (B, _N_PACKED) or packed.dtype != dtype or move.dtype != torch.bool:
+            raise ValueError(f"packed must be {dtype} {(B, _N_PACKED)} and move bool")
+        tensors = (*args, x, v, f, obs, packed, prev_distance, prev_arrived)
         if not all(t.is_contiguous() for t in tensors):
             raise ValueError("measure_rows writes in place: every tensor must be contiguous")
         self._call(dtype, B, idx, tensors)

@@ -159,9 +159,7 @@ class SwarmNavVecEnv(VecEnv):
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state["_pool"] = None  # threads do not pickle; recreated on first use
-        state["_swarm_infos"] = SwarmInfoPool(self.n_swarms)  # no step's infos
-        state["_terminal_infos"] = TerminalInfoPool(self.n_swarms, self.n_agents)
-        return state
+        return state  # the info pools pickle as their sizes (see infos.py)
 
     # ------------------------------------------------------------------ VecEnv API
     def reset(self) -> np.ndarray:
