@@ -2,8 +2,8 @@
 
 All share Stable-Baselines3's protocol, ``predict(obs, state=None, episode_start=None,
 deterministic=True) -> (action, state)``, so evaluation treats them and trained SB3
-models alike (DESIGN.md principle 6: baselines are policies, not env methods). One
-module per source paper:
+models alike (``docs/design.md`` principle 6: baselines are policies, not env methods).
+One module per source paper:
 
 - :class:`PotentialFieldController` (:mod:`agents.mabrouk_mcinnes`): the goal sink of
   Mabrouk & McInnes, eqs. 19–21, applied as the control force.

@@ -7,10 +7,10 @@ e^{−|r_i − r_g|/l_g}`` (eq. 19) to the social potential; every agent then fe
 
 ``F_goal_i = −∇V_goal = (C_g/l_g) e^{−|r_g − r_i|/l_g} (r_g − r_i)/|r_g − r_i|``
 
-(eq. 21 as MODELS.md §1 reads it: the printed eq. 21 drops the unit vector and writes
-``l_a`` for ``l_g``). :class:`PotentialFieldController` applies exactly that force as
-the agent's control, so the passive physics plus this controller is the paper's
-navigating swarm (eq. 21), and learned policies are measured against it.
+(eq. 21 as ``docs/models.md`` §1 reads it: the printed eq. 21 drops the unit vector
+and writes ``l_a`` for ``l_g``). :class:`PotentialFieldController` applies exactly that
+force as the agent's control, so the passive physics plus this controller is the
+paper's navigating swarm (eq. 21), and learned policies are measured against it.
 """
 
 from __future__ import annotations

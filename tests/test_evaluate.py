@@ -19,12 +19,12 @@ from train.cli_eval import main
 from train.evaluate import (
     CURVE_KEYS,
     SpaceMismatchError,
-    _detect_sb3_algorithm,
     evaluate_policies,
     format_table,
     policy_mode,
     run_episodes,
 )
+from train.evaluate.policies import _detect_sb3_algorithm
 
 ROOT = Path(__file__).resolve().parent.parent
 # A short task the goal-sink controller solves in ~40 steps.

@@ -66,8 +66,8 @@ def done_slots_only(cls: type) -> type:
     """SB3 algorithm ``cls`` whose episode bookkeeping visits the slots that ended only.
 
     SB3's ``_update_info_buffer`` reads ``info.get("episode")`` and ``"is_success"`` of
-    every slot on every step: with one slot per agent, 32,768 slots at 1,024 × 32, that
-    loop takes 5.5 ms per step, more than the env's whole step (4.5 ms). Monitors
+    every slot on every step: with one slot per agent (32,768 slots at 1,024 swarms × 32
+    agents) that loop costs more per step than the env's whole step. Monitors
     (``Monitor``, ``VecMonitor`` and ``SwarmNavVecEnv``) put ``episode`` into the infos
     of ended episodes only, and SB3 counts ``is_success`` only there, so visiting those
     slots keeps what it logs.

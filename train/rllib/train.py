@@ -21,7 +21,7 @@ Reproducibility: RLlib is seeded with ``seed`` (``config.debugging(seed=...)``),
 also seeds each env runner's envs. With ``num_env_runners: 0`` (sampling in the driver)
 two runs of the same config give identical checkpoints on the same machine and
 versions. With remote env runners (Ray actors) they do not, in Ray 2.60: the same seed
-gave returns that differ slightly from the first iteration on. Such runs are
+gives returns that differ slightly from the first iteration on. Such runs are
 repeatable in distribution, not bit for bit.
 """
 

@@ -1,0 +1,185 @@
+"""Seeded SwarmNav episodes of one policy, all stepped at once on one batched core.
+
+:func:`run_episodes` runs ``B`` episodes on :class:`~swarm_envs.envs.core.SwarmNavCore`
+with ``batch = B`` and records them in an :class:`EpisodeBatch`: per-episode totals,
+the group statistics at each episode's end, their curves over time, and episode 0's
+trajectory (for the GIF).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from agents.base import swarm_config_of
+from swarm_envs.config import SwarmConfig
+from swarm_envs.envs.core import SwarmNavCore
+from train.evaluate.policies import SpaceMismatchError, policy_mode
+
+__all__ = ["CURVE_KEYS", "FINAL_KEYS", "EpisodeBatch", "run_episodes"]
+
+#: Statistics recorded at every step and plotted against time (mean over episodes).
+CURVE_KEYS = ("centroid_distance", "expanse", "polarization", "angular_momentum")
+
+#: Statistics reported at each episode's last step, as ``final_<key>``.
+FINAL_KEYS = (
+    "expanse",
+    "polarization",
+    "angular_momentum",
+    "nearest_neighbor_distance",
+    "centroid_distance",
+    "fraction_arrived",
+)
+
+
+@dataclass
+class EpisodeBatch:
+    """Everything recorded for one policy over ``B`` episodes.
+
+    Per-episode arrays are shaped ``(B,)``. ``curves`` maps each of :data:`CURVE_KEYS`
+    to ``(T + 1, B)`` (index 0 is the start; an episode that has ended holds its last
+    value); ``times`` is ``(T + 1,)`` in simulated seconds. ``trajectory`` holds episode
+    0: positions and velocities ``(T0 + 1, N, d)`` and its goal ``(d,)``.
+    """
+
+    name: str
+    mode: str
+    dt: float
+    returns: np.ndarray
+    success: np.ndarray
+    lengths: np.ndarray
+    collisions: np.ndarray
+    effort: np.ndarray
+    final: dict[str, np.ndarray]
+    curves: dict[str, np.ndarray]
+    times: np.ndarray
+    trajectory: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+def run_episodes(
+    policy: Any,
+    cfg: SwarmConfig | Any,
+    episodes: int,
+    seed: int,
+    *,
+    name: str = "policy",
+    deterministic: bool = True,
+    progress: bool = False,
+    record_episode: bool = True,
+) -> EpisodeBatch:
+    """Run ``episodes`` seeded episodes of ``policy`` at once on one batched core.
+
+    Args:
+        policy: an object with SB3's ``predict``.
+        cfg: a :class:`SwarmConfig` (or any env it can be read from).
+        episodes: number of episodes ``B ≥ 1`` (all stepped together).
+        seed: seed of the start states (``numpy.random.default_rng(seed)``).
+        name: label of the progress bar and of the result.
+        deterministic: passed to ``predict``.
+        progress: show a tqdm progress bar (on stderr).
+        record_episode: keep episode 0's trajectory (for the GIF).
+
+    Raises:
+        SpaceMismatchError: see :func:`policy_mode`.
+        ValueError: ``episodes < 1``, or the policy returned non-finite actions.
+    """
+    cfg = swarm_config_of(cfg)
+    if isinstance(episodes, bool) or int(episodes) != episodes or episodes < 1:
+        raise ValueError(f"episodes must be an integer >= 1, got {episodes!r}")
+    mode = policy_mode(policy, cfg)
+    B, N, d = int(episodes), cfg.n_agents, cfg.dim
+    core = SwarmNavCore(cfg, batch=B)
+    core.reset(np.random.default_rng(seed))
+
+    returns = np.zeros(B)
+    lengths = np.zeros(B, np.int64)
+    collisions = np.zeros(B)
+    effort = np.zeros(B)
+    success = np.zeros(B, bool)
+    done = np.zeros(B, bool)
+    stats = core.stats()
+    final = {k: stats[k].astype(np.float64) for k in FINAL_KEYS}
+    series = {k: [stats[k].astype(np.float64)] for k in CURVE_KEYS}
+    xs, vs = [core.x[0].copy()], [core.v[0].copy()]
+    goal0 = core.goal[0].copy()
+    state: Any = None
+    episode_start = np.ones(B, bool)
+
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=cfg.max_steps, desc=name, unit="step", disable=not progress, leave=True)
+    try:
+        for _ in range(cfg.max_steps):
+            obs = core.observe()
+            if mode == "central":
+                action, state = policy.predict(
+                    obs.reshape(B, -1),
+                    state=state,
+                    episode_start=episode_start,
+                    deterministic=deterministic,
+                )
+            else:
+                action, state = policy.predict(
+                    obs.reshape(B * N, -1),
+                    state=state,
+                    episode_start=np.repeat(episode_start, N),
+                    deterministic=deterministic,
+                )
+            episode_start = np.zeros(B, bool)
+            a = np.asarray(action)
+            if a.size != B * N * d:
+                raise SpaceMismatchError(
+                    f"policy {name!r} returned actions of shape {a.shape}; expected "
+                    f"{(B * N, d) if mode == 'shared' else (B, N * d)}"
+                )
+            a = a.reshape(B, N, d)
+            reward, terminated, truncated, stats = core.step(a)  # validates, clips
+            clipped = np.clip(a.astype(np.float64), -1.0, 1.0)
+            live = ~done
+            returns[live] += reward[live]
+            lengths[live] += 1
+            collisions[live] += stats["collisions"][live]
+            effort[live] += np.einsum("bik,bik->b", clipped, clipped)[live] / N
+            for k in CURVE_KEYS:
+                series[k].append(stats[k].astype(np.float64))
+            ended = live & (terminated | truncated)
+            success |= ended & terminated
+            for k in FINAL_KEYS:
+                final[k][ended] = stats[k][ended]
+            if record_episode and live[0]:
+                xs.append(core.x[0].copy())
+                vs.append(core.v[0].copy())
+            done |= ended
+            bar.update(1)
+            if progress:
+                bar.set_postfix(
+                    done=f"{int(done.sum())}/{B}", success=int(success.sum()), refresh=False
+                )
+            if done.all():
+                break
+    finally:
+        bar.close()
+
+    # Hold each episode's last value after it ended.
+    steps = np.arange(len(series[CURVE_KEYS[0]]))
+    hold = np.minimum(steps[:, None], lengths[None, :])
+    curves = {k: np.take_along_axis(np.stack(v), hold, axis=0) for k, v in series.items()}
+    trajectory = {}
+    if record_episode:
+        trajectory = {"x": np.stack(xs), "v": np.stack(vs), "goal": goal0}
+    return EpisodeBatch(
+        name=name,
+        mode=mode,
+        dt=cfg.dt,
+        returns=returns,
+        success=success,
+        lengths=lengths,
+        collisions=collisions,
+        effort=effort,
+        final=final,
+        curves=curves,
+        times=steps * cfg.dt,
+        trajectory=trajectory,
+    )

@@ -1,0 +1,90 @@
+"""The evaluation harness: every policy on the same seeded episodes, measured and reported."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from agents.base import swarm_config_of
+from swarm_envs import ENV_ID
+from swarm_envs.config import SwarmConfig, as_dict
+from train.evaluate.episodes import run_episodes
+from train.evaluate.measures import METRIC_DOCS, summarize
+from train.evaluate.policies import SpaceMismatchError, policy_mode
+from train.evaluate.report import write_outputs
+
+__all__ = ["evaluate_policies"]
+
+
+def evaluate_policies(
+    policies: Mapping[str, Any],
+    cfg: SwarmConfig | Any,
+    episodes: int = 20,
+    seed: int = 0,
+    *,
+    out_dir: str | Path | None = None,
+    env_id: str = ENV_ID,
+    deterministic: bool = True,
+    progress: bool = True,
+    gif: bool = True,
+    plots: bool = True,
+    gif_size: int = 300,
+    extra: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Evaluate every policy on the same ``episodes`` seeded episodes.
+
+    Args:
+        policies: ``{name: policy}``; each policy has SB3's ``predict``.
+        cfg: the scenario, a :class:`SwarmConfig` or any swarm_envs env.
+        episodes: episodes per policy.
+        seed: seed of the start states, shared by all policies.
+        out_dir: if given, write ``results.json``, ``summary.md``, ``curves.png`` and
+            ``episode0_<name>.gif`` there (see :func:`write_outputs`).
+        env_id: recorded in the results as ``"env"``.
+        deterministic: passed to every ``predict``.
+        progress: show a tqdm progress bar per policy.
+        gif, plots: write the GIFs / the curves figure (with ``out_dir``).
+        gif_size: GIF width and height in pixels.
+        extra: more top-level entries for the results (e.g. the config path).
+
+    Returns:
+        ``{"env", "config", "episodes", "seed", "policies": {name: measures}}``, the
+        content of ``results.json`` (JSON-ready; ``mean_time_to_goal`` may be None).
+
+    Raises:
+        SpaceMismatchError: a policy's spaces do not fit (checked for all before running).
+    """
+    cfg = swarm_config_of(cfg)
+    if not policies:
+        raise ValueError("no policies to evaluate")
+    for name, policy in policies.items():
+        try:
+            policy_mode(policy, cfg)
+        except SpaceMismatchError as err:
+            raise SpaceMismatchError(f"policy {name!r}: {err}") from None
+    batches = {
+        name: run_episodes(
+            policy,
+            cfg,
+            episodes,
+            seed,
+            name=name,
+            deterministic=deterministic,
+            progress=progress,
+            record_episode=out_dir is not None and gif,
+        )
+        for name, policy in policies.items()
+    }
+    results: dict[str, Any] = {
+        "env": env_id,
+        **dict(extra or {}),
+        "config": as_dict(cfg),
+        "episodes": int(episodes),
+        "seed": int(seed),
+        "metrics": METRIC_DOCS,
+        "policies": {name: summarize(b) for name, b in batches.items()},
+    }
+    if out_dir is not None:
+        write_outputs(results, batches, cfg, out_dir, gif=gif, plots=plots, gif_size=gif_size)
+    return results

@@ -1,0 +1,109 @@
+"""What an evaluation writes: ``results.json``, ``summary.md``, ``curves.png``, GIFs.
+
+``summary.md`` holds the markdown table of :func:`format_table`; the figures are drawn
+by :mod:`train.evaluate.figures`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from swarm_envs.config import SwarmConfig
+from train.evaluate.episodes import EpisodeBatch
+from train.evaluate.figures import plot_curves, write_episode_gif
+from train.evaluate.measures import METRIC_DOCS
+
+__all__ = ["TABLE_COLUMNS", "format_table", "write_outputs"]
+
+#: Columns of the summary table: (key, header, format).
+TABLE_COLUMNS = (
+    ("success_rate", "success", "{:.0%}"),
+    ("mean_return", "return (mean ± std)", "{:.2f}"),
+    ("mean_time_to_goal", "time to goal (s)", "{:.1f}"),
+    ("collisions_per_episode", "collisions / ep.", "{:.1f}"),
+    ("control_effort", "control effort", "{:.1f}"),
+    ("final_centroid_distance", "final centroid dist.", "{:.2f}"),
+    ("final_expanse", "final expanse", "{:.2f}"),
+    ("final_polarization", "final polarization", "{:.2f}"),
+)
+
+
+def _fmt(value: Any, spec: str) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "–"
+    return spec.format(value)
+
+
+def format_table(results: Mapping[str, Any]) -> str:
+    """The policies' main measures as a markdown table (one row per policy)."""
+    header = "| policy | " + " | ".join(h for _, h, _ in TABLE_COLUMNS) + " |"
+    rule = "|---|" + "---:|" * len(TABLE_COLUMNS)
+    rows = []
+    for name, m in results["policies"].items():
+        cells = []
+        for key, _, spec in TABLE_COLUMNS:
+            cell = _fmt(m.get(key), spec)
+            if key == "mean_return" and m.get("std_return") is not None:
+                cell += " ± " + _fmt(m["std_return"], spec)
+            cells.append(cell)
+        rows.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join([header, rule, *rows])
+
+
+def _summary_markdown(results: Mapping[str, Any]) -> str:
+    cfg = results["config"]
+    lines = [
+        f"# Evaluation: {results['env']}",
+        "",
+        f"{results['episodes']} episodes per policy, seed {results['seed']}, "
+        f"N = {cfg['n_agents']}, dt = {cfg['dt']}, max_steps = {cfg['max_steps']}"
+        + (f", config `{results['config_path']}`" if results.get("config_path") else "")
+        + ".",
+        "",
+        format_table(results),
+        "",
+        "Measures (means over episodes):",
+        "",
+    ]
+    shown = {k for k, _, _ in TABLE_COLUMNS} | {"std_return"}
+    lines += [f"- `{k}`: {doc}" for k, doc in METRIC_DOCS.items() if k in shown]
+    return "\n".join(lines) + "\n"
+
+
+def _safe_name(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "policy"
+
+
+def write_outputs(
+    results: Mapping[str, Any],
+    batches: Mapping[str, EpisodeBatch],
+    cfg: SwarmConfig,
+    out_dir: str | Path,
+    *,
+    gif: bool = True,
+    plots: bool = True,
+    gif_size: int = 300,
+) -> dict[str, Path]:
+    """Write ``results.json``, ``summary.md``, ``curves.png`` and the GIFs; return paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths: dict[str, Path] = {"results": out / "results.json", "summary": out / "summary.md"}
+    paths["results"].write_text(
+        json.dumps(results, indent=2, ensure_ascii=False) + "\n", encoding="utf-8"
+    )
+    paths["summary"].write_text(_summary_markdown(results), encoding="utf-8")
+    if plots:
+        paths["curves"] = plot_curves(batches, cfg, out / "curves.png")
+    if gif:
+        for name, b in batches.items():
+            if b.trajectory:
+                key = f"gif_{name}"
+                paths[key] = write_episode_gif(
+                    b, cfg, out / f"episode0_{_safe_name(name)}.gif", gif_size
+                )
+    return paths
