@@ -36,7 +36,7 @@ from swarm_envs.envs.backends import select_backend
 def rates(fn: Callable[[], None], seconds: float, repeats: int) -> tuple[float, float]:
     """``(median, best)`` calls per second of ``fn`` over ``repeats`` windows of ``seconds``.
 
-    On a shared VM the spread is wide (host contention); the best window is the code's
+    On a shared machine the spread is wide (host contention); the best window is the code's
     speed, the median what a run typically sees. Both are printed.
     """
     fn()

@@ -14,7 +14,7 @@ adapter does), for one swarm (B = 1, float64) with the default config except
 at the density of the default N = 10 case; with the default radius, 100,000 agents
 would start 10^4 times denser. Random actions are drawn once per row (not timed).
 Each cell is the median (and the best) of ``--repeats`` single steps after one
-warm-up step; the machine is shared, so medians are what a run sees.
+warm-up step; on a shared machine the medians are what a run sees.
 
 Rows: N = 100 … ``--max-n``; the dense core only up to ``--dense-max`` (its
 ``(N, N)`` temporaries need about ``12 · 8 N²`` bytes). The crossover is then

@@ -7,9 +7,7 @@ ticks, and a light grid marks world coordinates. No drawing library is imported 
 this module; matplotlib (for a window, :meth:`SwarmRenderer.show`) and imageio (for
 :func:`write_gif`) are imported inside the functions that need them, so importing
 ``swarm_envs.render`` (and every environment) stays cheap and works on headless
-machines. A 400x400 frame with 100 agents, 50-step trails, velocities and the goal
-ring takes a few milliseconds (about 5-8 ms on a small 2-core VM); without trails
-about 1 ms.
+machines.
 
 Three-dimensional positions are drawn as their x–y projection. World coordinates have
 y pointing up; a frame is a ``uint8`` array shaped ``(height, width, 3)``. A size is

@@ -1,8 +1,8 @@
 """A cut-off radius for the social potential's pair terms, its error bound, and the
 forces and energy summed over a list of pairs (for large swarms).
 
-Every pair term of the social potential model (MODELS.md §1; Mabrouk & McInnes eqs.
-9–11) decays exponentially with the distance ``ρ = ρ_ij``. The force on ``i`` from
+Every pair term of the social potential model (``docs/models.md`` §1; Mabrouk & McInnes
+eqs. 9–11) decays exponentially with the distance ``ρ = ρ_ij``. The force on ``i`` from
 ``j`` is ``f_ij u_ij`` with
 
 ``f_ij = (C_a/l_a) e^{−ρ/l_a} − (C_r/l_r) e^{−ρ/l_r} − C_o ((v_i − v_j)·u_ij) e^{−ρ/l_o}``

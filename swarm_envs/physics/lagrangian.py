@@ -1,7 +1,7 @@
 """Lagrangian gradient swarm model of Vanualailai & Sharma: value, gradients, integrator.
 
 Reference: J. Vanualailai and B. Sharma, *A Lagrangian-based swarming behavior in the
-absence of obstacles* (2010; seed ``004``), §§3–5, eqs. 3–7; ``MODELS.md`` §5.
+absence of obstacles* (2010; seed ``004``), §§3–5, eqs. 3–7; ``docs/models.md`` §5.
 
 Model. Agent ``i`` is a point ``x_i ∈ R^d`` inside a disk ("bin", eq. 3) of radius
 ``r_i``. With the swarm centroid ``x_c = (1/n) Σ_k x_k`` (§3: the paper's ``x_c`` is the
@@ -481,7 +481,7 @@ def lagrangian_step(
 
     ``ẋ_i = −α_i ⊙ ∂L/∂x_i + u_i``: ``control`` ``u`` (shaped like ``x``, held over the
     frame) is added to the model velocity, as the SwarmNav environments apply an action
-    (``MODELS.md`` §6). The substep rules 1 (each pair keeps half its clearance, so no
+    (``docs/models.md`` §6). The substep rules 1 (each pair keeps half its clearance, so no
     ``R_ij`` ever reaches 0, whatever the control) and 2 (local error) always apply; rule
     3 (``L`` never increases, exact gradient) applies only without control, since a
     control may rightly raise ``L``.

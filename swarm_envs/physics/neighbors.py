@@ -84,8 +84,8 @@ CHUNK = 1 << 16
 
 #: A dense table of cumulative counts per key replaces binary search when the key
 #: range is at most this many times the number of points (at most 256 bytes per point).
-#: Binary search was 37 % of a 3-D k-nearest search of 100,000 agents, whose grid of
-#: small cells spans about 23 keys per point; the table halves that search.
+#: Fine grids need it: the 3-D k-nearest search of 100,000 agents spans about 23 keys per
+#: point, where binary search over the occupied keys would be a large part of the search.
 LOOKUP_FACTOR = 32
 
 #: Default ``reach`` of :func:`radius_pairs` (cells per search radius).

@@ -2,7 +2,7 @@
 
 Reference: Naterop, Petrides & Prasad, *Implementing two mathematical swarm models…*
 (seed ``003``), §4.2 (eqs. 15–18, table 2), after Viscido, Parrish & Grünbaum. The reading
-is the consistent one fixed in ``MODELS.md`` §4; the equation of motion is
+is the consistent one documented in ``docs/models.md`` §4; the equation of motion is
 
 ``m r̈_i = Σ_{j ∈ λ nearest of i} F(ρ_ij) u_ij + ξ_i − β v_i``
 
@@ -21,7 +21,7 @@ force along ``u_ij`` (eq. 16, positive = pulled toward j) is
 
 It is continuous except at ``ρ = R`` (a jump from ``F_max`` to 0) and, when
 ``r_0 = r_a``, at ``r_0`` (a jump from 0 to ``F_max``). Departures from the printed
-text, all from ``MODELS.md`` §4: eq. 16 prints the repulsion as ``g_r ρ − F_max`` with
+text (``docs/models.md`` §4): eq. 16 prints the repulsion as ``g_r ρ − F_max`` with
 ``g_r = F_max / r_a`` (which does not reach 0 at ``r_r``) and the attraction ramp as
 ``g_a (ρ − r_a)`` (negative on its own interval); table 2 lists ``g_r = 1``,
 ``g_a = 5 s⁻²``, consistent with neither. We use the slopes that make the curve of the
@@ -194,7 +194,7 @@ class PiecewiseParams:
 
 
 def force_law(rho: Any, params: PiecewiseParams) -> np.ndarray:
-    """The scalar pair force ``F(ρ)`` of eq. 16 (read as in ``MODELS.md`` §4), elementwise.
+    """The scalar pair force ``F(ρ)`` of eq. 16 (``docs/models.md`` §4), elementwise.
 
     Positive values attract (toward the neighbour), negative values repel. ``rho`` is
     a distance (``≥ 0``) of any shape; a floating array keeps its dtype.
@@ -299,7 +299,7 @@ def piecewise_forces(
 ) -> np.ndarray:
     """Total force on every agent: ``Σ_{λ nearest j} F(ρ_ij) u_ij + ξ_i − β v_i``.
 
-    Naterop §4.2, eq. 15 (with eqs. 16–18) plus the drag ``−β v_i`` of ``MODELS.md`` §4.
+    Naterop §4.2, eq. 15 (with eqs. 16–18) plus the drag ``−β v_i`` (``docs/models.md`` §4).
 
     Args:
         x: positions ``(..., N, d)``, ``d`` in {2, 3}; float32 stays float32.

@@ -4,7 +4,7 @@ References: I. D. Couzin, J. Krause, R. James, G. D. Ruxton and N. R. Franks,
 *Collective memory and spatial sorting in animal groups*, J. theor. Biol. 218 (2002) 1–11;
 Naterop, Petrides & Prasad, *Implementing two mathematical swarm models…* (seed ``003``),
 §4.1 "Unit-vector-based model" (eqs. 1–7, table 1) and §5.3 (table 3). The reading is the
-one fixed in ``MODELS.md`` §3.
+one documented in ``docs/models.md`` §3.
 
 The model is kinematic with constant speed: agent ``i`` has a position ``r_i`` and a unit
 heading ``η̂_i``, and moves with ``v_i = s_i η̂_i`` (Naterop eq. 2). Each step, among its
@@ -399,8 +399,8 @@ def zone_step(
     ``η̂' = turn_toward(η̂, d̂, φ̄_i)``, ``r' = r + dt s_i η̂'`` (Naterop eqs. 2–6).
     ``bias`` (shaped like ``x``), when given, is added to the unit desired direction
     before the turn, ``d̂_i + b_i`` (how the SwarmNav environments apply an action,
-    ``MODELS.md`` §6; ``b_i = ω ĝ_i`` is the informed-individual rule of eq. 6); a zero
-    bias leaves the model unchanged.
+    ``docs/models.md`` §6; ``b_i = ω ĝ_i`` is the informed-individual rule of eq. 6); a
+    zero bias leaves the model unchanged.
     ``rng`` is accepted for a uniform signature; this step is deterministic (the random
     parts of the model, the per-agent parameters and the informed subset, are drawn
     once per run by :func:`simulate_zone`). Returns new arrays ``(x', η̂')``.
