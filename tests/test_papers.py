@@ -12,10 +12,13 @@ from typing import Any
 import numpy as np
 import pytest
 
-from swarm_envs.papers import (
+from swarm_envs.papers._io import to_jsonable
+from swarm_envs.papers.claims import classify_trend
+from swarm_envs.papers.cli import main, parse_only
+from swarm_envs.papers.mabrouk_mcinnes import (
     FIGURES,
+    PARTS,
     RunSetup,
-    classify_trend,
     fig1_polarization_vs_beta,
     fig4_5_variance_and_angular_momentum,
     fig6_8_alignment_sweep,
@@ -23,8 +26,6 @@ from swarm_envs.papers import (
     fig10_amplitude_ratio_sweep,
     fig11_navigation,
 )
-from swarm_envs.papers._io import to_jsonable
-from swarm_envs.papers.cli import main, parse_only
 
 FIG_NAMES = ["fig1", "fig4_5", "fig6_8", "fig9", "fig10", "fig11"]
 TOP_KEYS = {"figure", "title", "paper", "setup", "claims", "verdict"}
@@ -131,7 +132,7 @@ def test_cli_unknown_figure_exits_2(tmp_path: Path, capsys: pytest.CaptureFixtur
 
 
 def test_parse_only_order_and_default():
-    assert parse_only(None) == FIG_NAMES
+    assert parse_only(None, PARTS) == FIG_NAMES
     assert parse_only("fig11, fig1") == ["fig1", "fig11"]
 
 

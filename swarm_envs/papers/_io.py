@@ -1,11 +1,15 @@
-"""Shared output helpers of the reproductions (JSON-ready values)."""
+"""Shared output helpers of the reproductions (JSON-ready values, JSON files)."""
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+__all__ = ["to_jsonable", "write_json"]
 
 
 def to_jsonable(obj: Any, digits: int = 6) -> Any:
@@ -31,4 +35,14 @@ def to_jsonable(obj: Any, digits: int = 6) -> Any:
         if not math.isfinite(value):
             return None
         return float(f"{value:.{digits}g}")
+    if isinstance(obj, Path):
+        return obj.name
     return obj
+
+
+def write_json(path: str | Path, doc: Any, *, indent: int = 1) -> Path:
+    """Write ``doc`` (made JSON-ready with :func:`to_jsonable`) to ``path``; return the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(to_jsonable(doc), indent=indent, ensure_ascii=False) + "\n")
+    return path

@@ -6,8 +6,11 @@ finds that "the expanse value of the swarm continuously increases with time (aft
 certain point) for all cases": the agents "escape the influential zones, and then
 continue with their same velocities". §5.1 and §6 blame "very high velocities" from the
 scaling of units and time step and propose "to reduce the time-step, and add a drag
-force". The physics is :mod:`swarm_envs.physics.piecewise` (``MODELS.md`` §4), the
-expanse :func:`swarm_envs.metrics.expanse` (Naterop eq. 11).
+force". The physics is :mod:`swarm_envs.physics.piecewise` (``docs/models.md`` §4),
+the expanse :func:`swarm_envs.metrics.expanse` (Naterop eq. 11). :func:`run` is the
+common entry point of the reproductions (:mod:`swarm_envs.papers.result`), with one
+part, ``piecewise_dispersal``; the claims are in :mod:`swarm_envs.papers.naterop.claims`,
+the plot in :mod:`swarm_envs.papers.naterop.plots`.
 
 What :func:`run` does: table 2 (``N = 100``, ``λ = 8``, ``F_max = 100``, ``r_r = 1``,
 ``r_a = 20``, ``R = 30``, random force ``σ = F_max/6``, unit mass), for
@@ -52,9 +55,9 @@ Choices where the report is silent:
 
 from __future__ import annotations
 
-import json
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -62,24 +65,40 @@ from typing import Any
 import numpy as np
 
 from swarm_envs import metrics
-from swarm_envs.papers._io import to_jsonable
+from swarm_envs.papers._io import to_jsonable, write_json
+from swarm_envs.papers.claims import verdict
+from swarm_envs.papers.naterop.claims import dispersal_claims
+from swarm_envs.papers.naterop.plots import plot_dispersal
+from swarm_envs.papers.result import (
+    PaperResult,
+    PartResult,
+    check_seeds,
+    finish,
+    output_dir,
+    select_parts,
+)
 from swarm_envs.physics.piecewise import PiecewiseParams, simulate_piecewise
 
 __all__ = [
     "DEFAULT_R_0S",
-    "PAPER",
+    "NAME",
+    "PARTS",
     "SETTINGS",
+    "TITLE",
     "Setting",
     "bounded",
     "dispersed",
-    "plot",
     "run",
 ]
 
-PAPER = (
+NAME = "naterop_piecewise"
+TITLE = (
     "Naterop, Petrides & Prasad, Implementing two mathematical swarm models "
     "(force-based model: §4.2, table 2; results: §5.1, Fig. 3)"
 )
+
+#: The one part: the dispersal figure (``piecewise_dispersal.json``, ``.png``).
+PARTS: tuple[str, ...] = ("piecewise_dispersal",)
 
 #: Equilibrium distances swept (the report's table 2 gives the range 1–15 m).
 DEFAULT_R_0S = (1.0, 5.0, 10.0, 15.0)
@@ -177,27 +196,8 @@ def _simulate_expanse(
     }
 
 
-def run(out_dir: Path | None = None, *, seeds: int = 3, quick: bool = False) -> dict[str, Any]:
-    """Reproduce the dispersal of the report's force model and show the drag fix.
-
-    Args:
-        out_dir: where to write ``piecewise_dispersal.json`` and
-            ``piecewise_dispersal.png``; ``None`` writes nothing.
-        seeds: number of random initial states and noise streams (batched), ``≥ 1``.
-        quick: a small, few-second version for tests (``N = 40``, ``T = 20 s``,
-            ``r_0 ∈ {1, 10}``, at most 2 seeds); its verdict is not meaningful.
-
-    Returns:
-        A JSON-ready dict: ``paper``, ``setup``, ``results`` (per setting and ``r_0``:
-        expanse series mean over seeds, initial/half/final expanse per seed, final
-        speed, nearest-neighbour distance and isolated fraction, and the ``dispersed``
-        and ``bounded`` flags per seed), ``verdict`` (``reproduced``: the report-like
-        runs all disperse; ``fixed``: the fixed runs are all bounded; ``summary``),
-        ``findings`` (the diagnostics) and ``runtime_s``.
-    """
-    if isinstance(seeds, bool) or not isinstance(seeds, (int, np.integer)) or seeds < 1:
-        raise ValueError(f"run: seeds must be an integer >= 1, got {seeds!r}")
-    start = time.perf_counter()
+def _compute(quick: bool, seeds: int) -> dict[str, Any]:
+    """The document of :func:`run`, with numpy values and without ``runtime_s``."""
     n_agents = 40 if quick else TABLE_2["N"]
     duration = 20.0 if quick else 200.0
     r_0s = (1.0, 10.0) if quick else DEFAULT_R_0S
@@ -298,11 +298,12 @@ def run(out_dir: Path | None = None, *, seeds: int = 3, quick: bool = False) -> 
         "drag_alone_bounded": drag_bounded,
         "drag_alone_bounded_fraction": float(flags["drag"]["bounded"].mean()),
         "note": "; ".join(notes),
+        "diagnostics": "; ".join(notes[:2]),
     }
     result = {
         "title": "Naterop piecewise force model: dispersal without drag, bounded with drag",
         "paper": {
-            "reference": PAPER,
+            "reference": TITLE,
             "claim": (
                 "§5.1: the expanse increases continuously with time for all cases; §5.1/§6: "
                 "reduce the time step and add a drag force"
@@ -330,58 +331,67 @@ def run(out_dir: Path | None = None, *, seeds: int = 3, quick: bool = False) -> 
         "results": results,
         "verdict": {"reproduced": reproduced, "fixed": fixed, "summary": summary},
         "findings": findings,
-        "runtime_s": time.perf_counter() - start,
+        "claims": dispersal_claims(flags["report"]["dispersed"], flags["fixed"]["bounded"]),
     }
-    result = to_jsonable(result)
-    if out_dir is not None:
-        out_dir = Path(out_dir)
-        out_dir.mkdir(parents=True, exist_ok=True)
-        (out_dir / "piecewise_dispersal.json").write_text(json.dumps(result, indent=1) + "\n")
-        plot(result, out_dir / "piecewise_dispersal.png")
     return result
 
 
-def plot(result: dict[str, Any], path: str | Path, *, dpi: int = 80) -> Path:
-    """Expanse vs time: all four settings (log scale), and the fixed setting alone."""
-    from matplotlib import colormaps
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+def run(
+    out_dir: str | Path | None = None,
+    *,
+    quick: bool = False,
+    seeds: int | None = None,
+    only: Sequence[str] | None = None,
+) -> PaperResult:
+    """Reproduce the dispersal of the report's force model and show the drag fix.
 
-    fig = Figure(figsize=(11.0, 3.8), layout="constrained")
-    FigureCanvasAgg(fig)
-    ax0, ax1 = fig.subplots(1, 2)
-    t = np.asarray(result["t"], dtype=float)
-    styles = {"report": "-", "fixed": "-", "small_dt": "--", "drag": ":"}
-    cmap = colormaps["viridis"]
-    r_0s = result["setup"]["r_0"]
-    for name, res in result["results"].items():
-        for k, (key, curve) in enumerate(res["r_0"].items()):
-            color = cmap(k / max(1, len(r_0s) - 1))
-            y = np.asarray(curve["expanse_mean"], dtype=float)
-            lw = 2.0 if name in ("report", "fixed") else 1.0
-            label = f"{name} (β={res['beta']:g}, dt={res['dt']:g}) r_0={key}"
-            ax0.semilogy(t, y, ls=styles[name], color=color, lw=lw, label=label)
-            if name == "fixed":
-                ax1.plot(t, y, color=color, label=f"r_0 = {key}")
-    ax0.set(xlabel="t [s]", ylabel="expanse [m] (mean over seeds)", title="all settings")
-    ax0.legend(fontsize=5, ncol=2)
-    R = result["paper"]["table_2"]["R"]
-    ax1.axhline(R, color="0.6", lw=0.8, ls="--", label="R")
-    ax1.set(
-        xlabel="t [s]",
-        ylabel="expanse [m]",
-        title="fixed: β = 0.5, dt = 0.01 s (bounded)",
-        ylim=(0, None),
+    Args:
+        out_dir: where to write ``piecewise_dispersal.json``,
+            ``piecewise_dispersal.png`` and ``summary.json``; ``None`` writes nothing.
+        quick: a small version for tests (``N = 40``, ``T = 20 s``, ``r_0 ∈ {1, 10}``,
+            at most 2 seeds); its verdict is not meaningful.
+        seeds: number of random initial states and noise streams (batched), ``≥ 1``
+            (``None``: 3).
+        only: ``None`` or ``["piecewise_dispersal"]`` (the only part).
+
+    Returns:
+        The verdict of ``piecewise_dispersal`` and its claims; the result reads as the
+        JSON document: ``paper``, ``setup``, ``results`` (per setting and ``r_0``:
+        expanse series mean over seeds, initial/half/final expanse per seed, final
+        speed, nearest-neighbour distance and isolated fraction, and the ``dispersed``
+        and ``bounded`` flags per seed), ``verdict`` (``reproduced``: the report-like
+        runs all disperse; ``fixed``: the fixed runs are all bounded; ``summary``),
+        ``claims`` (those two), ``findings`` (the diagnostics) and ``runtime_s``.
+    """
+    select_parts(PARTS, only)
+    n_seeds = check_seeds(seeds) or 3
+    start = time.perf_counter()
+    result = _compute(quick, n_seeds)
+    result["runtime_s"] = time.perf_counter() - start
+    result = to_jsonable(result)
+    out = output_dir(out_dir)
+    files: list[Path] = []
+    if out is not None:
+        files.append(write_json(out / "piecewise_dispersal.json", result))
+        files.append(plot_dispersal(result, out / "piecewise_dispersal.png"))
+    part = PartResult(
+        name="piecewise_dispersal",
+        title=result["title"],
+        verdict=verdict(result["claims"]),
+        claims=result["claims"],
+        note=result["findings"]["diagnostics"],
+        elapsed_s=time.perf_counter() - start,
+        files=tuple(files),
     )
-    ax1.legend(fontsize=7)
-    verdict = result["verdict"]
-    fig.suptitle(
-        f"Naterop §4.2 force model, N = {result['setup']['n_agents']}, mean over "
-        f"{result['setup']['seeds']} seeds — dispersal reproduced: {verdict['reproduced']}, "
-        f"fixed by drag: {verdict['fixed']}",
-        fontsize=9,
+    return finish(
+        NAME,
+        TITLE,
+        quick=quick,
+        setup=result["setup"],
+        parts={part.name: part},
+        data=result,
+        files=files,
+        out=out,
+        order=PARTS,
+        started=start,
     )
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi)
-    return path

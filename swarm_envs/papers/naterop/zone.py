@@ -2,8 +2,11 @@
 
 Report: Naterop, Petrides & Prasad, *Implementing two mathematical swarm models…*
 (seed ``003``), §4.1 (model, table 1), §5.2–5.3 (table 3, figs. 6–7). Model:
-:mod:`swarm_envs.physics.zone` (``MODELS.md`` §3); statistics: :mod:`swarm_envs.metrics`
-(``MODELS.md`` §2).
+:mod:`swarm_envs.physics.zone` (``docs/models.md`` §3); statistics:
+:mod:`swarm_envs.metrics` (``docs/models.md`` §2). :func:`run` is the common entry
+point of the reproductions (:mod:`swarm_envs.papers.result`), with one part,
+``zone_table3``; the claims are in :mod:`swarm_envs.papers.naterop.claims`, the plot in
+:mod:`swarm_envs.papers.naterop.plots`.
 
 Table 3 (N = 64, r_r = 1 m, r_a = 15 m, speed 2 m/s, φ̄ = 50°, σ = 0.05; averages over
 t ∈ [100, 150] s; time to food with 1 in 5 informed, 10 repetitions):
@@ -38,14 +41,16 @@ Choices where the report is silent (:class:`ZoneSetup`; ``docs/reproductions_nat
 Because the torus depends on how fast agents may turn, the table is run under two
 readings of φ̄ at once (one batch): ``"per_step"`` (50° per step, the report's words,
 eq. 5) and ``"per_second"`` (50°/s, i.e. 5° per 0.1 s step, near Couzin's 40°/s).
-The ``per_step`` reading is the one the verdicts are about.
+The ``per_step`` reading is the one the verdicts are about: its claims count toward
+the verdict of ``zone_table3``, those of the ``per_second`` reading are reported beside
+them.
 """
 
 from __future__ import annotations
 
-import itertools
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -53,7 +58,18 @@ from typing import Any
 import numpy as np
 
 from swarm_envs import metrics
-from swarm_envs.papers._io import to_jsonable
+from swarm_envs.papers._io import to_jsonable, write_json
+from swarm_envs.papers.claims import verdict
+from swarm_envs.papers.naterop.claims import zone_row_claims, zone_trend_claims
+from swarm_envs.papers.naterop.plots import plot_table3
+from swarm_envs.papers.result import (
+    PaperResult,
+    PartResult,
+    check_seeds,
+    finish,
+    output_dir,
+    select_parts,
+)
 from swarm_envs.physics.zone import (
     ZoneAgentParams,
     ZoneParams,
@@ -62,7 +78,22 @@ from swarm_envs.physics.zone import (
     zone_step,
 )
 
-__all__ = ["CONFIGURATIONS", "REPORT", "ZoneSetup", "classify_state", "run"]
+__all__ = [
+    "CONFIGURATIONS",
+    "NAME",
+    "PARTS",
+    "READINGS",
+    "REPORT",
+    "TITLE",
+    "ZoneSetup",
+    "classify_state",
+    "run",
+]
+
+NAME = "naterop_zone"
+TITLE = "Naterop, Petrides & Prasad, table 3 (§5.3), zone model of §4.1"
+#: The one part: table 3 (``zone_table3.json``, ``zone_table3.png``).
+PARTS: tuple[str, ...] = ("zone_table3",)
 
 #: Table 3's configurations and their orientation radii r_o [m].
 CONFIGURATIONS: tuple[tuple[str, float], ...] = (
@@ -275,7 +306,7 @@ def _food_times(setup: ZoneSetup) -> np.ndarray:
     return times.reshape(shape[:3])
 
 
-# --------------------------------------------------------------------------- verdicts
+# --------------------------------------------------------------------------- table
 
 
 def _row(
@@ -302,62 +333,6 @@ def _row(
     return row
 
 
-def _verdict(row: dict[str, Any], report: dict[str, float]) -> tuple[str, list[str]]:
-    """Checks on one row against the report; the verdict and why.
-
-    reproduced: our state is the report's, |ΔP| ≤ 0.1, raw L within a factor 2, and the
-    median time to food within 30 %; partly: some of these hold; not: none does.
-    """
-    checks = {
-        "state": row["state"] == row["configuration"],
-        "polarization": abs(row["polarization"] - report["polarization"]) <= 0.1,
-        "angular_momentum_raw": 0.5
-        <= row["angular_momentum_raw"] / report["angular_momentum_raw"]
-        <= 2.0,
-        "time_to_food": abs(row["time_to_food_median"] - report["time_to_food"])
-        <= 0.3 * report["time_to_food"],
-    }
-    why = [
-        f"state: ours {row['state']!r} (P={row['polarization']:.2f}, "
-        f"M={row['angular_momentum']:.2f}) vs report {row['configuration']!r}"
-        + (" — match" if checks["state"] else " — differs"),
-        f"polarization {row['polarization']:.2f} vs {report['polarization']:.2f}"
-        + (" (within 0.1)" if checks["polarization"] else " (off by more than 0.1)"),
-        f"raw angular momentum {row['angular_momentum_raw']:.2f} vs "
-        f"{report['angular_momentum_raw']:.2f}"
-        + (" (within x2)" if checks["angular_momentum_raw"] else " (off by more than x2)"),
-        f"median time to food {row['time_to_food_median']:.0f} s vs "
-        f"{report['time_to_food']:.0f} s"
-        + (" (within 30 %)" if checks["time_to_food"] else " (off by more than 30 %)"),
-    ]
-    if all(checks.values()):
-        return "reproduced", why
-    if any(checks.values()):
-        return "partly reproduced", why
-    return "not reproduced", why
-
-
-def _trends(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
-    """The report's qualitative claims across the four configurations (§5.3)."""
-    p = [r["polarization"] for r in rows]
-    lraw = [r["angular_momentum_raw"] for r in rows]
-    t = [r["time_to_food_median"] for r in rows]
-    return {
-        "polarization increases with r_o": {
-            "holds": bool(all(a < b for a, b in itertools.pairwise(p))),
-            "observed": p,
-        },
-        "torus has the largest angular momentum": {
-            "holds": bool(int(np.argmax(lraw)) == 1),
-            "observed": lraw,
-        },
-        "time to food decreases with r_o": {
-            "holds": bool(all(a > b for a, b in itertools.pairwise(t))),
-            "observed": t,
-        },
-    }
-
-
 def _table_text(rows: list[dict[str, Any]]) -> str:
     lines = [
         f"{'configuration':17s} {'r_o':>4s} | {'L raw':>12s} {'M unit':>5s} | "
@@ -376,63 +351,59 @@ def _table_text(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def _plot(result: dict[str, Any], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    names = [n for n, _ in CONFIGURATIONS]
-    ro = [r for _, r in CONFIGURATIONS]
-    fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
-    panels = (
-        ("polarization", "polarization |Σv̂|/N (eq. 8)"),
-        ("angular_momentum_raw", "angular momentum |Σr_ic×v|/N (eq. 10)"),
-        ("time_to_food_median", "time to food [s] (median)"),
-    )
-    for ax, (key, label) in zip(axes, panels, strict=True):
-        rep_key = "time_to_food" if key.startswith("time") else key
-        ax.plot(ro, [REPORT[n][rep_key] for n in names], "ks--", label="report (table 3)")
-        for reading, style in zip(READINGS, ("o-", "^:"), strict=True):
-            ys = [r[key] for r in result["tables"][reading]]
-            ax.plot(ro, ys, style, label=f"ours, φ̄ {reading.replace('_', ' ')}")
-        ax.set_xlabel("orientation radius r_o [m]")
-        ax.set_title(label, fontsize=9)
-        ax.set_xticks(ro)
-    axes[0].legend(fontsize=8)
-    fig.suptitle(f"Naterop table 3: zone model, N = {result['setup']['n_agents']}")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+def _label(reading: str) -> str:
+    return "" if reading == "per_step" else f" [φ̄ {reading.replace('_', ' ')}]"
 
 
-def run(out_dir: Path | None = None, *, seeds: int = 3, quick: bool = False) -> dict[str, Any]:
-    """Reproduce Naterop's table 3 (§5.3) and return a JSON-ready dict.
+def run(
+    out_dir: str | Path | None = None,
+    *,
+    quick: bool = False,
+    seeds: int | None = None,
+    only: Sequence[str] | None = None,
+) -> PaperResult:
+    """Reproduce Naterop's table 3 (§5.3).
 
     Args:
-        out_dir: where to write ``zone_table3.json`` and ``zone_table3.png``; ``None``
-            writes nothing.
-        seeds: independent runs averaged for P and L (the food times use
-            ``ZoneSetup.repetitions = 10``, as the report).
+        out_dir: where to write ``zone_table3.json``, ``zone_table3.png`` and
+            ``summary.json``; ``None`` writes nothing.
         quick: tiny sizes (12 agents, 12 s, 2 repetitions) for smoke tests.
+        seeds: independent runs averaged for P and L (``None``: 3; the food times use
+            ``ZoneSetup.repetitions = 10``, as the report).
+        only: ``None`` or ``["zone_table3"]`` (the only part).
 
     Returns:
-        ``{"setup", "report", "tables": {reading: rows}, "trends", "verdict", "text",
-        "runtime_s"}``; each row has our means and spreads, the state label, the time to
-        food, and ``verdict`` / ``why`` (for the ``per_step`` reading, the report's).
+        The verdict of ``zone_table3`` and its claims; the result reads as the JSON
+        document ``{"paper", "setup", "report", "tables": {reading: rows}, "trends",
+        "verdict", "verdict_per_second", "text", "runtime_s"}``. Each row has our means
+        and spreads, the state label, the time to food, its ``claims`` and ``verdict`` /
+        ``why``; ``verdict`` maps each configuration to its row's verdict under the
+        ``per_step`` reading (the report's), ``verdict_per_second`` under the other;
+        ``trends`` holds the claims across the configurations, per reading.
     """
+    select_parts(PARTS, only)
+    n_seeds = check_seeds(seeds) or 3
     start = time.perf_counter()
-    setup = ZoneSetup.quick(seeds) if quick else ZoneSetup(seeds=seeds)
+    setup = ZoneSetup.quick(n_seeds) if quick else ZoneSetup(seeds=n_seeds)
     stats = _table_statistics(setup)
     times = _food_times(setup)
     tables: dict[str, list[dict[str, Any]]] = {}
+    part_claims = []
     for i, reading in enumerate(READINGS):
         rows = []
         for j, (name, r_o) in enumerate(CONFIGURATIONS):
             row = _row(name, r_o, stats, times, i, j)
-            row["verdict"], row["why"] = _verdict(row, REPORT[name])
+            row["claims"], row["why"] = zone_row_claims(row, REPORT[name], label=_label(reading))
+            row["verdict"] = verdict(row["claims"])
             rows.append(row)
+            part_claims += [c | {"paper_form": reading == "per_step"} for c in row["claims"]]
         tables[reading] = rows
+    trends = {
+        reading: zone_trend_claims(rows, label=_label(reading), paper_form=reading == "per_step")
+        for reading, rows in tables.items()
+    }
+    for claims in trends.values():
+        part_claims += claims
     main = tables["per_step"]
     text = "\n\n".join(
         f"φ̄ = {setup.max_turn_degrees:g}° {reading.replace('_', ' ')}  "
@@ -440,31 +411,40 @@ def run(out_dir: Path | None = None, *, seeds: int = 3, quick: bool = False) -> 
         for reading, rows in tables.items()
     )
     result: dict[str, Any] = {
-        "paper": "Naterop, Petrides & Prasad, table 3 (§5.3), zone model of §4.1",
+        "paper": TITLE,
         "setup": {**asdict(setup), "readings": list(READINGS)},
         "report": REPORT,
         "tables": tables,
-        "trends": {reading: _trends(rows) for reading, rows in tables.items()},
+        "trends": trends,
         "verdict": {r["configuration"]: r["verdict"] for r in main},
         "verdict_per_second": {r["configuration"]: r["verdict"] for r in tables["per_second"]},
         "text": text,
+        "runtime_s": time.perf_counter() - start,
     }
-    result["runtime_s"] = time.perf_counter() - start
     result = to_jsonable(result)
-    if out_dir is not None:
-        import json
-
-        out_dir = Path(out_dir)
-        out_dir.mkdir(parents=True, exist_ok=True)
-        (out_dir / "zone_table3.json").write_text(json.dumps(result, indent=2))
-        _plot(result, out_dir / "zone_table3.png")
-    return result
-
-
-if __name__ == "__main__":  # pragma: no cover
-    import sys
-
-    res = run(Path(sys.argv[1]) if len(sys.argv) > 1 else None)
-    print(res["text"])
-    print("verdict:", res["verdict"])
-    print(f"runtime {res['runtime_s']:.1f} s")
+    out = output_dir(out_dir)
+    files: list[Path] = []
+    if out is not None:
+        files.append(write_json(out / "zone_table3.json", result))
+        files.append(plot_table3(result, out / "zone_table3.png"))
+    part = PartResult(
+        name="zone_table3",
+        title="Table 3: the zone model's four configurations",
+        verdict=verdict(part_claims),
+        claims=to_jsonable(part_claims),
+        note="rows (φ̄ per step): " + ", ".join(f"{k}: {v}" for k, v in result["verdict"].items()),
+        elapsed_s=time.perf_counter() - start,
+        files=tuple(files),
+    )
+    return finish(
+        NAME,
+        TITLE,
+        quick=quick,
+        setup=result["setup"],
+        parts={part.name: part},
+        data=result,
+        files=files,
+        out=out,
+        order=PARTS,
+        started=start,
+    )
