@@ -13,8 +13,8 @@ Every row is one ``step`` of B swarms (environments) of N agents, timed in windo
 about ``--seconds``; the rows of one size take turns, window after window, ``--repeats``
 times, so that a busy machine slows them all alike. Printed: median and best
 agent-steps/s (steps/s × B × N) and the ratio of each row's median to the numpy core's;
-then, per size, how many times the physics alone the full step costs (torch core, torch
-vec_env, numpy core; issue 8's target for the VecEnv is 2×).
+then, per size, how many times the physics alone the full step costs (the target for
+the VecEnv is 2×).
 
 Rows, ours (all with random actions in [−1, 1], drawn once per row):
 
@@ -22,10 +22,12 @@ Rows, ours (all with random actions in [−1, 1], drawn once per row):
   observations, reward, statistics);
 - ``numpy vec_env``: :class:`SwarmNavVecEnv` ``step`` (adds SB3's per-slot infos and the
   auto-reset bookkeeping);
-- ``torch core (plain)`` / ``(compiled)`` / ``(native)``: :class:`TorchSwarmNavCore`, the
-  same work as the numpy core, its step in plain torch, through ``torch.compile``, or
-  in C (:mod:`swarm_envs.envs.native_step`, where a C compiler builds it);
-- ``torch vec_env (compiled)`` / ``(native)``: the SB3 VecEnv stepping the torch core;
+- ``torch core (plain)`` / ``(compiled)``: :class:`TorchSwarmNavCore`, the same work as
+  the numpy core, its step in plain torch or through ``torch.compile``;
+- ``native core``: :class:`NativeSwarmNavCore`, the step in C (where a C compiler
+  builds it);
+- ``native vec_env`` / ``torch vec_env (compiled)``: the SB3 VecEnv on the C step (the
+  default) or on the compiled torch core;
 - ``physics only``: one semi-implicit Euler step of the social potential model, numpy
   and torch plain/compiled (no observations, reward or statistics).
 
@@ -60,15 +62,14 @@ import numpy as np
 import torch
 
 import swarm_envs  # noqa: F401  (registers the Gymnasium id)
-from swarm_envs import swarm_nav_v0
-from swarm_envs._malloc import keep_freed_memory
+from swarm_envs import swarm_nav_v0, tune_allocator
+from swarm_envs._runtime.torch_compile import SocialPotentialStepper
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.core import SwarmNavCore
-from swarm_envs.envs.native_step import NATIVE_ENV, native_support
+from swarm_envs.envs.native import NativeSwarmNavCore, native_support
 from swarm_envs.envs.torch_core import TorchSwarmNavCore
 from swarm_envs.physics import SocialPotentialParams, random_swarm
 from swarm_envs.physics import step as numpy_step
-from swarm_envs.physics.torch_backend import SocialPotentialStepper
 
 Step = Callable[[], Any]
 
@@ -115,23 +116,17 @@ def numpy_vec_env(n: int, b: int) -> Step:
     return lambda: venv.step(a)
 
 
-def torch_vec_env(kernel: str) -> Callable[[int, int], Step | None]:
-    """The SB3 VecEnv on the torch core (``backend="torch"``), its step run by ``kernel``:
-    ``"native"`` (the C step, the default where it builds) or ``"compiled"``."""
+def vec_env(backend: str) -> Callable[[int, int], Step | None]:
+    """The SB3 VecEnv on ``backend``: ``"native"`` (the C step, the default where it
+    builds) or ``"torch"`` (the torch core, compiled)."""
 
     def make(n: int, b: int) -> Step | None:
-        if kernel == "native" and not native_support()[0]:
+        if backend == "native" and not native_support()[0]:
             return None
-        previous = os.environ.get(NATIVE_ENV)
-        os.environ[NATIVE_ENV] = "1" if kernel == "native" else "0"
-        try:
-            venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, backend="torch")
-        finally:
-            if previous is None:
-                del os.environ[NATIVE_ENV]
-            else:
-                os.environ[NATIVE_ENV] = previous
-        assert venv.core.kernel == kernel, venv.core.kernel
+        venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, backend=backend)
+        assert venv.backend == backend, venv.backend
+        if backend == "torch":
+            print(f"    (torch vec_env {b} x {n}: ready in {venv.core.compile_seconds:.1f} s)")
         venv.seed(0)
         venv.reset()
         a = actions_for((venv.num_envs, 2))
@@ -140,20 +135,22 @@ def torch_vec_env(kernel: str) -> Callable[[int, int], Step | None]:
     return make
 
 
+def native_core(n: int, b: int) -> Step | None:
+    """:class:`NativeSwarmNavCore` (float32) ``step`` + ``observe``."""
+    if not native_support()[0]:
+        return None
+    core = NativeSwarmNavCore(SwarmConfig(n_agents=n, max_steps=10**9), batch=b, dtype=np.float32)
+    core.reset(np.random.default_rng(0))
+    a = actions_for((b, n, 2))
+    return lambda: (core.step(a), core.observe())
+
+
 def torch_core(kernel: str) -> Callable[[int, int], Step | None]:
-    """:class:`TorchSwarmNavCore` ``step`` + ``observe``, run by ``kernel``: ``"plain"``,
-    ``"compiled"`` (``torch.compile``) or ``"native"`` (the C step)."""
+    """:class:`TorchSwarmNavCore` ``step`` + ``observe``, ``"plain"`` or ``"compiled"``."""
 
     def make(n: int, b: int) -> Step | None:
-        if kernel == "native" and not native_support()[0]:
-            return None
         cfg = SwarmConfig(n_agents=n, max_steps=10**9)
-        options = {
-            "plain": dict(compile=False, native=False),
-            "compiled": dict(compile=True, native=False),
-            "native": dict(native=True),
-        }[kernel]
-        core = TorchSwarmNavCore(cfg, batch=b, **options)
+        core = TorchSwarmNavCore(cfg, batch=b, compile=kernel == "compiled")
         if kernel != "plain":
             print(f"    (torch core {b} x {n}, {kernel}: ready in {core.compile_seconds:.1f} s)")
         core.reset(np.random.default_rng(0))
@@ -279,9 +276,9 @@ ROWS: list[tuple[str, Callable[[int, int], Step | None], bool]] = [
     ("numpy vec_env", numpy_vec_env, False),
     ("torch core (plain)", torch_core("plain"), False),
     ("torch core (compiled)", torch_core("compiled"), False),
-    ("torch core (native)", torch_core("native"), False),
-    ("torch vec_env (compiled)", torch_vec_env("compiled"), False),
-    ("torch vec_env (native)", torch_vec_env("native"), False),
+    ("native core", native_core, False),
+    ("torch vec_env (compiled)", vec_env("torch"), False),
+    ("native vec_env", vec_env("native"), False),
     ("vmas navigation", vmas_navigation, False),
     ("vmas pairwise", vmas_pairwise, False),
     ("mpe2 simple_spread", mpe2_spread, False),
@@ -355,15 +352,15 @@ def print_table(results: list[dict]) -> None:
 #: (full-step row, physics-only row) pairs of the "cost of the full step" table.
 FULL_VS_PHYSICS = (
     ("torch core (compiled)", "physics only, torch compiled"),
-    ("torch core (native)", "physics only, torch compiled"),
+    ("native core", "physics only, torch compiled"),
     ("torch vec_env (compiled)", "physics only, torch compiled"),
-    ("torch vec_env (native)", "physics only, torch compiled"),
+    ("native vec_env", "physics only, torch compiled"),
     ("numpy core", "physics only, numpy"),
 )
 
 
 def print_full_vs_physics(results: list[dict]) -> None:
-    """How many times the physics alone costs the full step (issue 8's target: ≤ 2×).
+    """How many times the physics alone costs the full step (the target: ≤ 2×).
 
     Both rows of a ratio come from the same run, their windows alternating; a ratio of
     medians and a ratio of bests (the bests are the least disturbed windows).
@@ -419,7 +416,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.threads is not None:
         torch.set_num_threads(args.threads)
-    keep_freed_memory()
+    tune_allocator()
     print(f"machine: {machine()}")
     for mod in ("vmas", "mpe2"):
         try:

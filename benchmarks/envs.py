@@ -27,8 +27,7 @@ from collections.abc import Callable
 import numpy as np
 
 import swarm_envs  # noqa: F401  (registers the Gymnasium id)
-from swarm_envs import swarm_nav_v0
-from swarm_envs._malloc import keep_freed_memory
+from swarm_envs import swarm_nav_v0, tune_allocator
 from swarm_envs.config import DYNAMICS, SwarmConfig
 from swarm_envs.envs.backends import select_backend
 
@@ -121,7 +120,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--dynamics", nargs="+", default=list(DYNAMICS), choices=DYNAMICS)
     args = parser.parse_args()
-    print(f"glibc keep-freed-memory tuning active: {keep_freed_memory()}")
+    print(f"glibc heap tuning (swarm_envs.tune_allocator) active: {tune_allocator()}")
     s, r = args.seconds, args.repeats
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores; numpy {np.__version__}")
     print()

@@ -45,7 +45,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from swarm_envs._malloc import keep_freed_memory
+from swarm_envs import tune_allocator
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.core import SwarmNavCore
 from swarm_envs.envs.sparse_core import (
@@ -189,7 +189,7 @@ def main() -> None:
     parser.add_argument("--accuracy", type=int, default=0, metavar="N")
     parser.add_argument("--cutoff-tol", type=float, default=DEFAULT_CUTOFF_TOL)
     args = parser.parse_args()
-    print(f"glibc keep-freed-memory tuning active: {keep_freed_memory()}")
+    print(f"glibc heap tuning (swarm_envs.tune_allocator) active: {tune_allocator()}")
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores; numpy {np.__version__}")
     dim, reps = args.dim, args.repeats
     SPARSE_KWARGS["cutoff_tol"] = args.cutoff_tol

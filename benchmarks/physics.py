@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-from swarm_envs._malloc import keep_freed_memory
+from swarm_envs import tune_allocator
 from swarm_envs.physics import (
     LagrangianParams,
     PiecewiseParams,
@@ -106,7 +106,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--seconds", type=float, default=0.5)
     args = parser.parse_args()
-    print(f"glibc keep-freed-memory tuning active: {keep_freed_memory()}")
+    print(f"glibc heap tuning (swarm_envs.tune_allocator) active: {tune_allocator()}")
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, {platform.processor() or ''}")
     print(f"numpy {np.__version__}, python {platform.python_version()}")
     print()

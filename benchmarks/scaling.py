@@ -24,7 +24,7 @@ import sys
 
 import torch
 
-from swarm_envs._malloc import keep_freed_memory
+from swarm_envs import tune_allocator
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from compare import ROWS, compare, fmt, machine  # benchmarks/ is not a package
@@ -110,7 +110,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.threads is not None:
         torch.set_num_threads(args.threads)
-    keep_freed_memory()
+    tune_allocator()
     rows = OURS + (PEERS if args.peers else ())
     print(f"machine: {machine()}")
     results = {

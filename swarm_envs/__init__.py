@@ -1,9 +1,16 @@
 """swarm_envs: Gymnasium and PettingZoo environments for learned swarm control.
 
 ``import swarm_envs`` registers ``swarm_envs/SwarmNav-v0`` with Gymnasium.
+:func:`tune_allocator` is an explicit, process-wide speed-up of glibc's heap for long
+runs (the command-line tools call it; ``SWARM_ENVS_TUNE_ALLOCATOR=1`` applies it at
+import).
 """
 
+import os
+
 from gymnasium.envs.registration import register, registry
+
+from swarm_envs._runtime.allocator import tune_allocator
 
 __version__ = "0.1.0"
 
@@ -16,6 +23,9 @@ if ENV_ID not in registry:
         max_episode_steps=400,
     )
 
+if os.environ.get("SWARM_ENVS_TUNE_ALLOCATOR", "").strip() == "1":
+    tune_allocator()
+
 from swarm_envs import swarm_nav_v0  # noqa: E402
 
-__all__ = ["ENV_ID", "__version__", "swarm_nav_v0"]
+__all__ = ["ENV_ID", "__version__", "swarm_nav_v0", "tune_allocator"]

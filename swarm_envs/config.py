@@ -42,7 +42,7 @@ T = TypeVar("T")
 DYNAMICS = ("social_potential", "zone", "piecewise", "lagrangian")
 
 #: How the env computes a step (``SwarmConfig.backend``); see ``swarm_envs.envs.backends``.
-BACKENDS = ("auto", "numpy", "sparse", "torch")
+BACKENDS = ("auto", "numpy", "sparse", "native", "torch")
 
 #: Where the shipped YAML files live: ``configs/`` at the repository root, which the
 #: package holds as ``swarm_envs/configs`` (a symbolic link in the repository, the files
@@ -153,10 +153,12 @@ class SwarmConfig:
     """Reward weights."""
     backend: str = "auto"
     """How a step is computed, one of :data:`BACKENDS`: ``"numpy"`` (dense, every
-    model), ``"sparse"`` (cut-off + cell list, large swarms), ``"torch"`` (one fused,
-    compiled step; CPU or CUDA) or ``"auto"``, which picks by model, N and batch
+    model), ``"sparse"`` (cut-off + cell list, large swarms), ``"native"`` (the step in
+    C, built at first use), ``"torch"`` (one fused, compiled step; CPU or CUDA) or
+    ``"auto"``, which picks by measured speed among the backends that support the config
     (``swarm_envs.envs.backends.select_backend``). Results agree to float tolerance
-    (``"sparse"``: up to its documented cut-off error)."""
+    (``"sparse"``: up to its documented cut-off error). A named backend that cannot run
+    the config falls back to ``"auto"``'s pick with a warning."""
     device: str = "cpu"
     """Torch device of the ``"torch"`` backend (``"cpu"``, ``"cuda"``, ``"cuda:1"``...)."""
 

@@ -1,4 +1,4 @@
-"""Group statistics of a swarm (MODELS.md §2), over arrays with leading batch dimensions.
+"""Group statistics of a swarm (``docs/models.md`` §2), over arrays with leading batch axes.
 
 Sources: M. H. Mabrouk and C. R. McInnes, *Social potential model to simulate emergent
 behaviour for swarm robots*, §1.2 (seed ``001``, eqs. 1–6, and eq. 16 for the energy);
@@ -19,7 +19,7 @@ Statistics (``r_ic = r_i − r_c``, ``â = a / |a|``):
 - :func:`expanse` — ``(1/N) Σ_i |r_i − r_c|`` (eq. 6 as the text defines it; Naterop eq. 11).
 - :func:`packing_density` — ``expanse / N`` (Naterop eq. 12).
 - :func:`total_energy` — total energy φ of the social-potential model (Mabrouk & McInnes eq. 16).
-- :func:`fraction_within` — fraction of agents with ``|r_i − r_g| ≤ R`` (MODELS.md §2).
+- :func:`fraction_within` — fraction of agents with ``|r_i − r_g| ≤ R`` (navigation).
 - :func:`first_passage_time` — first time a series crosses a threshold: Naterop's response
   time, time until the centroid or a fraction of the agents is within the goal radius.
 
@@ -53,11 +53,13 @@ unit vectors can come out as ``N (1 + ε)``).
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from swarm_envs._array import NUMPY, ArrayNamespace, namespace
 from swarm_envs.physics import SocialPotentialParams, energy
 from swarm_envs.physics._validation import as_state
 
@@ -85,12 +87,22 @@ CENTRE_RTOL = 4.0
 # --------------------------------------------------------------------------- helpers
 
 
-def _as_state(name: str, a: Any) -> np.ndarray:
-    """``a`` as a floating array shaped ``(..., N, d)``, ``N ≥ 1``, ``d`` in {2, 3}."""
+def _as_state(name: str, a: Any) -> Any:
+    """``a`` as a floating array shaped ``(..., N, d)``, ``N ≥ 1``, ``d`` in {2, 3}.
+
+    A torch tensor stays a tensor (the statistics run on either)."""
+    if _is_tensor(a):
+        if a.ndim < 2 or a.shape[-1] not in (2, 3) or a.shape[-2] < 1:
+            raise ValueError(f"{name} must have shape (..., N, d) with N >= 1, d in (2, 3)")
+        return a
     return as_state(a, name, min_agents=1)
 
 
-def _as_pair(x: Any, v: Any) -> tuple[np.ndarray, np.ndarray]:
+def _is_tensor(a: Any) -> bool:
+    return type(a).__module__.startswith("torch")
+
+
+def _as_pair(x: Any, v: Any) -> tuple[Any, Any]:
     x = _as_state("positions", x)
     v = _as_state("velocities", v)
     if v.shape != x.shape:
@@ -98,43 +110,60 @@ def _as_pair(x: Any, v: Any) -> tuple[np.ndarray, np.ndarray]:
     return x, v
 
 
-def _norm(a: np.ndarray) -> np.ndarray:
+def _norm(a: Any, xp: ArrayNamespace) -> Any:
     """Euclidean norm over the last axis, shape ``a.shape[:-1]``."""
-    return np.sqrt(np.einsum("...k,...k->...", a, a))
+    return xp.sqrt(xp.sum(a * a, axis=-1))
 
 
-def _unit(a: np.ndarray, norm: np.ndarray, keep: np.ndarray | None = None) -> np.ndarray:
-    """``a / |a|`` with the zero vector wherever ``keep`` is false (default ``norm > 0``)."""
+def _unit(a: Any, norm: Any, keep: Any, xp: ArrayNamespace) -> Any:
+    """``a / |a|`` with the zero vector wherever ``keep`` is false."""
     # Dividing by inf gives exactly the zero vector where the direction is undefined.
-    safe = np.where(norm > 0 if keep is None else keep, norm, np.inf)
-    return a / safe[..., None]
+    return a / xp.where(keep, norm, xp.inf)[..., None]
 
 
-def _relative(x: np.ndarray) -> np.ndarray:
+def _headings(v: Any, xp: ArrayNamespace) -> Any:
+    """Unit headings ``v̂_i``, the zero vector for an agent at rest."""
+    speed = _norm(v, xp)
+    return _unit(v, speed, speed > 0, xp)
+
+
+def _relative(x: Any, xp: ArrayNamespace) -> Any:
     """``r_ic = r_i − r_c``, shaped like ``x``."""
-    return x - x.mean(axis=-2, keepdims=True)
+    return x - xp.mean(x, axis=-2)[..., None, :]
 
 
-def _unit_relative(x: np.ndarray) -> np.ndarray:
+def _unit_relative(x: Any, xp: ArrayNamespace) -> Any:
     """``r̂_ic``, with the zero vector for an agent at the centre (to rounding)."""
-    r = _relative(x)
-    dist = _norm(r)
+    r = _relative(x, xp)
+    dist = _norm(r, xp)
     n = x.shape[-2]
-    scale = np.max(np.abs(x), axis=(-2, -1), keepdims=True)[..., 0]  # (..., 1)
-    tol = CENTRE_RTOL * np.finfo(x.dtype).eps * np.sqrt(n) * scale
-    return _unit(r, dist, dist > tol)
+    scale = xp.amax(xp.abs(x), axis=(-2, -1))[..., None]  # (..., 1)
+    tol = (CENTRE_RTOL * xp.eps(x) * math.sqrt(n)) * scale
+    return _unit(r, dist, dist > tol, xp)
 
 
-def _cross_sum_norm(r: np.ndarray, v: np.ndarray) -> np.ndarray:
+def _cross_sum_norm(r: Any, v: Any, xp: ArrayNamespace) -> Any:
     """``|Σ_i r_i × v_i|`` over the agent axis: scalar z-component in 2-D, vector in 3-D."""
+    z = xp.sum(r[..., 0] * v[..., 1] - r[..., 1] * v[..., 0], axis=-1)
     if r.shape[-1] == 2:
-        z = r[..., 0] * v[..., 1] - r[..., 1] * v[..., 0]
-        return np.abs(z.sum(axis=-1))
-    return _norm(np.cross(r, v).sum(axis=-2))
+        return xp.abs(z)
+    cx = xp.sum(r[..., 1] * v[..., 2] - r[..., 2] * v[..., 1], axis=-1)
+    cy = xp.sum(r[..., 2] * v[..., 0] - r[..., 0] * v[..., 2], axis=-1)
+    return xp.sqrt(cx * cx + cy * cy + z * z)
 
 
-def _result(value: Any, dtype: np.dtype) -> np.ndarray:
-    return np.asarray(value, dtype=dtype)
+def _common(x: Any, v: Any) -> Any:
+    """The common floating dtype of ``x`` and ``v`` (as an array to take it from)."""
+    if _is_tensor(x):
+        return x
+    return np.empty(0, np.result_type(x, v))
+
+
+def _result(value: Any, like: Any) -> Any:
+    """``value`` in the floating dtype of ``like`` (an array for numpy input)."""
+    if _is_tensor(value):
+        return value.to(like.dtype) if _is_tensor(like) else value
+    return np.asarray(value, dtype=like.dtype if hasattr(like, "dtype") else like)
 
 
 # --------------------------------------------------------------------------- statistics
@@ -153,7 +182,7 @@ def centroid(x: ArrayLike) -> np.ndarray:
     array([1., 1.])
     """
     x = _as_state("positions", x)
-    return x.mean(axis=-2)
+    return namespace(x).mean(x, axis=-2)
 
 
 def polarization(v: ArrayLike) -> np.ndarray:
@@ -178,9 +207,9 @@ def polarization(v: ArrayLike) -> np.ndarray:
     0.5
     """
     v = _as_state("velocities", v)
+    xp = namespace(v)
     n = v.shape[-2]
-    heading = _unit(v, _norm(v))
-    return _result(np.minimum(_norm(heading.sum(axis=-2)) / n, 1), v.dtype)
+    return _result(xp.clip(_norm(xp.sum(_headings(v, xp), axis=-2), xp) / n, None, 1.0), v)
 
 
 def velocity_polarization(v: ArrayLike) -> np.ndarray:
@@ -199,8 +228,9 @@ def velocity_polarization(v: ArrayLike) -> np.ndarray:
     2.0
     """
     v = _as_state("velocities", v)
+    xp = namespace(v)
     n = v.shape[-2]
-    return _result(_norm(v.sum(axis=-2)) / n, v.dtype)
+    return _result(_norm(xp.sum(v, axis=-2), xp) / n, v)
 
 
 def spherical_variance(v: ArrayLike) -> np.ndarray:
@@ -221,7 +251,7 @@ def spherical_variance(v: ArrayLike) -> np.ndarray:
     1.0
     """
     p = polarization(v)
-    return _result(1 - p, p.dtype)
+    return _result(1 - p, p)
 
 
 def angular_momentum(x: ArrayLike, v: ArrayLike) -> np.ndarray:
@@ -249,10 +279,10 @@ def angular_momentum(x: ArrayLike, v: ArrayLike) -> np.ndarray:
     0.0
     """
     x, v = _as_pair(x, v)
+    xp = namespace(x, v)
     n = x.shape[-2]
-    heading = _unit(v, _norm(v))
-    value = np.minimum(_cross_sum_norm(_unit_relative(x), heading) / n, 1)
-    return _result(value, np.result_type(x, v))
+    value = _cross_sum_norm(_unit_relative(x, xp), _headings(v, xp), xp) / n
+    return _result(xp.clip(value, None, 1.0), _common(x, v))
 
 
 def velocity_angular_momentum(x: ArrayLike, v: ArrayLike) -> np.ndarray:
@@ -269,9 +299,10 @@ def velocity_angular_momentum(x: ArrayLike, v: ArrayLike) -> np.ndarray:
         Shape ``(...)``, in the common dtype of ``x`` and ``v``.
     """
     x, v = _as_pair(x, v)
+    xp = namespace(x, v)
     n = x.shape[-2]
-    value = _cross_sum_norm(_unit_relative(x), v) / n
-    return _result(value, np.result_type(x, v))
+    value = _cross_sum_norm(_unit_relative(x, xp), v, xp) / n
+    return _result(value, _common(x, v))
 
 
 def raw_angular_momentum(x: ArrayLike, v: ArrayLike) -> np.ndarray:
@@ -294,9 +325,10 @@ def raw_angular_momentum(x: ArrayLike, v: ArrayLike) -> np.ndarray:
     (6.0, 3.0)
     """
     x, v = _as_pair(x, v)
+    xp = namespace(x, v)
     n = x.shape[-2]
-    value = _cross_sum_norm(_relative(x), v) / n
-    return _result(value, np.result_type(x, v))
+    value = _cross_sum_norm(_relative(x, xp), v, xp) / n
+    return _result(value, _common(x, v))
 
 
 def nearest_neighbor_distance(x: ArrayLike) -> np.ndarray:
@@ -329,7 +361,7 @@ def nearest_neighbor_distance(x: ArrayLike) -> np.ndarray:
         rho2 += diff * diff
     idx = np.arange(n)
     rho2[..., idx, idx] = np.inf
-    return _result(np.sqrt(rho2.min(axis=-1)).mean(axis=-1), x.dtype)
+    return _result(np.sqrt(rho2.min(axis=-1)).mean(axis=-1), x)
 
 
 def expanse(x: ArrayLike) -> np.ndarray:
@@ -338,7 +370,7 @@ def expanse(x: ArrayLike) -> np.ndarray:
     The mean distance of the agents from the :func:`centroid`, as the paper's text
     defines it. The extracted eq. 6, ``(1/N) Σ_i sqrt((|r_i| − |r_c|)²)``, compares
     distances *from the origin* and so changes when the swarm is translated; that is a
-    typo (MODELS.md §2), not the statistic. ``N = 1`` gives 0.
+    typo (``docs/models.md`` §2), not the statistic. ``N = 1`` gives 0.
 
     Args:
         x: positions ``(..., N, d)``.
@@ -351,7 +383,8 @@ def expanse(x: ArrayLike) -> np.ndarray:
     True
     """
     x = _as_state("positions", x)
-    return _result(_norm(_relative(x)).mean(axis=-1), x.dtype)
+    xp = namespace(x)
+    return _result(xp.mean(_norm(_relative(x, xp), xp), axis=-1), x)
 
 
 def packing_density(x: ArrayLike) -> np.ndarray:
@@ -367,7 +400,7 @@ def packing_density(x: ArrayLike) -> np.ndarray:
         Shape ``(...)``, in the dtype of ``x``.
     """
     x = _as_state("positions", x)
-    return _result(expanse(x) / x.shape[-2], x.dtype)
+    return _result(expanse(x) / x.shape[-2], x)
 
 
 def total_energy(
@@ -379,9 +412,9 @@ def total_energy(
     """Total energy φ (Mabrouk & McInnes eq. 16) of the social-potential model.
 
     ``φ = Σ_i ½ m |v_i|² + Σ_{i<j} U(ρ_ij) + Σ_i V_goal(r_i)``; a thin wrapper around
-    :func:`swarm_envs.physics.energy` (MODELS.md §1), listed here so that every group
-    statistic of §1.2 lives in one module. The goal term is included when ``goal`` is
-    given and ``params.C_g > 0``.
+    :func:`swarm_envs.physics.energy` (``docs/models.md`` §1), listed here so that every
+    group statistic of the paper's §1.2 lives in one module. The goal term is included
+    when ``goal`` is given and ``params.C_g > 0``.
 
     Args:
         x: positions ``(..., N, d)``.
@@ -398,7 +431,7 @@ def total_energy(
 
 
 def fraction_within(x: ArrayLike, goal: ArrayLike, radius: ArrayLike) -> np.ndarray:
-    """Fraction of agents with ``|r_i − r_g| ≤ radius`` (MODELS.md §2, navigation).
+    """Fraction of agents with ``|r_i − r_g| ≤ radius`` (``docs/models.md`` §2).
 
     Args:
         x: positions ``(..., N, d)``.
@@ -421,9 +454,9 @@ def fraction_within(x: ArrayLike, goal: ArrayLike, radius: ArrayLike) -> np.ndar
     if np.any(np.isnan(radius)) or np.any(radius < 0):
         raise ValueError(f"fraction_within: radius must be >= 0, got {radius!r}")
     goal = np.asarray(goal, dtype=x.dtype)
-    dist = _norm(x - goal[..., None, :])
+    dist = _norm(x - goal[..., None, :], NUMPY)
     inside = dist <= radius[..., None]
-    return _result(inside.mean(axis=-1, dtype=x.dtype), x.dtype)
+    return _result(inside.mean(axis=-1, dtype=x.dtype), x)
 
 
 def first_passage_time(
@@ -442,7 +475,7 @@ def first_passage_time(
 
     - Naterop's *response time*, the time until the first member reaches the food:
       ``first_passage_time(np.linalg.norm(xs - g, axis=-1).min(axis=-1), dt, R)``;
-    - time until the centroid is within the goal radius (MODELS.md §2):
+    - time until the centroid is within the goal radius (``docs/models.md`` §2):
       ``first_passage_time(np.linalg.norm(centroid(xs) - g, axis=-1), dt, R)``;
     - time until a fraction ``q`` of the agents is within it:
       ``first_passage_time(fraction_within(xs, g, R), dt, q, below=False)``.

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -17,17 +19,23 @@ from swarm_envs.envs.backends import (
     TORCH_MIN_SLOTS,
     make_core,
     select_backend,
+    unsupported,
 )
 from swarm_envs.envs.core import SwarmNavCore
 from swarm_envs.envs.sparse_core import SparseSwarmNavCore
 
 
-def test_auto_picks_by_model_size_and_batch():
-    assert select_backend(SwarmConfig()) == "numpy"
+def test_auto_picks_by_model_size_and_batch(monkeypatch):
+    from swarm_envs.envs import backends
+
+    native = backends.unsupported(SwarmConfig(), "native") is None
+    small = "native" if native else "numpy"
+    assert select_backend(SwarmConfig()) == small
     assert select_backend(SwarmConfig(n_agents=SPARSE_MIN_AGENTS)) == "sparse"
-    assert select_backend(SwarmConfig(n_agents=SPARSE_MIN_AGENTS - 1)) == "numpy"
-    assert select_backend(SwarmConfig(n_agents=32), batch=TORCH_MIN_SLOTS // 32) == "torch"
-    assert select_backend(SwarmConfig(n_agents=32), batch=TORCH_MIN_SLOTS // 32 - 1) == "numpy"
+    assert select_backend(SwarmConfig(n_agents=SPARSE_MIN_AGENTS - 1)) == small
+    assert select_backend(SwarmConfig(n_agents=32), batch=TORCH_MIN_SLOTS // 32) == (
+        "native" if native else "torch"
+    )
     for dynamics in ("zone", "piecewise", "lagrangian"):
         cfg = SwarmConfig(dynamics=dynamics, n_agents=SPARSE_MIN_AGENTS)
         assert select_backend(cfg, batch=1000) == "numpy"
@@ -35,21 +43,59 @@ def test_auto_picks_by_model_size_and_batch():
     assert select_backend(verlet, batch=10_000) == "numpy"
     assert select_backend(SwarmConfig(device="cuda")) == "torch"
     assert select_backend(SwarmConfig(backend="sparse")) == "sparse"
+    # Without the C step: numpy for few slots, torch from TORCH_MIN_SLOTS.
+    monkeypatch.setattr(
+        backends, "unsupported", lambda cfg, b: "not available" if b == "native" else None
+    )
+    assert select_backend(SwarmConfig(n_agents=32), batch=TORCH_MIN_SLOTS // 32) == "torch"
+    assert select_backend(SwarmConfig(n_agents=32), batch=TORCH_MIN_SLOTS // 32 - 1) == "numpy"
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "reason", "fallback"),
+    [
+        ({"backend": "sparse", "dynamics": "zone"}, "social_potential", "numpy"),
+        ({"backend": "torch", "integrator": "velocity_verlet"}, "semi_implicit_euler", "numpy"),
+        ({"backend": "native", "dynamics": "lagrangian"}, "social_potential", "numpy"),
+    ],
+)
+def test_a_backend_that_cannot_run_a_config_falls_back_with_one_warning(
+    monkeypatch, kwargs, reason, fallback
+):
+    from swarm_envs.envs import backends
+
+    monkeypatch.setattr(backends, "_WARNED", set())
+    name = kwargs["backend"]
+    with pytest.warns(UserWarning, match=f"backend '{name}' cannot run this config.*{reason}"):
+        core = make_core(SwarmConfig(**kwargs))
+    assert core.backend == fallback
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # once: the second core is quiet
+        assert make_core(SwarmConfig(**kwargs)).backend == fallback
 
 
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
         ({"backend": "gpu"}, "backend must be one of"),
-        ({"backend": "sparse", "dynamics": "zone"}, "social_potential"),
-        ({"backend": "torch", "integrator": "velocity_verlet"}, "semi_implicit_euler"),
         ({"backend": "numpy", "device": "cuda"}, "needs backend 'torch'"),
         ({"device": ""}, "device must be"),
     ],
 )
-def test_unsupported_backend_choices_are_value_errors(kwargs, match):
+def test_impossible_backend_choices_are_value_errors(kwargs, match):
     with pytest.raises(ValueError, match=match):
         make_core(SwarmConfig(**kwargs))
+
+
+def test_every_core_implements_the_protocol():
+    from swarm_envs.envs.protocol import Core
+
+    for backend in ("numpy", "sparse", "native", "torch"):
+        cfg = SwarmConfig(n_agents=4, backend=backend)
+        if unsupported(cfg, backend) is not None:
+            continue
+        core = make_core(cfg, batch=2)
+        assert isinstance(core, Core) and core.backend == backend
 
 
 def test_large_swarms_run_on_the_sparse_core_through_every_api():
@@ -93,7 +139,7 @@ def test_sparse_and_numpy_vec_envs_agree_with_a_long_cutoff(integrator: str):
 
 
 def test_dense_core_is_the_numpy_backend():
-    assert type(make_core(SwarmConfig(), batch=2)) is SwarmNavCore
+    assert type(make_core(SwarmConfig(backend="numpy"), batch=2)) is SwarmNavCore
 
 
 @pytest.mark.parametrize(

@@ -1,10 +1,10 @@
 """Physical invariants of the social potential model and its integrators (TESTING.md item 14).
 
-Everything here follows from MODELS.md §1 and could fail if the physics were wrong:
+Everything here follows from docs/models.md §1 and could fail if the physics were wrong:
 
 * ``F = −∇V`` by central finite differences (float64, 2-D and 3-D, with and without the goal);
-* an independent per-pair loop implementation of MODELS.md §1 agrees with ``forces``;
-* ``dφ/dt`` along the flow equals the closed form of MODELS.md §1 (sign of the alignment term);
+* an independent per-pair loop implementation of docs/models.md §1 agrees with ``forces``;
+* ``dφ/dt`` along the flow equals the closed form of docs/models.md §1 (sign of the alignment term);
 * energy conserved without dissipation, with an error that shrinks at the integrator's order;
 * the measured global order of each integrator (1 and 2), also with velocity-dependent forces;
 * linear and angular momentum conserved with alignment on, decaying as ``e^{−βt/m}`` with β > 0;
@@ -37,7 +37,7 @@ from swarm_envs.physics import (
 
 INTEGRATOR_ORDER = {"semi_implicit_euler": 1, "velocity_verlet": 2}
 
-# Conservative parameters: the only setting in which F = −∇V holds (MODELS.md §1).
+# Conservative parameters: the only setting in which F = −∇V holds (docs/models.md §1).
 CONSERVATIVE = SocialPotentialParams(C_o=0.0, beta=0.0)
 
 
@@ -71,7 +71,7 @@ def angular_momentum(x: np.ndarray, v: np.ndarray, m: float) -> np.ndarray:
 def reference_forces(
     x: np.ndarray, v: np.ndarray, p: SocialPotentialParams, goal: np.ndarray | None
 ) -> np.ndarray:
-    """MODELS.md §1 written out pair by pair with Python loops (independent of the library)."""
+    """docs/models.md §1 written out pair by pair with Python loops (independent of the library)."""
     n = x.shape[0]
     out = np.zeros_like(x)
     for i in range(n):
@@ -165,7 +165,7 @@ def test_forces_match_pairwise_loop_reference(dim: int, with_goal: bool) -> None
 
 @pytest.mark.parametrize("dim", [2, 3])
 def test_energy_rate_matches_closed_form(dim: int) -> None:
-    """dφ/dt = −β Σ|v_i|² − ½ Σ_{i≠j} C_o (v_ij·u_ij)² e^{−ρ_ij/l_o} + Σ v_i·u_i (MODELS.md §1).
+    """dφ/dt = −β Σ|v_i|² − ½ Σ_{i≠j} C_o (v_ij·u_ij)² e^{−ρ_ij/l_o} + Σ v_i·u_i (docs/models.md §1).
 
     dφ/dt is measured by a central difference of ``energy`` along the exact vector field
     ``(ṙ, v̇) = (v, (F + u)/m)``, so a wrong sign or factor in the alignment term, or a
@@ -453,7 +453,7 @@ def test_property_force_is_minus_gradient(
 
 
 def group_size(x: np.ndarray) -> tuple[float, float]:
-    """(expanse, nearest-neighbour distance) of MODELS.md §2, averaged over leading axes."""
+    """(expanse, nearest-neighbour distance) of docs/models.md §2, averaged over leading axes."""
     centred = x - x.mean(axis=-2, keepdims=True)
     expanse = np.linalg.norm(centred, axis=-1).mean(axis=-1)
     n = x.shape[-2]

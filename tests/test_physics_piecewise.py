@@ -1,4 +1,4 @@
-"""Piecewise force model (Naterop §4.2, MODELS.md §4): the force law at every threshold,
+"""Piecewise force model (Naterop §4.2, docs/models.md §4): the force law at every threshold,
 the λ-nearest selection, the random force and the drag, determinism, batching, dtypes,
 validation, and the reproduction of the report's dispersal and of the drag fix."""
 
@@ -275,7 +275,7 @@ def test_invalid_simulate_arguments() -> None:
 
 
 def test_long_run_bounded_with_drag_and_dispersing_without() -> None:
-    """DESIGN.md: the report's model disperses; with drag a long run stays bounded."""
+    """docs/design.md: the report's model disperses; with drag a long run stays bounded."""
     rng = np.random.default_rng(0)
     n = 30
     x0 = rng.uniform(0, math.sqrt(3 * n), (2, n, 2))

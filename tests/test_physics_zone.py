@@ -1,4 +1,4 @@
-"""Invariants of the zone model (Naterop §4.1, MODELS.md §3) and its table-3 reproduction."""
+"""Invariants of the zone model (Naterop §4.1, docs/models.md §3) and its table-3 reproduction."""
 
 from __future__ import annotations
 

@@ -9,16 +9,22 @@ import pytest
 
 from swarm_envs import swarm_nav_v0
 
-KW = {"n_agents": 5, "max_steps": 12, "n_neighbors": 3}
+# Worker threads split the numpy backends (the C step threads inside).
+KW = {"n_agents": 5, "max_steps": 12, "n_neighbors": 3, "backend": "numpy"}
 
 
 def copy_state(src_cores, dst_core) -> None:
     """Put the swarms of several cores, in order, into one core of the same total batch."""
-    for name in ("x", "v", "goal", "t", "start_distance", "prev_distance", "prev_arrived"):
+    for name in ("x", "v", "goal", "t"):
         setattr(dst_core, name, np.concatenate([getattr(c, name) for c in src_cores]).copy())
+    for name in ("_prev", "_start"):  # the reward's previous and start statistics
+        keys = getattr(src_cores[0], name)
+        merged = {k: np.concatenate([getattr(c, name)[k] for c in src_cores]) for k in keys}
+        setattr(dst_core, name, merged)
     from swarm_envs.physics import pair_geometry
 
     dst_core._geometry = pair_geometry(dst_core.x)
+    dst_core._measure()  # the statistics and the carried force of the copied state
 
 
 def test_threaded_step_equals_single_core_step_from_the_same_state():
@@ -80,7 +86,7 @@ def test_threaded_env_pickles_and_continues_identically():
 
 def test_default_threads_follow_the_batch_size():
     assert swarm_nav_v0.vec_env(16, **KW).n_threads == 1
-    big = swarm_nav_v0.vec_env(1024, n_agents=2, n_neighbors=1)
+    big = swarm_nav_v0.vec_env(1024, n_agents=2, n_neighbors=1, backend="numpy")
     assert 1 <= big.n_threads <= 2
     assert sum(c.batch for c in big.cores) == 1024
 

@@ -29,7 +29,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from swarm_envs import ENV_ID
+from swarm_envs import ENV_ID, tune_allocator
 
 PROG = "swarm-eval"
 
@@ -195,6 +195,7 @@ def _load_rllib(path: Path, seed: int) -> Any:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``swarm-eval``; returns the exit status (0 ok, 2 user error)."""
     args = build_parser().parse_args(argv)
+    tune_allocator()  # a long-running tool: keep freed heap for reuse
     try:
         if args.episodes < 1:
             raise CliError(f"--episodes must be >= 1, got {args.episodes}")

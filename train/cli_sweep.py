@@ -22,6 +22,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from swarm_envs import tune_allocator
 from train.config import parse_overrides
 from train.sweep import ENGINES, load_sweep_config, run_sweep, write_outputs
 
@@ -61,6 +62,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``swarm-sweep``; returns the exit status (0 ok, 2 user error)."""
     args = build_parser().parse_args(argv)
+    tune_allocator()  # a long-running tool: keep freed heap for reuse
     name = Path(args.config).stem
     out = Path(args.out) if args.out else Path("runs") / "sweeps" / name
     try:

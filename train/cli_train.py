@@ -21,6 +21,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from swarm_envs import tune_allocator
 from train.config import load_train_config, parse_overrides
 
 ENGINES = ("sb3", "rllib")
@@ -57,6 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("overrides", nargs="*", help="key=value overrides (dotted keys)")
     args = parser.parse_args(argv)
+    tune_allocator()  # a long-running tool: keep freed heap for reuse
     engine = _engine(args.engine, args.config)
     out = Path(args.out) if args.out else Path("runs") / Path(args.config).stem
     try:

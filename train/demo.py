@@ -20,6 +20,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from swarm_envs import tune_allocator
 from swarm_envs.config import CONFIG_ROOT
 from train.config import load_train_config, parse_overrides
 
@@ -98,6 +99,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-progress", action="store_true")
     parser.add_argument("overrides", nargs="*", help="key=value overrides of the train config")
     args = parser.parse_args(argv)
+    tune_allocator()  # a long-running tool: keep freed heap for reuse
     try:
         tc = load_train_config(args.config, parse_overrides(args.overrides))
     except ValueError as err:

@@ -1,89 +1,173 @@
-"""Which core computes a SwarmNav step: dense numpy, sparse (cut-off), or fused torch.
+"""Which core computes a SwarmNav step: numpy, cut-off, C, or torch.
 
-Every core has the interface of :class:`~swarm_envs.envs.core.SwarmNavCore` and gives
-the same results for the same seed and actions (to float tolerance; the sparse core up
-to the force error of its cut-off, :mod:`swarm_envs.physics.cutoff`):
+Every core implements :class:`~swarm_envs.envs.protocol.Core` and executes the same
+definitions (``docs/design.md``), so the same seed and actions give the same results to
+float tolerance (the cut-off core up to the force error of its cut-off,
+:mod:`swarm_envs.physics.cutoff`):
 
 ===========  =========================================================================
-backend      what it is, and where it pays
+backend      what it is
 ===========  =========================================================================
 ``numpy``    :class:`~swarm_envs.envs.core.SwarmNavCore`: dense ``(B, N, N)`` pair
-             arrays, every ``dynamics`` and integrator. Small swarms, few swarms.
+             arrays; every ``dynamics`` and integrator. The reference.
 ``sparse``   :class:`~swarm_envs.envs.sparse_core.SparseSwarmNavCore`: a cut-off
-             radius and an O(N) cell list (social potential only). Large swarms,
-             from :data:`~swarm_envs.envs.sparse_core.SPARSE_MIN_AGENTS` agents.
-``torch``    :class:`~swarm_envs.envs.torch_core.TorchSwarmNavCore`: the whole step as
-             one ``torch.compile``-d function, on the CPU or ``device="cuda"``
-             (social potential, semi-implicit Euler). Many swarms at once: from
-             :data:`TORCH_MIN_SLOTS` agent slots (``B·N``) on the CPU; any size on a GPU.
+             radius and an O(N) cell list (social potential). Large swarms.
+``native``   :class:`~swarm_envs.envs.native.NativeSwarmNavCore`: the step in C, built
+             at first use with the system C compiler (social potential, semi-implicit
+             Euler, CPU).
+``torch``    :class:`~swarm_envs.envs.torch_core.TorchSwarmNavCore`: the step as one
+             torch function, compiled where possible; CPU or ``device="cuda"`` (social
+             potential, semi-implicit Euler).
 ===========  =========================================================================
 
-``backend="auto"`` (the default) applies the rules of :func:`select_backend`.
+``backend="auto"`` (the default) picks by measured speed among the backends that
+support the config (:func:`select_backend`; ``docs/performance.md`` has the
+measurements). A backend asked for by name that cannot run a config is refused up front
+(each core's ``unsupported(cfg)`` says why); the env then runs on the backend ``auto``
+picks among the others and warns once, naming both and the reason.
 """
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import numpy as np
 
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.protocol import Core
 from swarm_envs.envs.sparse_core import SPARSE_MIN_AGENTS, SparseSwarmNavCore
 
-#: Agent slots ``B·N`` from which ``"auto"`` runs the torch core on the CPU: below it
-#: the compile time (tens of seconds, once) outweighs what the fused step saves.
+#: Agent slots ``B·N`` from which ``"auto"`` runs the torch core on the CPU where the C
+#: step is not available: below it the compile time (tens of seconds, once) outweighs
+#: what the fused step saves over numpy.
 TORCH_MIN_SLOTS = 16_384
 
-__all__ = ["SPARSE_MIN_AGENTS", "TORCH_MIN_SLOTS", "make_core", "select_backend"]
+__all__ = [
+    "SPARSE_MIN_AGENTS",
+    "TORCH_MIN_SLOTS",
+    "make_core",
+    "resolve_backend",
+    "select_backend",
+    "unsupported",
+]
+
+_WARNED: set[tuple[str, ...]] = set()
 
 
-def _torch_fits(cfg: SwarmConfig) -> bool:
-    return cfg.dynamics == "social_potential" and cfg.integrator == "semi_implicit_euler"
+def _core_class(backend: str) -> Any:
+    if backend == "numpy":
+        return SwarmNavCore
+    if backend == "sparse":
+        return SparseSwarmNavCore
+    if backend == "native":
+        from swarm_envs.envs.native import NativeSwarmNavCore
+
+        return NativeSwarmNavCore
+    from swarm_envs.envs.torch_core import TorchSwarmNavCore
+
+    return TorchSwarmNavCore
+
+
+def unsupported(cfg: SwarmConfig, backend: str) -> str | None:
+    """Why ``backend`` cannot run ``cfg`` here (``None`` if it can).
+
+    >>> unsupported(SwarmConfig(dynamics="zone"), "torch")
+    "supports dynamics='social_potential' only, got 'zone'"
+    """
+    if backend == "numpy":
+        return None if cfg.device == "cpu" else f"runs on the CPU only, got device={cfg.device!r}"
+    if backend == "sparse":
+        if cfg.device != "cpu":
+            return f"runs on the CPU only, got device={cfg.device!r}"
+        return SparseSwarmNavCore.unsupported(cfg)
+    return _core_class(backend).unsupported(cfg)
+
+
+def _auto(cfg: SwarmConfig, batch: int) -> tuple[str, str | None]:
+    """``auto``'s pick and, if the C step would have been picked but cannot run, why."""
+    if cfg.device != "cpu":
+        return "torch", None
+    if cfg.dynamics == "social_potential" and cfg.n_agents >= SPARSE_MIN_AGENTS:
+        return "sparse", None
+    why = unsupported(cfg, "native")
+    if why is None:
+        return "native", None
+    if cfg.dynamics == "social_potential" and cfg.integrator == "semi_implicit_euler":
+        if batch * cfg.n_agents >= TORCH_MIN_SLOTS and unsupported(cfg, "torch") is None:
+            return "torch", None
+        return "numpy", why if "not available" in why else None
+    return "numpy", None
 
 
 def select_backend(cfg: SwarmConfig, batch: int = 1) -> str:
-    """The backend that runs ``batch`` swarms of ``cfg`` (``cfg.backend`` unless "auto").
+    """The backend that runs ``batch`` swarms of ``cfg``: ``cfg.backend`` where it
+    supports ``cfg``, else ``auto``'s pick.
 
     ``"auto"``: a ``device`` other than the CPU → ``"torch"``; the social potential with
-    at least ``SPARSE_MIN_AGENTS`` agents per swarm → ``"sparse"``; the social potential
-    with the Euler integrator and at least ``TORCH_MIN_SLOTS`` agent slots → ``"torch"``;
-    anything else → ``"numpy"``.
+    at least ``SPARSE_MIN_AGENTS`` agents per swarm → ``"sparse"``; wherever the C step
+    runs the config → ``"native"`` (the fastest at every batch size measured); where it
+    is not available, the social potential with the Euler integrator and at least
+    ``TORCH_MIN_SLOTS`` agent slots → ``"torch"``; anything else → ``"numpy"``.
 
-    >>> select_backend(SwarmConfig()), select_backend(SwarmConfig(), batch=4096)
-    ('numpy', 'torch')
-    >>> select_backend(SwarmConfig(n_agents=100_000))
-    'sparse'
     >>> select_backend(SwarmConfig(dynamics="zone"), batch=4096)
     'numpy'
+    >>> select_backend(SwarmConfig(n_agents=100_000))
+    'sparse'
     """
-    if cfg.backend != "auto":
+    if cfg.backend != "auto" and unsupported(cfg, cfg.backend) is None:
         return cfg.backend
-    if cfg.device != "cpu":
-        return "torch"
-    if cfg.dynamics == "social_potential" and cfg.n_agents >= SPARSE_MIN_AGENTS:
-        return "sparse"
-    if _torch_fits(cfg) and batch * cfg.n_agents >= TORCH_MIN_SLOTS:
-        return "torch"
-    return "numpy"
+    return _auto(cfg, batch)[0]
 
 
-def make_core(cfg: SwarmConfig, batch: int = 1, dtype: Any = np.float64) -> Any:
-    """A core for ``batch`` swarms of ``cfg`` on the backend :func:`select_backend` picks.
+def _warn_once(key: tuple[str, ...], message: str) -> None:
+    if key not in _WARNED:
+        _WARNED.add(key)
+        warnings.warn(message, UserWarning, stacklevel=3)
+
+
+def resolve_backend(cfg: SwarmConfig, batch: int = 1) -> str:
+    """:func:`select_backend`, warning where a backend cannot be used.
+
+    A backend named in ``cfg.backend`` that cannot run ``cfg`` falls back to ``auto``'s
+    pick with a :class:`UserWarning` (once per backend and reason) naming both; so does
+    ``auto`` where the C step would run the config but cannot be built here.
 
     Raises:
-        ValueError: an explicit backend that does not support ``cfg`` (naming what
-            it supports), or a torch device that is not available.
+        ValueError: a ``device`` other than the CPU with a backend that runs on the CPU
+            only.
     """
-    backend = select_backend(cfg, batch)
-    if backend != "torch" and cfg.device != "cpu":
+    if cfg.device != "cpu" and cfg.backend not in ("auto", "torch"):
         raise ValueError(
-            f"device={cfg.device!r} needs backend 'torch' (or 'auto'), got {backend!r}"
+            f"device={cfg.device!r} needs backend 'torch' (or 'auto'), got {cfg.backend!r}"
         )
-    if backend == "numpy":
-        return SwarmNavCore(cfg, batch=batch, dtype=dtype)
-    if backend == "sparse":
-        return SparseSwarmNavCore(cfg, batch=batch, dtype=dtype)
-    from swarm_envs.envs.torch_core import TorchSwarmNavCore
+    if cfg.backend == "auto":
+        backend, why = _auto(cfg, batch)
+        if why is not None:
+            _warn_once(("native", why), f"backend 'native' unavailable ({why}); using {backend!r}")
+        return backend
+    why = unsupported(cfg, cfg.backend)
+    if why is None:
+        return cfg.backend
+    chosen = _auto(cfg, batch)[0]
+    _warn_once(
+        (cfg.backend, chosen, why),
+        f"backend {cfg.backend!r} cannot run this config ({why}); using {chosen!r}",
+    )
+    return chosen
 
-    return TorchSwarmNavCore(cfg, batch=batch, dtype=dtype, device=cfg.device)
+
+def make_core(cfg: SwarmConfig, batch: int = 1, dtype: Any = np.float64) -> Core:
+    """A core for ``batch`` swarms of ``cfg`` on the backend :func:`resolve_backend`
+    gives (warning there if the requested one cannot run ``cfg``).
+
+    Raises:
+        ValueError: a torch device that is not available, or a ``device`` other than the
+            CPU with a backend that runs on the CPU only.
+    """
+    backend = resolve_backend(cfg, batch)
+    cls = _core_class(backend)
+    if backend == "torch":
+        return cls(cfg, batch=batch, dtype=dtype, device=cfg.device)
+    return cls(cfg, batch=batch, dtype=dtype)

@@ -3,7 +3,7 @@
 :class:`~swarm_envs.envs.core.SwarmNavCore` owns the batched state ``x, v`` ``(B, N, d)``
 and the goals ``(B, d)``; the adapter selected by ``SwarmConfig.dynamics`` advances it
 by one step with the control ``u = u_max · a`` (``a ∈ [−1, 1]^d`` per agent) and draws
-whatever per-swarm state its model needs at reset. The actions follow ``MODELS.md`` §6;
+whatever per-swarm state its model needs at reset. The actions follow ``docs/models.md`` §6;
 with ``a = 0`` every model runs exactly its passive physics:
 
 ============================  =====================================================
@@ -43,10 +43,11 @@ from swarm_envs.physics import (
     energy,
     forces,
     goal_force,
-    step,
+    kinetic_energy,
     uniform_ball,
     verlet_step,
 )
+from swarm_envs.physics.integrators import euler_update
 from swarm_envs.physics.lagrangian import (
     lagrangian_step,
     lagrangian_value,
@@ -54,6 +55,7 @@ from swarm_envs.physics.lagrangian import (
     pair_clearance,
 )
 from swarm_envs.physics.piecewise import piecewise_forces
+from swarm_envs.physics.social_potential import goal_terms, pair_terms
 from swarm_envs.physics.zone import (
     ZoneAgentParams,
     draw_agent_params,
@@ -84,7 +86,7 @@ class Dynamics(ABC):
     ) -> None:
         """Model state for the swarms ``idx`` (already drawn ``x, v, goal``), in place.
 
-        The default has none (the social potential with Euler, for instance).
+        The default has none.
         """
         return None
 
@@ -95,52 +97,76 @@ class Dynamics(ABC):
         v: np.ndarray,
         goal: np.ndarray | None,
         control: np.ndarray | None,
-        geometry: PairGeometry | None,
     ) -> tuple[np.ndarray, np.ndarray, PairGeometry | None]:
         """``(x', v', geometry of x' or None)`` after one step of ``cfg.dt``.
 
         ``goal`` is ``None`` unless the goal acts passively; ``control`` is
-        ``u_max · a`` or ``None`` for zero actions; ``geometry`` is ``x``'s.
+        ``u_max · a`` or ``None`` for zero actions.
         """
 
-    def energy(
+    def measure(
         self, x: np.ndarray, v: np.ndarray, goal: np.ndarray, geometry: PairGeometry
     ) -> np.ndarray:
-        """The model's energy statistic per swarm, ``(B,)``: kinetic by default."""
+        """The model's energy statistic per swarm, ``(B,)``, at a new state (after every
+        reset and step; a model may keep what it computes for its next step). Kinetic
+        by default."""
         return 0.5 * np.einsum("bik,bik->b", v, v)
 
 
 class SocialPotentialDynamics(Dynamics):
-    """Mabrouk & McInnes: ``m v̇ = F_i + u_i`` (eq. 13), Euler or velocity Verlet."""
+    """Mabrouk & McInnes: ``m v̇ = F_i + u_i`` (eq. 13), Euler or velocity Verlet.
+
+    Both integrators carry the passive force from one step to the next: semi-implicit
+    Euler the force ``F(x, v)`` of the current state, computed in :meth:`measure` in the
+    same pass over the pairs as the energy; velocity Verlet the force at the
+    extrapolated velocity (:func:`~swarm_envs.physics.integrators.verlet_step`).
+    """
 
     def __init__(self, cfg: SwarmConfig, batch: int, dtype: np.dtype) -> None:
         super().__init__(cfg, batch, dtype)
-        self._f_passive: np.ndarray | None = None  # velocity Verlet carries the force
+        self._force: np.ndarray | None = None  # the passive force carried to the next step
+        self._verlet = cfg.integrator == "velocity_verlet"
+
+    def _physics_goal(self, goal: np.ndarray) -> np.ndarray | None:
+        cfg = self.cfg
+        return goal if cfg.goal_in_physics and cfg.physics.C_g > 0 else None
 
     def reset(self, x, v, goal, idx, rng) -> None:
-        cfg = self.cfg
-        if cfg.integrator == "velocity_verlet":
-            physics_goal = goal if cfg.goal_in_physics and cfg.physics.C_g > 0 else None
-            f = forces(x, v, cfg.physics, physics_goal)
-            if self._f_passive is None:
-                self._f_passive = f
+        if self._verlet:
+            f = forces(x, v, self.cfg.physics, self._physics_goal(goal))
+            if self._force is None:
+                self._force = f
             else:
-                self._f_passive[idx] = f[idx]
+                self._force[idx] = f[idx]
 
-    def step(self, x, v, goal, control, geometry):
+    def step(self, x, v, goal, control):
         cfg = self.cfg
+        assert self._force is not None
         goal = goal if cfg.physics.C_g > 0 else None
-        if cfg.integrator == "velocity_verlet":
-            assert self._f_passive is not None
-            x, v, self._f_passive, geometry = verlet_step(
-                x, v, self._f_passive, cfg.physics, dt=cfg.dt, goal=goal, control=control
+        if self._verlet:
+            x, v, self._force, geometry = verlet_step(
+                x, v, self._force, cfg.physics, dt=cfg.dt, goal=goal, control=control
             )
             return x, v, geometry
-        x, v = step(x, v, cfg.physics, dt=cfg.dt, goal=goal, control=control, geometry=geometry)
+        accel = self._force if control is None else self._force + control
+        x, v = euler_update(x, v, accel, cfg.dt, cfg.physics.m)
         return x, v, None
 
-    def energy(self, x, v, goal, geometry):
-        return energy(x, v, self.cfg.physics, goal, geometry=geometry)
+    def measure(self, x, v, goal, geometry):
+        p = self.cfg.physics
+        if self._verlet:
+            return energy(x, v, p, goal if p.C_g > 0 else None, geometry=geometry)
+        fs, pairs = pair_terms(geometry, v, p)
+        if p.beta > 0:
+            fs = [fc - p.beta * v[..., k] for k, fc in enumerate(fs)]
+        phi = kinetic_energy(v, p) + pairs
+        if p.C_g > 0:
+            sink, potential, _ = goal_terms(x, p, goal)
+            phi = phi + potential.sum(axis=-1)
+            if self.cfg.goal_in_physics:
+                fs = [fc + gc for fc, gc in zip(fs, sink, strict=True)]
+        self._force = np.stack(fs, axis=-1)
+        return phi
 
 
 class ZoneDynamics(Dynamics):
@@ -174,7 +200,7 @@ class ZoneDynamics(Dynamics):
         heading = np.where(norm > 1e-12, speed / np.maximum(norm, 1e-300), random)
         v[idx] = self.agent_params.speed[idx][..., None] * heading
 
-    def step(self, x, v, goal, control, geometry):
+    def step(self, x, v, goal, control):
         speed = self.agent_params.speed[..., None]
         heading = v / speed
         x, heading = zone_step(
@@ -208,7 +234,7 @@ class PiecewiseDynamics(Dynamics):
         if self.cfg.piecewise.sigma > 0 and (self._noise_rng is None or idx.size == self.batch):
             self._noise_rng = np.random.default_rng(rng.integers(2**63))
 
-    def step(self, x, v, goal, control, geometry):
+    def step(self, x, v, goal, control):
         cfg, p = self.cfg, self.cfg.piecewise
         f = piecewise_forces(x, v, p, self._noise_rng)
         if goal is not None and cfg.physics.C_g > 0:
@@ -218,7 +244,7 @@ class PiecewiseDynamics(Dynamics):
         v = v + (cfg.dt / p.m) * f
         return x + cfg.dt * v, v, None
 
-    def energy(self, x, v, goal, geometry):
+    def measure(self, x, v, goal, geometry):
         return 0.5 * self.cfg.piecewise.m * np.einsum("bik,bik->b", v, v)
 
 
@@ -254,7 +280,7 @@ class LagrangianDynamics(Dynamics):
         v[idx] = lagrangian_velocity(x[idx], p, self._centre(goal[idx]))
         self._substep[idx] = cfg.dt
 
-    def step(self, x, v, goal, control, geometry):
+    def step(self, x, v, goal, control):
         x, v, self._substep = lagrangian_step(
             x,
             self.cfg.lagrangian,
@@ -265,7 +291,7 @@ class LagrangianDynamics(Dynamics):
         )
         return x, v.astype(self.dtype, copy=False), None
 
-    def energy(self, x, v, goal, geometry):
+    def measure(self, x, v, goal, geometry):
         return lagrangian_value(x, self.cfg.lagrangian, self._centre(goal))
 
 

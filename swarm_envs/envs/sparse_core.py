@@ -29,7 +29,7 @@ array. One step:
    the positions are known, and runs while step 3 does.
 
 What differs from the dense core is the cut-off only: pair terms (Morse cohesion,
-alignment; MODELS.md §1 eqs. 9–11) of agents farther apart than
+alignment; docs/models.md §1 eqs. 9–11) of agents farther apart than
 ``r_c = cutoff_radius(cfg.physics, cutoff_tol, speed=cutoff_speed)`` are dropped, each
 smaller than ``cutoff_tol`` (force units) for relative speeds up to ``cutoff_speed``.
 The per-agent bound is :func:`swarm_envs.physics.cutoff.force_error_bound`:
@@ -77,10 +77,11 @@ from typing import Any
 import numpy as np
 
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs.core import SwarmNavCore, require_social_potential
-from swarm_envs.physics import compiled_pairs, goal_force, goal_potential
+from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.physics import compiled_pairs, goal_force, goal_potential, kinetic_energy
 from swarm_envs.physics._validation import check_real
 from swarm_envs.physics.cutoff import PairAccumulator, cutoff_radius
+from swarm_envs.physics.integrators import euler_update
 from swarm_envs.physics.neighbors import CELL_MARGIN, REACH, CellList, knn
 
 #: Agents per swarm from which to use :class:`SparseSwarmNavCore`: above the crossover
@@ -164,8 +165,8 @@ class SparseSwarmNavCore(SwarmNavCore):
 
     A drop-in for :class:`~swarm_envs.envs.core.SwarmNavCore` (same methods, same
     random draws, same results up to the cut-off; see the module docstring). It
-    overrides only the physics hooks (``_after_reset``, ``_advance``, ``_pair_stats``
-    and ``_nearest``); the reset draws, the reward, the statistics and the
+    overrides only the physics hooks (``_after_reset``, ``_advance`` and
+    ``_pair_measures``); the reset draws, the reward, the statistics and the
     observations are the dense core's.
 
     Args:
@@ -189,6 +190,8 @@ class SparseSwarmNavCore(SwarmNavCore):
     ((2, 4, 34), (2,), True)
     """
 
+    backend = "sparse"
+
     def __init__(
         self,
         cfg: SwarmConfig,
@@ -197,7 +200,9 @@ class SparseSwarmNavCore(SwarmNavCore):
         cutoff_tol: float = DEFAULT_CUTOFF_TOL,
         cutoff_speed: float = DEFAULT_CUTOFF_SPEED,
     ) -> None:
-        require_social_potential(cfg, "SparseSwarmNavCore")
+        reason = self.unsupported(cfg)
+        if reason is not None:
+            raise ValueError(f"SparseSwarmNavCore: {reason}")
         super().__init__(cfg, batch, dtype)
         self.cutoff_tol = check_real(
             "SparseSwarmNavCore", "cutoff_tol", cutoff_tol, low=0.0, low_inclusive=False
@@ -213,6 +218,14 @@ class SparseSwarmNavCore(SwarmNavCore):
         self._knn_cache: tuple[int, np.ndarray, np.ndarray] | None = None
         self._knn_radius: float | None = None
         self._knn_pending: tuple[int, Future] | None = None
+
+    @staticmethod
+    def unsupported(cfg: SwarmConfig) -> str | None:
+        """Why this core cannot run ``cfg`` (``None`` if it can): the social potential
+        model only, either integrator."""
+        if cfg.dynamics != "social_potential":
+            return f"supports dynamics='social_potential' only, got {cfg.dynamics!r}"
+        return None
 
     def __getstate__(self) -> dict[str, Any]:
         """The core without its look-ahead search in flight (a thread's future)."""
@@ -320,11 +333,8 @@ class SparseSwarmNavCore(SwarmNavCore):
             accel = self._f_passive if control is None else self._f_passive + control
             self.v = v_half + (0.5 * dt / m) * accel
         else:
-            # Semi-implicit Euler (swarm_envs.physics.integrators.step).
-            if m != 1.0:
-                accel = accel / m
-            self.v = self.v + dt * accel
-            self.x = self.x + dt * self.v
+            # Semi-implicit Euler (swarm_envs.physics.integrators.euler_update).
+            self.x, self.v = euler_update(self.x, self.v, accel, dt, m)
             self._state += 1
             self._f_passive = self._passive(self.v)
         if not (np.isfinite(self.x).all() and np.isfinite(self.v).all()):
@@ -354,18 +364,16 @@ class SparseSwarmNavCore(SwarmNavCore):
         self._knn_cache = (self._state, idx, dist)
         return idx, dist
 
-    def _nearest(self) -> np.ndarray:
-        return self._knn()[0]
-
-    def _pair_stats(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """As the dense core's; ``energy`` sums the pair potential over the pairs within
-        the cut-off, ``collisions`` and the nearest-neighbour distance are exact."""
+    def _pair_measures(self) -> tuple[np.ndarray | None, np.ndarray, np.ndarray, np.ndarray]:
+        """As the dense core's; the energy sums the pair potential over the pairs within
+        the cut-off, the collisions and the neighbours are exact."""
         p = self.cfg.physics
         if self.cfg.n_agents > 1:
-            nnd = self._knn()[1][..., 0].mean(axis=-1)
+            near, dist = self._knn()
+            nearest = dist[..., 0]
         else:
-            nnd = np.zeros(self.batch)
-        energy = 0.5 * p.m * np.einsum("bik,bik->b", self.v, self.v) + self._potential
+            near, nearest = None, np.zeros((self.batch, 1), self.dtype)
+        energy = kinetic_energy(self.v, p) + self._potential
         if p.C_g > 0:
             energy = energy + goal_potential(self.x, p, self.goal).sum(axis=-1)
-        return nnd, self._collisions.copy(), energy.astype(self.dtype, copy=False)
+        return near, nearest, self._collisions.copy(), energy.astype(self.dtype, copy=False)

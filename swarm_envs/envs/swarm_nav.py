@@ -18,7 +18,9 @@ from pettingzoo import ParallelEnv
 
 from swarm_envs.config import SwarmConfig, load_swarm_config
 from swarm_envs.envs.backends import make_core
-from swarm_envs.envs.core import OBS_BOUND, SwarmNavCore, check_actions
+from swarm_envs.envs.common import check_actions
+from swarm_envs.envs.protocol import Core as SwarmNavCore
+from swarm_envs.envs.task import OBS_BOUND
 
 RENDER_MODES = ("rgb_array", "human")
 
@@ -26,7 +28,7 @@ SWARM_NAV_DOC = """
     ## Description
 
     A swarm of ``N`` agents obeys the social potential model of Mabrouk & McInnes
-    (Morse cohesion eqs. 9–10, alignment eq. 11, dissipation eq. 12; MODELS.md §1) and
+    (Morse cohesion eqs. 9–10, alignment eq. 11, dissipation eq. 12; docs/models.md §1) and
     must gather inside a goal radius around a goal sink ``G``. The passive physics is
     always on; each agent's action is a bounded force added to its passive force, so a
     zero action leaves the paper's model untouched. The sink ``C_g, l_g`` (eq. 19)

@@ -24,15 +24,14 @@ empty mapping. None of them is built per step: fresh dicts for 32k slots would c
 more than the fused step (see :mod:`swarm_envs.envs.infos`).
 :attr:`SwarmNavVecEnv.last_stats` holds the statistics as ``(B,)`` arrays.
 
-Large batches are split over worker threads (``n_threads``; default one per 512
-swarms, up to the CPU count), each stepping its own slice of swarms on its own core:
-numpy releases the GIL inside its array loops, so the slices run in parallel. A seed
-gives the same rollout for the same ``n_threads``.
-
-The step runs on the backend ``select_backend`` picks (``backend=`` overrides; see
-:mod:`swarm_envs.envs.backends`): the dense numpy core, the cut-off core for large swarms,
-or from ``TORCH_MIN_SLOTS`` agent slots the fused torch step (one core, no worker
-threads; ``device="cuda"`` for a GPU). :attr:`SwarmNavVecEnv.backend` says which.
+The step runs on the backend ``auto`` picks (``backend=`` overrides; see
+:mod:`swarm_envs.envs.backends`): by default the C step, which spreads the swarms over
+its own threads; the dense numpy core for the other models; the cut-off core for large
+swarms; the torch core on a GPU (``device="cuda"``). :attr:`SwarmNavVecEnv.backend`
+says which. On the numpy backends large batches are split over worker threads
+(``n_threads``; default one per 512 swarms, up to the CPU count), each stepping its own
+slice of swarms on its own core: numpy releases the GIL inside its array loops, so the
+slices run in parallel. A seed gives the same rollout for the same ``n_threads``.
 
 The state is float32 by default (``dtype=np.float64`` for exact agreement with the
 float64 single-swarm envs); observations are float32 either way.
@@ -53,8 +52,7 @@ import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
-from swarm_envs.envs.backends import make_core, select_backend
-from swarm_envs.envs.core import OBS_BOUND, SwarmNavCore
+from swarm_envs.envs.backends import make_core, resolve_backend
 from swarm_envs.envs.infos import (  # noqa: F401  (QUIET_INFO, SwarmInfo: re-exported)
     QUIET_INFO,
     SwarmInfo,
@@ -62,7 +60,9 @@ from swarm_envs.envs.infos import (  # noqa: F401  (QUIET_INFO, SwarmInfo: re-ex
     TerminalInfoPool,
     TerminalRecord,
 )
+from swarm_envs.envs.protocol import Core as SwarmNavCore
 from swarm_envs.envs.swarm_nav import make_config
+from swarm_envs.envs.task import OBS_BOUND
 
 
 class SwarmNavVecEnv(VecEnv):
@@ -90,11 +90,12 @@ class SwarmNavVecEnv(VecEnv):
         self.n_agents = self.cfg.n_agents
         if np.dtype(dtype) not in (np.dtype(np.float32), np.dtype(np.float64)):
             raise ValueError(f"dtype must be float32 or float64, got {dtype!r}")
-        self.backend = select_backend(self.cfg, self.n_swarms)
-        if self.backend == "torch":  # one fused step for every swarm; torch has its own threads
+        self.backend = resolve_backend(self.cfg, self.n_swarms)
+        if self.backend in ("torch", "native"):  # one step for every swarm, threaded inside
             if n_threads not in (None, 1):
                 raise ValueError(
-                    f"n_threads must be null or 1 with the torch backend, got {n_threads!r}"
+                    f"n_threads must be null or 1 with the {self.backend} backend, "
+                    f"got {n_threads!r}"
                 )
             n_threads = 1
         self.n_threads = self._check_threads(n_threads)

@@ -1,6 +1,6 @@
 """Pure, vectorised physics of the swarm models over ``(..., N, d)`` arrays.
 
-Public interface (DESIGN.md): :class:`SocialPotentialParams`, :func:`forces`,
+Public interface (docs/design.md): :class:`SocialPotentialParams`, :func:`forces`,
 :func:`energy`, :func:`simulate`. The other models of the seeds live in their own
 modules (``zone``, ``piecewise``, ``lagrangian``) with ``ZoneParams``,
 ``PiecewiseParams`` and ``LagrangianParams``, exported here too; ``simulate`` dispatches

@@ -73,8 +73,11 @@ def check_state(x: Any, v: Any | None = None) -> tuple[np.ndarray, np.ndarray | 
     """Validate positions (and velocities) shaped ``(..., N, d)`` with d in {2, 3}.
 
     Floating arrays keep their dtype (float32 stays float32); anything else becomes
-    float64. Returns the arrays (no copy when already floating).
+    float64. Returns the arrays (no copy when already floating). Torch tensors are
+    checked the same way and returned as they are (:func:`_check_tensors`).
     """
+    if _is_tensor(x):
+        return _check_tensors(x, v)
     x = as_state(x, "positions")
     if v is None:
         return x, None
@@ -86,12 +89,46 @@ def check_state(x: Any, v: Any | None = None) -> tuple[np.ndarray, np.ndarray | 
     return x, v
 
 
+def _is_tensor(a: Any) -> bool:
+    return type(a).__module__.startswith("torch")
+
+
+def _check_tensors(x: Any, v: Any | None) -> tuple[Any, Any | None]:
+    """Floating torch tensors shaped ``(..., N, d)``, ``d`` in {2, 3}; ``v`` like ``x``."""
+    if not x.is_floating_point():
+        raise ValueError(f"positions must be a floating tensor, got dtype {x.dtype}")
+    if x.ndim < 2 or x.shape[-1] not in SUPPORTED_DIMS:
+        raise ValueError(
+            f"positions must have shape (..., N, d) with d in {SUPPORTED_DIMS}, "
+            f"got {tuple(x.shape)}"
+        )
+    if v is None:
+        return x, None
+    if not _is_tensor(v):
+        raise ValueError(f"velocities must be a torch tensor like the positions, got {type(v)}")
+    if v.shape != x.shape:
+        raise ValueError(
+            f"velocities shape {tuple(v.shape)} must equal positions shape {tuple(x.shape)}"
+        )
+    return x, v
+
+
 def check_goal(goal: Any, x: np.ndarray) -> np.ndarray:
     """A goal position as an array of ``x``'s dtype with shape ``(..., d)``.
 
     Raises:
         ValueError: if the goal is not finite or its last dimension is not ``d``.
     """
+    if _is_tensor(x):
+        import torch
+
+        g = torch.as_tensor(goal, dtype=x.dtype, device=x.device)
+        if g.ndim < 1 or g.shape[-1] != x.shape[-1]:
+            raise ValueError(
+                f"goal must have shape (..., {x.shape[-1]}) like the positions, "
+                f"got {tuple(g.shape)}"
+            )
+        return g
     g = np.asarray(goal, dtype=x.dtype)
     d = x.shape[-1]
     if g.ndim < 1 or g.shape[-1] != d:

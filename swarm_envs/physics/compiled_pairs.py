@@ -4,7 +4,7 @@ pass (:func:`cell_pair_sums`) and the k-nearest round (:func:`knearest_round`).
 :func:`cell_pair_sums` gives exactly what feeding every chunk of
 :meth:`swarm_envs.physics.neighbors.CellList.iter_pairs` to a
 :class:`swarm_envs.physics.cutoff.PairAccumulator` gives (the forces, pair potential and
-close pairs of every unordered pair within the radius, MODELS.md §1 eqs. 9–11), to
+close pairs of every unordered pair within the radius, docs/models.md §1 eqs. 9–11), to
 float64 round-off: the numpy pass makes about 40 array passes over 65,536 candidates at
 a time and spends most of its time in memory; this one visits each candidate once, in
 registers. Per pair within ``r`` (``ρ = |x_j − x_i|``, ``u_ij = (x_j − x_i)/ρ``):

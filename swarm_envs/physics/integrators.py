@@ -47,30 +47,37 @@ def _check_integrator(integrator: str) -> None:
         raise ValueError(f"integrator must be one of {INTEGRATORS}, got {integrator!r}")
 
 
+def euler_update(x: Any, v: Any, accel: Any, dt: float, m: float) -> tuple[Any, Any]:
+    """The semi-implicit Euler update with the force ``accel`` (passive + control):
+    ``v' = v + dt · accel/m``, ``x' = x + dt v'``. numpy arrays or torch tensors."""
+    if m != 1.0:
+        accel = accel / m
+    v_new = v + dt * accel
+    return x + dt * v_new, v_new
+
+
 def step(
-    x: np.ndarray,
-    v: np.ndarray,
+    x: Any,
+    v: Any,
     params: SocialPotentialParams,
     *,
     dt: float,
-    goal: np.ndarray | None = None,
-    control: np.ndarray | None = None,
+    goal: Any | None = None,
+    control: Any | None = None,
     geometry: PairGeometry | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[Any, Any]:
     """One semi-implicit (symplectic) Euler step of the social potential model.
 
-    ``v' = v + dt (F(x, v) + u)/m``, ``x' = x + dt v'``. ``control`` is the force ``u``
-    added to the passive force (``None`` or zeros leave the passive physics untouched).
-    ``geometry`` is ``pair_geometry(x)`` when the caller has it. Returns new arrays
-    ``(x', v')``; the inputs are not modified.
+    ``v' = v + dt (F(x, v) + u)/m``, ``x' = x + dt v'`` (:func:`euler_update`).
+    ``control`` is the force ``u`` added to the passive force (``None`` or zeros leave
+    the passive physics untouched). ``geometry`` is ``pair_geometry(x)`` when the
+    caller has it. numpy arrays or torch tensors; returns new arrays ``(x', v')``, the
+    inputs are not modified.
     """
     accel = forces(x, v, params, goal, geometry=geometry)
     if control is not None:
-        accel += control
-    if params.m != 1.0:
-        accel /= params.m
-    v_new = v + dt * accel
-    return x + dt * v_new, v_new
+        accel = accel + control
+    return euler_update(x, v, accel, dt, params.m)
 
 
 def verlet_step(

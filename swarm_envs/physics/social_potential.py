@@ -1,14 +1,20 @@
-"""Social potential model of Mabrouk & McInnes: forces and energy.
+"""Social potential model of Mabrouk & McInnes: the pair law, the goal sink, forces, energy.
 
 Reference: M. H. Mabrouk and C. R. McInnes, *Social potential model to simulate
-emergent behaviour for swarm robots* (seeds ``000``/``001``). The reading below is the
-consistent one fixed in ``MODELS.md`` §1; where it departs from the printed equations
-it says so.
+emergent behaviour for swarm robots*. The reading below is the one fixed in
+``docs/models.md`` §1; where it departs from the printed equations it says so.
 
 Notation: ``r_ij = r_j − r_i``, ``ρ_ij = |r_ij|``, ``u_ij = r_ij / ρ_ij`` (unit vector
 from i toward j), ``v_ij = v_i − v_j``. Arrays are shaped ``(..., N, d)``: any leading
 batch dimensions, ``N`` agents, ``d = 2`` or ``3``. Nothing here loops over agents or
 pairs in Python; pairwise terms are ``(..., N, N)`` arrays.
+
+One definition, every backend: :func:`pair_law` (the Morse cohesion of eqs. 9–10 and the
+alignment of eq. 11, per pair) and :func:`sink_law` (the goal sink of eqs. 19–20, per
+agent) are written once, over any array type and an ``exp`` function. The functions
+below apply them to numpy arrays or torch tensors alike (the namespace follows the
+input, :mod:`swarm_envs._array`); the cut-off core's pair passes (numpy and numba) call
+the same two laws on their pair lists.
 
 Coincident agents (``ρ_ij = 0``): the direction ``u_ij`` is undefined; the convention
 is ``u_ij = 0``, so a coincident pair exerts no force on each other (the distance is
@@ -20,14 +26,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
+from swarm_envs._array import ArrayNamespace, namespace
 from swarm_envs.physics._validation import check_goal, check_real, check_state
 
 #: Distances are floored at this value before dividing (coincident-agent convention).
 RHO_FLOOR = 1e-12
+
+Array = Any
 
 
 @dataclass(frozen=True)
@@ -107,81 +116,204 @@ class SocialPotentialParams:
         return self.amplitude_ratio * self.range_ratio**2
 
 
-def pair_potential(rho: np.ndarray, params: SocialPotentialParams) -> np.ndarray:
+# --------------------------------------------------------------------------- the laws
+
+
+def pair_law(
+    rho: Array,
+    inv_rho: Array,
+    vdot: Array | None,
+    C_a: float,
+    C_r: float,
+    l_a: float,
+    l_r: float,
+    C_o: float,
+    l_o: float,
+    exp: Any,
+) -> tuple[Array, Array]:
+    """The pair law of the social potential model, per pair: ``(s_ij, U(ρ_ij))``.
+
+    ``s_ij`` is the force on i from j per unit of ``r_ij`` (so ``F_i = Σ_j s_ij r_ij``):
+
+    ``s_ij = [ (C_a/l_a) e^{−ρ/l_a} − (C_r/l_r) e^{−ρ/l_r}
+    − C_o ((v_i − v_j)·u_ij) e^{−ρ/l_o} ] / ρ``
+
+    (cohesion eq. 10, the negative gradient of the generalised Morse potential eq. 9;
+    alignment eq. 11), and ``U(ρ) = C_r e^{−ρ/l_r} − C_a e^{−ρ/l_a}`` (eq. 9).
+
+    Args:
+        rho: distances ``ρ_ij`` (any shape; an array, a tensor or a float).
+        inv_rho: ``1 / max(ρ_ij, RHO_FLOOR)``, same shape.
+        vdot: ``(v_i − v_j)·r_ij`` (not normalised), same shape; ``None`` (or
+            ``C_o = 0``) skips the alignment term.
+        C_a, C_r, l_a, l_r, C_o, l_o: the parameters of :class:`SocialPotentialParams`.
+        exp: the exponential of the array type (``np.exp``, ``torch.exp``, a scalar
+            ``exp`` in compiled loops).
+
+    >>> s, u = pair_law(1.0, 1.0, None, 1.0, 1.2, 1.0, 0.2, 0.1, 1.5, math.exp)
+    >>> round(s, 6), round(u, 6)  # attraction at ρ = 1 (positive: toward j)
+    (0.327452, -0.359794)
+    """
+    e_a = exp(rho * (-1.0 / l_a))
+    e_r = exp(rho * (-1.0 / l_r))
+    s = (C_a / l_a) * e_a - (C_r / l_r) * e_r
+    if vdot is not None and C_o != 0:
+        s = s - (C_o * vdot * inv_rho) * exp(rho * (-1.0 / l_o))
+    return s * inv_rho, C_r * e_r - C_a * e_a
+
+
+def sink_law(dist: Array, inv_dist: Array, C_g: float, l_g: float, exp: Any) -> tuple[Array, Array]:
+    """The goal sink, per agent: ``(g_i, V_goal)`` with ``F_goal_i = g_i (r_g − r_i)``.
+
+    ``V_goal(r_i) = −C_g e^{−|r_g − r_i|/l_g}`` (eq. 19) and its negative gradient
+    ``F_goal_i = (C_g/l_g) e^{−|r_g − r_i|/l_g} (r_g − r_i)/|r_g − r_i|``. The printed
+    eqs. 21/23 drop the unit vector and write ``l_a`` for ``l_g`` (``docs/models.md``
+    §1). ``inv_dist = 1 / max(dist, RHO_FLOOR)``: an agent on the goal feels no force.
+
+    >>> g, v = sink_law(5.0, 0.2, 15.0, 5.0, math.exp)
+    >>> round(g, 6), round(v, 6)
+    (0.220728, -5.518192)
+    """
+    e = exp(dist * (-1.0 / l_g))
+    return ((C_g / l_g) * e) * inv_dist, -C_g * e
+
+
+def _pair_law(
+    rho: Array, inv_rho: Array, vdot: Array | None, p: SocialPotentialParams, xp: ArrayNamespace
+):
+    return pair_law(rho, inv_rho, vdot, p.C_a, p.C_r, p.l_a, p.l_r, p.C_o, p.l_o, xp.exp)
+
+
+# --------------------------------------------------------------------------- geometry
+
+
+class PairGeometry(NamedTuple):
+    """Pairwise offsets and distances of one set of positions (numpy or torch).
+
+    ``dx[k]`` is ``r_ij[..., k] = x_j[k] − x_i[k]`` and ``rho`` is ``ρ_ij``, each
+    ``(..., N, N)`` (zeros on the diagonal); components are separate arrays, faster than
+    one ``(..., N, N, d)`` array for the reductions in :func:`forces`, and the layout on
+    which a compiler fuses each pair's terms into one loop. Treat as read-only.
+    """
+
+    dx: list[Array]
+    rho: Array
+
+
+def components(a: Array) -> list[Array]:
+    """``[a[..., 0], ..., a[..., d−1]]`` for an array; a list of components as it is."""
+    if isinstance(a, (list, tuple)):
+        return list(a)
+    return [a[..., k] for k in range(a.shape[-1])]
+
+
+def pair_geometry(x: Array) -> PairGeometry:
+    """The :class:`PairGeometry` of positions ``x`` shaped ``(..., N, d)`` (or its list of
+    ``d`` components, each ``(..., N)``)."""
+    xs = components(x)
+    xp = namespace(xs[0])
+    dx = [c[..., None, :] - c[..., :, None] for c in xs]
+    rho2 = dx[0] * dx[0]
+    for k in range(1, len(dx)):
+        rho2 = rho2 + dx[k] * dx[k]
+    return PairGeometry(dx, xp.sqrt(rho2))
+
+
+def pair_terms(
+    geometry: PairGeometry, v: Array | None, params: SocialPotentialParams
+) -> tuple[list[Array], Array]:
+    """The pair part of eq. 14 per component and the pair energy ``Σ_{i<j} U(ρ_ij)``.
+
+    Returns ``([F_0, ..., F_{d−1}] each (..., N), E (...))`` with
+    ``F_i = Σ_j s_ij r_ij`` from :func:`pair_law` (``v`` its velocities ``(..., N, d)``
+    or components; ``None`` skips alignment). ``E`` sums ``U`` over all ordered pairs,
+    subtracts the ``N`` diagonal terms ``U(0) = C_r − C_a`` and halves.
+    """
+    p = params
+    dx, rho = geometry.dx, geometry.rho
+    xp = namespace(rho)
+    inv_rho = 1.0 / xp.clip(rho, RHO_FLOOR, None)
+    vdot = None
+    if v is not None and p.C_o != 0:
+        vs = components(v)
+        vdot = (vs[0][..., :, None] - vs[0][..., None, :]) * dx[0]
+        for k in range(1, len(dx)):
+            vdot = vdot + (vs[k][..., :, None] - vs[k][..., None, :]) * dx[k]
+    s, u = _pair_law(rho, inv_rho, vdot, p, xp)
+    n = rho.shape[-1]
+    energy = 0.5 * (xp.sum(xp.sum(u, axis=-1), axis=-1) - n * (p.C_r - p.C_a))
+    return [xp.sum_product(s, c) for c in dx], energy
+
+
+def goal_terms(
+    x: Array, params: SocialPotentialParams, goal: Array
+) -> tuple[list[Array], Array, Array]:
+    """The goal sink on every agent: ``(F_goal per component, V_goal (..., N), dist (..., N))``.
+
+    ``x`` is ``(..., N, d)`` or its components; ``goal`` broadcasts against ``(..., d)``.
+    """
+    xs = components(x)
+    xp = namespace(xs[0])
+    offset = [goal[..., None, k] - xc for k, xc in enumerate(xs)]  # r_g − r_i
+    dist2 = offset[0] * offset[0]
+    for oc in offset[1:]:
+        dist2 = dist2 + oc * oc
+    dist = xp.sqrt(dist2)
+    g, potential = sink_law(
+        dist, 1.0 / xp.clip(dist, RHO_FLOOR, None), params.C_g, params.l_g, xp.exp
+    )
+    return [oc * g for oc in offset], potential, dist
+
+
+# --------------------------------------------------------------------------- public API
+
+
+def pair_potential(rho: Array, params: SocialPotentialParams) -> Array:
     """Generalised Morse pair potential ``U(ρ) = C_r e^{−ρ/l_r} − C_a e^{−ρ/l_a}`` (eq. 9).
 
     >>> float(pair_potential(np.array(0.0), SocialPotentialParams()))  # C_r − C_a
     0.19999999999999996
     """
-    rho = np.asarray(rho)
-    return params.C_r * np.exp(-rho / params.l_r) - params.C_a * np.exp(-rho / params.l_a)
+    if not type(rho).__module__.startswith("torch"):
+        rho = np.asarray(rho)
+    xp = namespace(rho)
+    return _pair_law(rho, rho, None, params, xp)[1]
 
 
-def goal_potential(x: np.ndarray, params: SocialPotentialParams, goal: np.ndarray) -> np.ndarray:
+def _state(x: Any, v: Any | None = None) -> tuple[Array, Array | None]:
+    """Validated ``(x, v)``: numpy arrays through :func:`check_state`, torch tensors as
+    they are (floating, ``(..., N, d)``, ``d`` in {2, 3})."""
+    return check_state(x, v)
+
+
+def goal_potential(x: Array, params: SocialPotentialParams, goal: Array) -> Array:
     """Goal sink ``V_goal(r_i) = −C_g e^{−|r_i − r_g|/l_g}`` (eq. 19), shaped ``(..., N)``.
 
     ``goal`` broadcasts against ``(..., d)``.
     """
-    x, _ = check_state(x)
-    dist = np.linalg.norm(check_goal(goal, x)[..., None, :] - x, axis=-1)
-    return -params.C_g * np.exp(-dist / params.l_g)
+    x, _ = _state(x)
+    return goal_terms(x, params, check_goal(goal, x))[1]
 
 
-def goal_force(x: np.ndarray, params: SocialPotentialParams, goal: np.ndarray) -> np.ndarray:
+def goal_force(x: Array, params: SocialPotentialParams, goal: Array) -> Array:
     """Goal-sink force ``F_goal_i = (C_g/l_g) e^{−|r_g − r_i|/l_g} (r_g − r_i)/|r_g − r_i|``.
 
-    The gradient of eq. 19; the printed eqs. 21/23 drop the unit vector and write ``l_a``
-    for ``l_g`` (MODELS.md §1). An agent exactly on the goal feels no force.
-    Shape ``(..., N, d)`` like ``x``.
+    The gradient of eq. 19 (:func:`sink_law`). An agent exactly on the goal feels no
+    force. Shape ``(..., N, d)`` like ``x``.
     """
-    x, _ = check_state(x)
-    offset = check_goal(goal, x)[..., None, :] - x
-    dist = np.sqrt(np.einsum("...k,...k->...", offset, offset))
-    scale = (params.C_g / params.l_g) * np.exp(-dist / params.l_g) / np.maximum(dist, RHO_FLOOR)
-    return offset * scale[..., None]
-
-
-class PairGeometry(NamedTuple):
-    """Pairwise offsets, distances and memoised decays of one set of positions.
-
-    ``dx[k]`` is ``r_ij[..., k] = x_j[k] − x_i[k]`` and ``rho`` is ``ρ_ij``, each
-    ``(..., N, N)`` (zeros on the diagonal); components are separate contiguous arrays,
-    faster than one ``(..., N, N, d)`` array for the reductions in :func:`forces`.
-    :meth:`decay` caches ``e^{−ρ/l}`` per length ``l``, so that the forces and the
-    energy at the same positions compute each exponential once. Treat as read-only.
-    """
-
-    dx: list[np.ndarray]
-    rho: np.ndarray
-    decays: dict[float, np.ndarray]
-
-    def decay(self, length: float) -> np.ndarray:
-        """``e^{−ρ_ij / length}`` (cached; do not modify the returned array)."""
-        out = self.decays.get(length)
-        if out is None:
-            out = np.exp(self.rho * (-1.0 / length))
-            self.decays[length] = out
-        return out
-
-
-def pair_geometry(x: np.ndarray) -> PairGeometry:
-    """The :class:`PairGeometry` of positions ``x`` shaped ``(..., N, d)``."""
-    d = x.shape[-1]
-    dx = [x[..., None, :, k] - x[..., :, None, k] for k in range(d)]
-    rho2 = dx[0] * dx[0]
-    for k in range(1, d):
-        rho2 += dx[k] * dx[k]
-    return PairGeometry(dx, np.sqrt(rho2, out=rho2), {})
+    x, _ = _state(x)
+    xp = namespace(x)
+    return xp.stack(goal_terms(x, params, check_goal(goal, x))[0], axis=-1)
 
 
 def forces(
-    x: np.ndarray,
-    v: np.ndarray,
+    x: Array,
+    v: Array,
     params: SocialPotentialParams,
-    goal: np.ndarray | None = None,
+    goal: Array | None = None,
     *,
     geometry: PairGeometry | None = None,
-) -> np.ndarray:
+) -> Array:
     """Total passive force on every agent (eq. 14, plus eq. 20's goal term).
 
     ``F_i = Σ_{j≠i} [ (C_a/l_a) e^{−ρ_ij/l_a} − (C_r/l_r) e^{−ρ_ij/l_r}
@@ -193,87 +325,71 @@ def forces(
     ``−∇_i V`` with ``V = Σ_{i<j} U(ρ_ij)`` (tested by finite differences).
 
     Args:
-        x: positions ``(..., N, d)``, ``d`` in {2, 3}; float32 stays float32.
-        v: velocities, same shape.
+        x: positions ``(..., N, d)``, ``d`` in {2, 3}: a numpy array (float32 stays
+            float32) or a floating torch tensor on any device.
+        v: velocities, same shape and type.
         params: model parameters.
         goal: goal position broadcastable to ``(..., d)``, or ``None`` for no sink.
         geometry: ``pair_geometry(x)`` if the caller has it already (saves recomputing).
 
     Returns:
-        Forces shaped like ``x`` (not divided by the mass).
+        Forces shaped like ``x`` (not divided by the mass), of the same array type.
 
     >>> x = np.array([[0.0, 0.0], [1.0, 0.0]])
     >>> f = forces(x, np.zeros_like(x), SocialPotentialParams())
     >>> bool(np.allclose(f[0], -f[1]))  # pair forces are antisymmetric
     True
     """
-    x, v = check_state(x, v)
+    x, v = _state(x, v)
+    xp = namespace(x)
     p = params
-    d = x.shape[-1]
     geo = pair_geometry(x) if geometry is None else geometry
-    dx, rho = geo.dx, geo.rho
-    inv_rho = np.maximum(rho, RHO_FLOOR)
-    np.reciprocal(inv_rho, out=inv_rho)
-
-    # Scalar pair magnitude along u_ij (eq. 10).
-    scalar = geo.decay(p.l_a) * (p.C_a / p.l_a)
-    scalar -= (p.C_r / p.l_r) * geo.decay(p.l_r)
-    if p.C_o > 0:
-        # Alignment (eq. 11): −C_o ((v_i − v_j)·u_ij) e^{−ρ/l_o}.
-        proj = (v[..., :, None, 0] - v[..., None, :, 0]) * dx[0]
-        for k in range(1, d):
-            proj += (v[..., :, None, k] - v[..., None, :, k]) * dx[k]
-        proj *= inv_rho
-        proj *= geo.decay(p.l_o)
-        proj *= p.C_o
-        scalar -= proj
-    scalar *= inv_rho  # now F_i = Σ_j scalar_ij r_ij
-    total = np.stack([np.einsum("...ij,...ij->...i", scalar, dx[k]) for k in range(d)], axis=-1)
+    fs, _ = pair_terms(geo, v, p)
     if p.beta > 0:
-        total -= p.beta * v
+        fs = [fc - p.beta * v[..., k] for k, fc in enumerate(fs)]
     if goal is not None:
         goal = check_goal(goal, x)
         if p.C_g > 0:
-            total += goal_force(x, p, goal)
-    return total
+            fg = goal_terms(x, p, goal)[0]
+            fs = [fc + gc for fc, gc in zip(fs, fg, strict=True)]
+    return xp.stack(fs, axis=-1)
 
 
-def kinetic_energy(v: np.ndarray, params: SocialPotentialParams) -> np.ndarray:
+def kinetic_energy(v: Array, params: SocialPotentialParams) -> Array:
     """``Σ_i ½ m |v_i|²``, shaped ``(...)``."""
-    v = np.asarray(v)
-    return 0.5 * params.m * np.einsum("...ik,...ik->...", v, v)
+    if not type(v).__module__.startswith("torch"):
+        v = np.asarray(v)
+    xp = namespace(v)
+    return 0.5 * params.m * xp.sum(v * v, axis=(-2, -1))
 
 
 def potential_energy(
-    x: np.ndarray,
+    x: Array,
     params: SocialPotentialParams,
-    goal: np.ndarray | None = None,
+    goal: Array | None = None,
     *,
     geometry: PairGeometry | None = None,
-) -> np.ndarray:
+) -> Array:
     """``Σ_{i<j} U(ρ_ij) + Σ_i V_goal(r_i)`` (eqs. 9, 16, 19), shaped ``(...)``."""
-    x, _ = check_state(x)
+    x, _ = _state(x)
+    xp = namespace(x)
     geo = pair_geometry(x) if geometry is None else geometry
-    n = x.shape[-2]
-    # U(ρ) = C_r e^{−ρ/l_r} − C_a e^{−ρ/l_a} over all ordered pairs, minus the N diagonal
-    # terms U(0), halved.
-    u = params.C_r * geo.decay(params.l_r) - params.C_a * geo.decay(params.l_a)
-    pairs = 0.5 * (u.sum(axis=(-2, -1)) - n * (params.C_r - params.C_a))
+    pairs = pair_terms(geo, None, params)[1]
     if goal is not None:
         goal = check_goal(goal, x)
         if params.C_g > 0:
-            pairs = pairs + goal_potential(x, params, goal).sum(axis=-1)
+            pairs = pairs + xp.sum(goal_terms(x, params, goal)[1], axis=-1)
     return pairs
 
 
 def energy(
-    x: np.ndarray,
-    v: np.ndarray,
+    x: Array,
+    v: Array,
     params: SocialPotentialParams,
-    goal: np.ndarray | None = None,
+    goal: Array | None = None,
     *,
     geometry: PairGeometry | None = None,
-) -> np.ndarray:
+) -> Array:
     """Total energy φ (eq. 16): kinetic + pair potential + goal potential, shaped ``(...)``.
 
     With no control, ``dφ/dt = −β Σ|v_i|² − ½ Σ_{i≠j} C_o ((v_ij·u_ij))² e^{−ρ_ij/l_o} ≤ 0``
@@ -285,5 +401,5 @@ def energy(
     >>> bool(np.isclose(energy(x, v, p), pair_potential(np.array(1.0), p)))
     True
     """
-    x, v = check_state(x, v)
+    x, v = _state(x, v)
     return kinetic_energy(v, params) + potential_energy(x, params, goal, geometry=geometry)

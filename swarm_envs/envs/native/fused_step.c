@@ -1,12 +1,25 @@
-/* The fused SwarmNav step of swarm_envs.envs.native_step, in C (float32 and float64).
+/* The fused SwarmNav step of swarm_envs.envs.native, in C (float32 and float64).
  *
- * Compiled at first use by swarm_envs/envs/native_step.py with the system C compiler
- * (-O3 -march=native -fopenmp): the loops over pairs are vectorised (float32 with the
- * inlined exp_f32 below; float64 calls glibc's vector exp, libmvec, declared SIMD), and
- * the swarms are spread over OpenMP threads. Called through ctypes. The GCC vector
- * extensions used (vector_size, __builtin_shuffle, __builtin_convertvector) lower to
- * narrower vectors or scalars where AVX-512 is missing; AVX-512 gets min/max intrinsics
- * for the k-NN keys.
+ * An execution strategy for the shared definitions of swarm_envs.physics and
+ * swarm_envs.envs.task (docs/design.md): the same semi-implicit Euler step with the
+ * carried force, pair law, goal sink, neighbour ranking, observation layout and
+ * statistics, laid out for the CPU. The reward is not here: Python combines it from the
+ * statistics and the effort this step writes (swarm_envs.envs.task.reward).
+ *
+ * The parameters arrive in StepParams, and the output columns are PK_*, both from the
+ * header step_params.h that swarm_envs/envs/native/contract.py generates from the config
+ * dataclasses at build time. What this kernel implements it declares below
+ * (KERNEL_PHYSICS, KERNEL_STATS, KERNEL_OBS_LAYOUT); Python refuses configs that need
+ * more.
+ *
+ * Compiled at first use by swarm_envs/envs/native/build.py with the system C compiler
+ * (-O3 -march=<SWARM_ENVS_NATIVE_ARCH, default native> -fopenmp, plus $CFLAGS): the loops
+ * over pairs are vectorised (float32 with the inlined exp_f32 below; float64 calls
+ * glibc's vector exp, libmvec, declared SIMD), and the swarms are spread over OpenMP
+ * threads. Called through ctypes. The GCC vector extensions used (vector_size,
+ * __builtin_shuffle, __builtin_convertvector) lower to narrower vectors or scalars where
+ * AVX-512 is missing; AVX-512 gets min/max intrinsics for the k-NN keys and compressed
+ * stores for the observations.
  */
 #include <math.h>
 #include <stdint.h>
@@ -16,18 +29,20 @@
 #include <immintrin.h>
 #endif
 
+#include "step_params.h"
+
 #pragma omp declare simd notinbranch
 double exp(double);
 
-/* Integer parameters ip[...]. */
-enum { IP_B, IP_N, IP_D, IP_K, IP_K_REAL, IP_K_SORT, IP_NEED, IP_OBS_DIM, IP_PHYSICS_GOAL, IP_SIZE };
-/* Real parameters dp[...]. */
-enum {
-    DP_DT, DP_M, DP_U_MAX, DP_C_A, DP_C_R, DP_L_A, DP_L_R, DP_C_O, DP_L_O, DP_BETA, DP_C_G,
-    DP_L_G, DP_GOAL_RADIUS, DP_COLLISION_RADIUS, DP_GOAL_SCALE, DP_VEL_SCALE,
-    DP_INV_NBR_SCALE, DP_INV_VEL_SCALE, DP_OBS_BOUND, DP_CENTRE_TOL, DP_RHO_FLOOR,
-    DP_W_PROGRESS, DP_W_ARRIVAL, DP_W_SUCCESS, DP_W_COLLISION, DP_W_EFFORT, DP_W_TIME, DP_SIZE
-};
+/* What this kernel implements (read by swarm_envs.envs.native.contract.KernelInfo). */
+#define KERNEL_PHYSICS "C_a C_r l_a l_r C_o l_o beta C_g l_g m"
+#define KERNEL_STATS                                                                        \
+    "polarization angular_momentum expanse nearest_neighbor_distance energy "              \
+    "fraction_arrived collisions centroid_distance mean_goal_distance success"
+#define KERNEL_OBS_LAYOUT                                                                   \
+    "goal_offset/obs_goal_scale,velocity/obs_velocity_scale;"                              \
+    "offset/obs_neighbor_scale,relative_velocity/obs_velocity_scale,mask"
+
 /* e^x in float32, inlined so that the pair loop vectorises without calls (a call to
  * libmvec's vector expf spills every live register, which made the loop 1.6x slower).
  * Cephes' expf: x = n ln2 + r with |r| <= ln2/2 (ln2 in two parts), e^r by a degree-6
@@ -64,7 +79,6 @@ static inline float exp_f32(float x) {
 /* An action x clipped to [-1, 1] (x finite). */
 #define UNIT_CLIP(x) ((x) < -1 ? (REAL)-1 : (x) > 1 ? (REAL)1 : (x))
 
-#define N_PACKED 11
 #define KMAX_SORT 64
 
 /* exp_f32 over n values, for the tests. */
@@ -72,8 +86,11 @@ void fused_exp_f32(const float *x, float *y, int64_t n) {
     for (int64_t t = 0; t < n; t++) y[t] = exp_f32(x[t]);
 }
 
-int fused_step_abi(void) { return 1000 * IP_SIZE + 10 * DP_SIZE + 2; }
+long long fused_step_layout(void) { return STEP_LAYOUT_HASH; }
 int fused_step_kmax(void) { return KMAX_SORT; }
+const char *fused_step_physics(void) { return KERNEL_PHYSICS; }
+const char *fused_step_stats(void) { return KERNEL_STATS; }
+const char *fused_step_obs_layout(void) { return KERNEL_OBS_LAYOUT; }
 
 #define REAL float
 #define ABITS uint32_t /* a REAL's bits, and its exponent's */

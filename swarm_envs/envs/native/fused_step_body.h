@@ -1,14 +1,15 @@
 /* One SwarmNav step for swarms [b0, b1): the body of fused_step.c, included once per
  * floating type (REAL, with EXP, SQRT, FLOOR and the function name FUSED_STEP).
  *
- * The same arithmetic as swarm_envs.envs.torch_core.build_advance (see its docstring and
- * MODELS.md §1-2): the semi-implicit Euler step with the carried passive force, one pass
- * over the pairs of the new state (forces eqs. 10-12, pair energy eq. 9, distances), the
- * goal sink (eqs. 19-20), the k nearest neighbours, the observations, the statistics and
- * the reward. Everything for one swarm stays in a few kilobytes of scratch memory.
+ * The arithmetic of swarm_envs.envs.torch_step.build_advance (docs/models.md §1-2, §6):
+ * the semi-implicit Euler step with the carried passive force, one pass over the pairs
+ * of the new state (pair_law: forces eqs. 10-12, pair energy eq. 9, distances), the goal
+ * sink (sink_law, eqs. 19-20), the k nearest neighbours, the observations, the
+ * statistics and the actions' effort. Everything for one swarm stays in a few kilobytes
+ * of scratch memory.
  */
 
-/* The k_sort = K nearest neighbours of the agents of block I (MODELS.md §2's k-NN order:
+/* The k_sort = K nearest neighbours of the agents of block I (docs/models.md §2's k-NN order:
  * by (ρ, j)), from the distances that the pair pass stored per tile and offset. Each
  * candidate is inserted into the sorted lists of its lane; the tiles hand candidates over
  * in rotated order, so the comparison is on (ρ, j). Tile (J, I) with J < I holds agent
@@ -94,33 +95,32 @@ static inline __attribute__((always_inline)) void KNN_BLOCK(
 }
 
 static inline __attribute__((always_inline)) void FUSED_SWARM(
-    const int64_t *ip, const double *dp, const int64_t d, int64_t b, REAL *scratch,
-                        const REAL *x, const REAL *v, const REAL *f, const REAL *goal,
-                        const REAL *a, const uint8_t *move, const REAL *prev_distance,
-                        const REAL *prev_arrived, const REAL *start_distance, REAL *x_out,
-                        REAL *v_out, REAL *f_out, float *obs, REAL *packed, REAL *mean_dist_out,
-                        REAL *arrived_out) {
-    const int64_t B = ip[IP_B], N = ip[IP_N], k = ip[IP_K];
-    const int64_t k_real = ip[IP_K_REAL], k_sort = ip[IP_K_SORT], need = ip[IP_NEED];
-    const int64_t obs_dim = ip[IP_OBS_DIM], physics_goal = ip[IP_PHYSICS_GOAL];
+    const StepParams *P, const int64_t d, int64_t b, REAL *scratch, const REAL *x,
+    const REAL *v, const REAL *f, const REAL *goal, const REAL *a, const uint8_t *move,
+    REAL *x_out, REAL *v_out, REAL *f_out, float *obs, REAL *packed) {
+    const int64_t B = P->batch, N = P->n_agents, k = P->n_neighbors;
+    const int64_t k_real = P->k_real, k_sort = P->k_rank, need = P->need;
+    const int64_t obs_dim = P->obs_dim, physics_goal = P->physics_goal;
     const int64_t NP = (N + LANES - 1) / LANES * LANES;
-    const REAL dt = (REAL)dp[DP_DT], m = (REAL)dp[DP_M], u_max = (REAL)dp[DP_U_MAX];
-    const REAL C_a = (REAL)dp[DP_C_A], C_r = (REAL)dp[DP_C_R];
-    const REAL l_a = (REAL)dp[DP_L_A], l_r = (REAL)dp[DP_L_R];
-    const REAL C_o = (REAL)dp[DP_C_O];
-    const REAL beta = (REAL)dp[DP_BETA], C_g = (REAL)dp[DP_C_G], l_g = (REAL)dp[DP_L_G];
-    const REAL goal_radius = (REAL)dp[DP_GOAL_RADIUS];
-    const REAL collision_radius = (REAL)dp[DP_COLLISION_RADIUS];
-    const REAL goal_scale = (REAL)dp[DP_GOAL_SCALE], vel_scale = (REAL)dp[DP_VEL_SCALE];
-    const REAL inv_nbr_scale = (REAL)dp[DP_INV_NBR_SCALE];
-    const REAL inv_vel_scale = (REAL)dp[DP_INV_VEL_SCALE];
-    const REAL obs_bound = (REAL)dp[DP_OBS_BOUND], centre_tol = (REAL)dp[DP_CENTRE_TOL];
-    const REAL rho_floor = (REAL)dp[DP_RHO_FLOOR];
+    const REAL dt = (REAL)P->dt, m = (REAL)P->physics_m, u_max = (REAL)P->u_max;
+    const REAL C_a = (REAL)P->physics_C_a, C_r = (REAL)P->physics_C_r;
+    const REAL l_a = (REAL)P->physics_l_a, l_r = (REAL)P->physics_l_r;
+    const REAL C_o = (REAL)P->physics_C_o;
+    const REAL beta = (REAL)P->physics_beta, C_g = (REAL)P->physics_C_g;
+    const REAL l_g = (REAL)P->physics_l_g;
+    const REAL goal_radius = (REAL)P->goal_radius;
+    const REAL collision_radius = (REAL)P->collision_radius;
+    const REAL goal_scale = (REAL)P->obs_goal_scale, vel_scale = (REAL)P->obs_velocity_scale;
+    const REAL inv_nbr_scale = (REAL)(1.0 / P->obs_neighbor_scale);
+    const REAL inv_vel_scale = (REAL)(1.0 / P->obs_velocity_scale);
+    const REAL obs_bound = (REAL)P->obs_bound, centre_tol = (REAL)P->centre_tol;
+    const REAL rho_floor = (REAL)P->rho_floor;
     const REAL inf = (REAL)INFINITY;
-    const REAL dec_a = (REAL)(-1.0 / dp[DP_L_A]), dec_r = (REAL)(-1.0 / dp[DP_L_R]);
-    const REAL dec_o = (REAL)(-1.0 / dp[DP_L_O]);
-    const REAL ca_la = (REAL)(dp[DP_C_A] / dp[DP_L_A]), cr_lr = (REAL)(dp[DP_C_R] / dp[DP_L_R]);
-    const REAL cg_lg = (REAL)(dp[DP_C_G] / dp[DP_L_G]);
+    const REAL dec_a = (REAL)(-1.0 / P->physics_l_a), dec_r = (REAL)(-1.0 / P->physics_l_r);
+    const REAL dec_o = (REAL)(-1.0 / P->physics_l_o);
+    const REAL ca_la = (REAL)(P->physics_C_a / P->physics_l_a);
+    const REAL cr_lr = (REAL)(P->physics_C_r / P->physics_l_r);
+    const REAL cg_lg = (REAL)(P->physics_C_g / P->physics_l_g);
     const int same_decay = l_a == l_r, alignment = C_o > 0;
     const REAL Nr = (REAL)N;
     const int64_t S = NP; /* component stride of the scratch state (padded to LANES) */
@@ -424,7 +424,7 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
 #endif
 #undef CLIP_OBS
 
-    /* 5. Statistics (swarm_envs.metrics, MODELS.md §2). Headings v/|v| (0 at rest) and
+    /* 5. Statistics (swarm_envs.metrics, docs/models.md §2). Headings v/|v| (0 at rest) and
      * unit offsets from the centroid (0 within the centring tolerance) as quotients
      * whose divisor is replaced by 1 where they are 0: the loops vectorise. */
     const REAL *x0 = xs, *x1 = xs + S, *x2 = xs + 2 * S;
@@ -492,27 +492,18 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
         const REAL at = UNIT_CLIP(ab[t]);
         effort += at * at;
     }
-    const REAL reward = (REAL)dp[DP_W_PROGRESS] * (prev_distance[b] - mean_goal_distance) /
-                            start_distance[b] +
-                        (REAL)dp[DP_W_ARRIVAL] * (arrived - prev_arrived[b]) +
-                        (REAL)dp[DP_W_SUCCESS] * success -
-                        (REAL)dp[DP_W_COLLISION] * collisions / Nr -
-                        (REAL)dp[DP_W_EFFORT] * effort / Nr - (REAL)dp[DP_W_TIME];
-
-    REAL *pk = packed + b * N_PACKED;
-    pk[0] = polarization;
-    pk[1] = angular;
-    pk[2] = radius_sum / Nr;
-    pk[3] = nnd;
-    pk[4] = phi;
-    pk[5] = arrived;
-    pk[6] = collisions;
-    pk[7] = SQRT(cd2);
-    pk[8] = mean_goal_distance;
-    pk[9] = success;
-    pk[10] = reward;
-    mean_dist_out[b] = mean_goal_distance;
-    arrived_out[b] = arrived;
+    REAL *pk = packed + b * PK_SIZE;
+    pk[PK_polarization] = polarization;
+    pk[PK_angular_momentum] = angular;
+    pk[PK_expanse] = radius_sum / Nr;
+    pk[PK_nearest_neighbor_distance] = nnd;
+    pk[PK_energy] = phi;
+    pk[PK_fraction_arrived] = arrived;
+    pk[PK_collisions] = collisions;
+    pk[PK_centroid_distance] = SQRT(cd2);
+    pk[PK_mean_goal_distance] = mean_goal_distance;
+    pk[PK_success] = success;
+    pk[PK_effort] = effort;
     for (int64_t c = 0; c < d; c++)
         for (int64_t i = 0; i < N; i++) {
             x_out[(c * B + b) * N + i] = xs[c * S + i];
@@ -530,13 +521,11 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
  * Returns 0, 1 if scratch memory could not be allocated, 2 if k_sort > KMAX_SORT, 3 if
  * an action of these swarms is NaN or infinite (checked first: nothing is written).
  * Finite actions outside [-1, 1] are clipped, as numpy's clip would. */
-int FUSED_STEP(const int64_t *ip, const double *dp, int64_t b0, int64_t b1,
-               const int64_t *rows, const REAL *x,
-               const REAL *v, const REAL *f, const REAL *goal, const REAL *a,
-               const uint8_t *move, const REAL *prev_distance, const REAL *prev_arrived,
-               const REAL *start_distance, REAL *x_out, REAL *v_out, REAL *f_out, float *obs,
-               REAL *packed, REAL *mean_dist, REAL *arrived) {
-    const int64_t N = ip[IP_N], d = ip[IP_D], k_sort = ip[IP_K_SORT];
+int FUSED_STEP(const StepParams *P, int64_t b0, int64_t b1, const int64_t *rows,
+               const REAL *x, const REAL *v, const REAL *f, const REAL *goal, const REAL *a,
+               const uint8_t *move, REAL *x_out, REAL *v_out, REAL *f_out, float *obs,
+               REAL *packed) {
+    const int64_t N = P->n_agents, d = P->dim, k_sort = P->k_rank;
     const int64_t NP = (N + LANES - 1) / LANES * LANES;
     if (k_sort > KMAX_SORT) return 2;
     /* Non-finite actions: exponent bits all ones (an integer OR reduction, vectorised). */
@@ -558,17 +547,15 @@ int FUSED_STEP(const int64_t *ip, const double *dp, int64_t b0, int64_t b1,
 #pragma omp for schedule(static)
             for (int64_t t = b0; t < b1; t++) {
                 if (!scratch) { status |= 1; continue; }
-                FUSED_SWARM(ip, dp, 2, rows ? rows[t] : t, scratch, x, v, f, goal, a, move, prev_distance,
-                            prev_arrived, start_distance, x_out, v_out, f_out, obs, packed,
-                            mean_dist, arrived);
+                FUSED_SWARM(P, 2, rows ? rows[t] : t, scratch, x, v, f, goal, a, move, x_out,
+                            v_out, f_out, obs, packed);
             }
         } else {
 #pragma omp for schedule(static)
             for (int64_t t = b0; t < b1; t++) {
                 if (!scratch) { status |= 1; continue; }
-                FUSED_SWARM(ip, dp, 3, rows ? rows[t] : t, scratch, x, v, f, goal, a, move, prev_distance,
-                            prev_arrived, start_distance, x_out, v_out, f_out, obs, packed,
-                            mean_dist, arrived);
+                FUSED_SWARM(P, 3, rows ? rows[t] : t, scratch, x, v, f, goal, a, move, x_out,
+                            v_out, f_out, obs, packed);
             }
         }
         free(scratch);

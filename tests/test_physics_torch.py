@@ -1,9 +1,10 @@
-"""The torch twin of the social potential physics: same numbers as numpy, compiled or plain.
+"""The social potential physics on torch tensors: the same definitions as on numpy arrays,
+the same numbers, compiled or plain.
 
-MODELS.md §1 (forces, energy, Euler step), TESTING.md items 11 (coincident agents) and
-14 (``F = −∇V``, momentum), and the compile switch of ``swarm_envs.physics.torch_backend``
-(automatic, overridable, falling back to plain torch). Only one test compiles (small
-shapes); the others run plain torch.
+docs/models.md §1 (forces, energy, Euler step): coincident agents, ``F = −∇V``,
+momentum; and the compile switch of ``swarm_envs._runtime.torch_compile`` (automatic,
+overridable, falling back to plain torch). Only one test compiles (small shapes); the
+others run plain torch.
 """
 
 from __future__ import annotations
@@ -12,8 +13,15 @@ import numpy as np
 import pytest
 import torch
 
-from swarm_envs.physics import SocialPotentialParams, energy, forces, random_swarm, step
-from swarm_envs.physics import torch_backend as tb
+from swarm_envs._runtime import torch_compile as rt
+from swarm_envs.physics import (
+    SocialPotentialParams,
+    energy,
+    forces,
+    potential_energy,
+    random_swarm,
+    step,
+)
 
 PARAMS = [
     SocialPotentialParams(),
@@ -36,14 +44,14 @@ def test_forces_energy_and_step_match_numpy_in_float64(params, dim):
     x, v, goal = swarm(7, dim)
     tx, tv, tg = (torch.from_numpy(a) for a in (x, v, goal))
     np.testing.assert_allclose(
-        tb.forces(tx, tv, params, tg).numpy(), forces(x, v, params, goal), rtol=1e-12, atol=1e-12
+        forces(tx, tv, params, tg).numpy(), forces(x, v, params, goal), rtol=1e-12, atol=1e-12
     )
     np.testing.assert_allclose(
-        tb.energy(tx, tv, params, tg).numpy(), energy(x, v, params, goal), rtol=1e-12
+        energy(tx, tv, params, tg).numpy(), energy(x, v, params, goal), rtol=1e-12
     )
     u = np.random.default_rng(2).uniform(-1, 1, x.shape)
     x1, v1 = step(x, v, params, dt=0.05, goal=goal, control=u)
-    tx1, tv1 = tb.step(tx, tv, params, dt=0.05, goal=tg, control=torch.from_numpy(u))
+    tx1, tv1 = step(tx, tv, params, dt=0.05, goal=tg, control=torch.from_numpy(u))
     np.testing.assert_allclose(tx1.numpy(), x1, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(tv1.numpy(), v1, rtol=1e-12, atol=1e-12)
 
@@ -52,7 +60,7 @@ def test_float32_stays_float32_and_matches_numpy():
     params = SocialPotentialParams.navigation()
     x, v, _ = swarm(10, batch=(4,))
     x32, v32 = x.astype(np.float32), v.astype(np.float32)
-    f = tb.forces(torch.from_numpy(x32), torch.from_numpy(v32), params)
+    f = forces(torch.from_numpy(x32), torch.from_numpy(v32), params)
     assert f.dtype == torch.float32
     np.testing.assert_allclose(f.numpy(), forces(x32, v32, params), rtol=1e-5, atol=1e-5)
 
@@ -61,15 +69,15 @@ def test_cohesion_is_minus_the_gradient_of_the_pair_potential():
     params = SocialPotentialParams(C_o=0.0, beta=0.0, C_g=3.0)
     x, _, goal = swarm(6, batch=(2,))
     tx, tg = torch.from_numpy(x), torch.from_numpy(goal)
-    f = tb.forces(tx, torch.zeros_like(tx), params, tg)
+    f = forces(tx, torch.zeros_like(tx), params, tg)
     h = 1e-6
     grad = torch.zeros_like(tx)
     for i in range(x.shape[-2]):
         for k in range(x.shape[-1]):
             step_ = torch.zeros_like(tx)
             step_[..., i, k] = h
-            up = tb.potential_energy(tx + step_, params, tg)
-            down = tb.potential_energy(tx - step_, params, tg)
+            up = potential_energy(tx + step_, params, tg)
+            down = potential_energy(tx - step_, params, tg)
             grad[..., i, k] = (up - down) / (2 * h)
     np.testing.assert_allclose(f.numpy(), -grad.numpy(), rtol=1e-6, atol=1e-7)
 
@@ -77,7 +85,7 @@ def test_cohesion_is_minus_the_gradient_of_the_pair_potential():
 def test_pair_forces_conserve_momentum():
     params = SocialPotentialParams(beta=0.0)  # cohesion + alignment are antisymmetric
     x, v, _ = swarm(9)
-    f = tb.forces(torch.from_numpy(x), torch.from_numpy(v), params)
+    f = forces(torch.from_numpy(x), torch.from_numpy(v), params)
     assert float(f.sum(-2).abs().max()) < 1e-12
 
 
@@ -86,9 +94,9 @@ def test_coincident_agents_give_finite_forces_and_energy():
     x = torch.zeros(2, 4, 2, dtype=torch.float32)  # every pair coincident
     x[1, 1] = 1e-12
     v = torch.randn(2, 4, 2, generator=torch.Generator().manual_seed(0))
-    f = tb.forces(x, v, params, goal=torch.zeros(2, 2))
+    f = forces(x, v, params, goal=torch.zeros(2, 2))
     assert torch.isfinite(f).all()
-    assert torch.isfinite(tb.energy(x, v, params, torch.zeros(2, 2))).all()
+    assert torch.isfinite(energy(x, v, params, torch.zeros(2, 2))).all()
     # u_ij = 0 for coincident pairs: no pair force, only dissipation.
     np.testing.assert_allclose(f[0].numpy(), (-params.beta * v[0]).numpy(), atol=1e-6)
 
@@ -96,51 +104,51 @@ def test_coincident_agents_give_finite_forces_and_energy():
 def test_bad_input_raises_value_error():
     p = SocialPotentialParams()
     with pytest.raises(ValueError, match="positions must have shape"):
-        tb.forces(torch.zeros(3, 4), torch.zeros(3, 4), p)
+        forces(torch.zeros(3, 4), torch.zeros(3, 4), p)
     with pytest.raises(ValueError, match="velocities shape"):
-        tb.forces(torch.zeros(3, 2), torch.zeros(4, 2), p)
+        forces(torch.zeros(3, 2), torch.zeros(4, 2), p)
     with pytest.raises(ValueError, match="floating"):
-        tb.forces(torch.zeros(3, 2, dtype=torch.int64), torch.zeros(3, 2), p)
-    with pytest.raises(ValueError, match=r"torch\.Tensor"):
-        tb.forces(np.zeros((3, 2)), torch.zeros(3, 2), p)
+        forces(torch.zeros(3, 2, dtype=torch.int64), torch.zeros(3, 2), p)
+    with pytest.raises(ValueError, match="velocities must be a torch tensor"):
+        forces(torch.zeros(3, 2), np.zeros((3, 2)), p)
     with pytest.raises(ValueError, match="goal must have shape"):
-        tb.forces(torch.zeros(3, 2), torch.zeros(3, 2), p, goal=torch.zeros(3))
+        forces(torch.zeros(3, 2), torch.zeros(3, 2), p, goal=torch.zeros(3))
     with pytest.raises(ValueError, match="dt must be"):
-        tb.SocialPotentialStepper(p, dt=0.0)
+        rt.SocialPotentialStepper(p, dt=0.0)
     with pytest.raises(ValueError, match="SocialPotentialParams"):
-        tb.SocialPotentialStepper({"C_a": 1.0}, dt=0.1)
+        rt.SocialPotentialStepper({"C_a": 1.0}, dt=0.1)
 
 
 # --------------------------------------------------------------------------- compiling
 
 
 def test_resolve_compile_obeys_argument_and_environment(monkeypatch):
-    monkeypatch.delenv(tb.COMPILE_ENV, raising=False)
-    assert tb.resolve_compile(False) == (False, "compile=False")
-    monkeypatch.setenv(tb.COMPILE_ENV, "0")
-    assert tb.resolve_compile("auto")[0] is False
-    monkeypatch.setenv(tb.COMPILE_ENV, "maybe")
-    with pytest.raises(ValueError, match=tb.COMPILE_ENV):
-        tb.resolve_compile("auto")
-    monkeypatch.delenv(tb.COMPILE_ENV)
+    monkeypatch.delenv(rt.COMPILE_ENV, raising=False)
+    assert rt.resolve_compile(False) == (False, "compile=False")
+    monkeypatch.setenv(rt.COMPILE_ENV, "0")
+    assert rt.resolve_compile("auto")[0] is False
+    monkeypatch.setenv(rt.COMPILE_ENV, "maybe")
+    with pytest.raises(ValueError, match=rt.COMPILE_ENV):
+        rt.resolve_compile("auto")
+    monkeypatch.delenv(rt.COMPILE_ENV)
     with pytest.raises(ValueError, match="compile must be"):
-        tb.resolve_compile("yes")
-    monkeypatch.setattr(tb, "compile_support", lambda device="cpu": "no C++ compiler found")
-    assert tb.resolve_compile("auto") == (False, "no C++ compiler found")
+        rt.resolve_compile("yes")
+    monkeypatch.setattr(rt, "compile_support", lambda device="cpu": "no C++ compiler found")
+    assert rt.resolve_compile("auto") == (False, "no C++ compiler found")
     with pytest.raises(ValueError, match="no C\\+\\+ compiler"):
-        tb.resolve_compile(True)
+        rt.resolve_compile(True)
 
 
 def test_compile_support_names_what_is_missing(monkeypatch):
     monkeypatch.setenv("CXX", "")
-    monkeypatch.setattr(tb.shutil, "which", lambda name: None)
-    assert "C++ compiler" in tb.compile_support("cpu")
-    assert tb.compile_support("meta") is not None
+    monkeypatch.setattr(rt.shutil, "which", lambda name: None)
+    assert "C++ compiler" in rt.compile_support("cpu")
+    assert rt.compile_support("meta") is not None
 
 
 def test_auto_falls_back_to_plain_when_compiling_fails(monkeypatch):
-    monkeypatch.delenv(tb.COMPILE_ENV, raising=False)
-    monkeypatch.setattr(tb, "compile_support", lambda device="cpu": None)
+    monkeypatch.delenv(rt.COMPILE_ENV, raising=False)
+    monkeypatch.setattr(rt, "compile_support", lambda device="cpu": None)
 
     def broken_compile(fn, **kwargs):
         def run(*args, **kw):
@@ -149,29 +157,29 @@ def test_auto_falls_back_to_plain_when_compiling_fails(monkeypatch):
         return run
 
     monkeypatch.setattr(torch, "compile", broken_compile)
-    stepper = tb.SocialPotentialStepper(SocialPotentialParams(), dt=0.1)
+    stepper = rt.SocialPotentialStepper(SocialPotentialParams(), dt=0.1)
     assert stepper.compiled
     x, v, _ = swarm(5, batch=(2,))
     tx, tv = torch.from_numpy(x), torch.from_numpy(v)
     with pytest.warns(UserWarning, match="falling back to plain torch"):
         x1, v1 = stepper.warmup(tx, tv)
     assert not stepper.compiled and stepper.compile_seconds is not None
-    ref = tb.step(tx, tv, SocialPotentialParams(), dt=0.1)
+    ref = step(tx, tv, SocialPotentialParams(), dt=0.1)
     assert torch.equal(x1, ref[0]) and torch.equal(v1, ref[1])
     # compile=True does not fall back: the failure surfaces.
-    strict = tb.MaybeCompiled(lambda t: t, compile=True)
+    strict = rt.MaybeCompiled(lambda t: t, compile=True)
     with pytest.raises(RuntimeError, match="simulated"):
         strict.warmup(tx)
 
 
-@pytest.mark.skipif(tb.compile_support("cpu") is not None, reason="torch.compile unavailable")
+@pytest.mark.skipif(rt.compile_support("cpu") is not None, reason="torch.compile unavailable")
 def test_compiled_step_matches_plain_step():
     params = SocialPotentialParams.navigation()
     x, v, goal = swarm(12, batch=(4,))
     args = [torch.from_numpy(a.astype(np.float32)) for a in (x, v, goal)]
     u = torch.from_numpy(np.random.default_rng(3).uniform(-3, 3, x.shape).astype(np.float32))
-    plain = tb.SocialPotentialStepper(params, dt=0.1, compile=False)
-    compiled = tb.SocialPotentialStepper(params, dt=0.1, compile=True)
+    plain = rt.SocialPotentialStepper(params, dt=0.1, compile=False)
+    compiled = rt.SocialPotentialStepper(params, dt=0.1, compile=True)
     compiled.warmup(*args, u)
     assert compiled.compiled and compiled.compile_seconds > 0
     xp, vp = plain(*args, u)
@@ -186,12 +194,12 @@ def test_cuda_matches_cpu():
     x, v, goal = swarm(16, batch=(8,))
     cpu = [torch.from_numpy(a.astype(np.float32)) for a in (x, v, goal)]
     gpu = [t.cuda() for t in cpu]
-    stepper = tb.SocialPotentialStepper(params, dt=0.1, device="cuda")
+    stepper = rt.SocialPotentialStepper(params, dt=0.1, device="cuda")
     stepper.warmup(*gpu)
     xg, vg = stepper(*gpu)
-    xc, vc = tb.step(*cpu[:2], params, dt=0.1, goal=cpu[2])
+    xc, vc = step(*cpu[:2], params, dt=0.1, goal=cpu[2])
     torch.testing.assert_close(xg.cpu(), xc, rtol=1e-5, atol=1e-5)
     torch.testing.assert_close(vg.cpu(), vc, rtol=1e-5, atol=1e-5)
     torch.testing.assert_close(
-        tb.energy(*gpu[:2], params, gpu[2]).cpu(), tb.energy(*cpu[:2], params, cpu[2])
+        energy(*gpu[:2], params, gpu[2]).cpu(), energy(*cpu[:2], params, cpu[2])
     )

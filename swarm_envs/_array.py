@@ -1,0 +1,228 @@
+"""The few array operations the shared definitions use, for numpy arrays and torch tensors.
+
+Every law, statistic, observation feature and reward term of the package is written
+once, against an :class:`ArrayNamespace`, and executed by each backend with its own
+arrays: numpy (the dense and cut-off cores, the public physics functions) or torch (the
+torch core, plain or compiled, on any device). This module holds the operations whose
+spelling differs between the two libraries; operators (``+``, ``*``, ``<``, indexing,
+``.sum(axis)`` is *not* shared, use :meth:`ArrayNamespace.sum`) work on both as they are.
+
+>>> import numpy as np
+>>> xp = namespace(np.zeros(3))
+>>> xp.name, float(xp.sum(xp.exp(np.zeros(3)), axis=-1))
+('numpy', 3.0)
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+__all__ = ["NUMPY", "SCALAR", "ArrayNamespace", "namespace", "torch_namespace"]
+
+Array = Any
+
+
+class ArrayNamespace:
+    """numpy's operations under the names the shared definitions call.
+
+    :class:`TorchNamespace` gives torch's under the same names. Arguments named
+    ``axis`` take an int or a tuple of ints, as in numpy.
+    """
+
+    name = "numpy"
+    inf = math.inf
+
+    def exp(self, a: Array) -> Array:
+        return np.exp(a)
+
+    def sqrt(self, a: Array) -> Array:
+        return np.sqrt(a)
+
+    def abs(self, a: Array) -> Array:
+        return np.abs(a)
+
+    def floor(self, a: Array) -> Array:
+        return np.floor(a)
+
+    def where(self, cond: Array, a: Array, b: Array) -> Array:
+        return np.where(cond, a, b)
+
+    def clip(self, a: Array, low: float | None = None, high: float | None = None) -> Array:
+        return np.clip(a, low, high)
+
+    def sum(self, a: Array, axis: int | tuple[int, ...]) -> Array:
+        return np.sum(a, axis=axis)
+
+    def mean(self, a: Array, axis: int | tuple[int, ...]) -> Array:
+        return np.mean(a, axis=axis)
+
+    def sum_product(self, a: Array, b: Array) -> Array:
+        """``Σ_j a[..., j] b[..., j]``: the sum of products over the last axis."""
+        return np.einsum("...j,...j->...", a, b)
+
+    def amax(self, a: Array, axis: int | tuple[int, ...]) -> Array:
+        return np.amax(a, axis=axis)
+
+    def stack(self, arrays: Sequence[Array], axis: int) -> Array:
+        return np.stack(arrays, axis=axis)
+
+    def concat(self, arrays: Sequence[Array], axis: int) -> Array:
+        return np.concatenate(arrays, axis=axis)
+
+    def zeros(self, shape: tuple[int, ...], like: Array) -> Array:
+        return np.zeros(shape, dtype=like.dtype)
+
+    def ones(self, shape: tuple[int, ...], like: Array) -> Array:
+        return np.ones(shape, dtype=like.dtype)
+
+    def arange(self, n: int, like: Array) -> Array:
+        return np.arange(n)
+
+    def array(self, values: Sequence[float], like: Array) -> Array:
+        """A 1-D array of ``values`` in the dtype (and on the device) of ``like``."""
+        return np.asarray(values, dtype=like.dtype)
+
+    def astype(self, a: Array, like: Array) -> Array:
+        """``a`` in the floating dtype of ``like``."""
+        return np.asarray(a).astype(like.dtype, copy=False)
+
+    def float32(self, a: Array) -> Array:
+        return np.asarray(a, dtype=np.float32)
+
+    def eps(self, a: Array) -> float:
+        """Machine epsilon of ``a``'s floating dtype."""
+        return float(np.finfo(a.dtype).eps)
+
+    def gather_agents(self, table: Array, index: Array) -> Array:
+        """``out[b, i, s] = table[b, index[b, i, s]]``: ``(B, N, c)``, ``(B, N, k)`` →
+        ``(B, N, k, c)``."""
+        rows = np.arange(table.shape[0])[:, None, None]
+        return table[rows, index]
+
+
+class TorchNamespace(ArrayNamespace):
+    """torch's operations under the names of :class:`ArrayNamespace` (traceable by
+    ``torch.compile``)."""
+
+    name = "torch"
+
+    def __init__(self) -> None:
+        import torch
+
+        self.torch = torch
+
+    def exp(self, a: Array) -> Array:
+        return self.torch.exp(a)
+
+    def sqrt(self, a: Array) -> Array:
+        return self.torch.sqrt(a)
+
+    def abs(self, a: Array) -> Array:
+        return self.torch.abs(a)
+
+    def floor(self, a: Array) -> Array:
+        return self.torch.floor(a)
+
+    def where(self, cond: Array, a: Array, b: Array) -> Array:
+        return self.torch.where(cond, a, b)
+
+    def clip(self, a: Array, low: float | None = None, high: float | None = None) -> Array:
+        return self.torch.clamp(a, min=low, max=high)
+
+    def sum(self, a: Array, axis: int | tuple[int, ...]) -> Array:
+        return self.torch.sum(a, dim=axis)
+
+    def mean(self, a: Array, axis: int | tuple[int, ...]) -> Array:
+        return self.torch.mean(a, dim=axis)
+
+    def sum_product(self, a: Array, b: Array) -> Array:
+        return self.torch.sum(a * b, dim=-1)
+
+    def amax(self, a: Array, axis: int | tuple[int, ...]) -> Array:
+        return self.torch.amax(a, dim=axis)
+
+    def stack(self, arrays: Sequence[Array], axis: int) -> Array:
+        return self.torch.stack(list(arrays), dim=axis)
+
+    def concat(self, arrays: Sequence[Array], axis: int) -> Array:
+        return self.torch.cat(list(arrays), dim=axis)
+
+    def zeros(self, shape: tuple[int, ...], like: Array) -> Array:
+        return self.torch.zeros(shape, dtype=like.dtype, device=like.device)
+
+    def ones(self, shape: tuple[int, ...], like: Array) -> Array:
+        return self.torch.ones(shape, dtype=like.dtype, device=like.device)
+
+    def arange(self, n: int, like: Array) -> Array:
+        return self.torch.arange(n, device=like.device)
+
+    def array(self, values: Sequence[float], like: Array) -> Array:
+        return self.torch.tensor(values, dtype=like.dtype, device=like.device)
+
+    def astype(self, a: Array, like: Array) -> Array:
+        return a.to(like.dtype)
+
+    def float32(self, a: Array) -> Array:
+        return a.to(self.torch.float32)
+
+    def eps(self, a: Array) -> float:
+        return float(self.torch.finfo(a.dtype).eps)
+
+    def gather_agents(self, table: Array, index: Array) -> Array:
+        rows = self.torch.arange(table.shape[0], device=table.device)[:, None, None]
+        return table[rows, index]
+
+
+class ScalarNamespace(ArrayNamespace):
+    """Plain Python floats, for one swarm's per-swarm terms (the reward of a single env
+    costs microseconds instead of a few dozen array operations)."""
+
+    name = "scalar"
+
+    def exp(self, a: Array) -> Array:
+        return math.exp(a)
+
+    def sqrt(self, a: Array) -> Array:
+        return math.sqrt(a)
+
+    def abs(self, a: Array) -> Array:
+        return abs(a)
+
+    def floor(self, a: Array) -> Array:
+        return float(math.floor(a))
+
+    def where(self, cond: Array, a: Array, b: Array) -> Array:
+        return a if cond else b
+
+    def clip(self, a: Array, low: float | None = None, high: float | None = None) -> Array:
+        if low is not None and a < low:
+            return low
+        if high is not None and a > high:
+            return high
+        return a
+
+
+#: The numpy namespace.
+NUMPY = ArrayNamespace()
+#: The plain-float namespace (scalars only: no reductions, stacking or gathers).
+SCALAR = ScalarNamespace()
+_TORCH: list[TorchNamespace] = []
+
+
+def torch_namespace() -> TorchNamespace:
+    """The torch namespace (imports torch on first use)."""
+    if not _TORCH:
+        _TORCH.append(TorchNamespace())
+    return _TORCH[0]
+
+
+def namespace(*arrays: Array) -> ArrayNamespace:
+    """The namespace of ``arrays``: torch's if any is a torch tensor, else numpy's."""
+    for a in arrays:
+        if type(a).__module__.startswith("torch"):
+            return torch_namespace()
+    return NUMPY

@@ -1,0 +1,77 @@
+"""What every SwarmNav core shares: input checks and the random starts.
+
+Every core validates actions with :func:`check_actions` (or :func:`check_action_shape`
+where it checks finiteness itself), and draws its starts with :func:`draw_starts`, so a
+seed gives the same starts on every backend.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from swarm_envs.physics import uniform_ball
+
+#: The error message for NaN or infinite actions (every core and the C step raise it).
+NON_FINITE_ACTIONS = "actions must be finite (got NaN or inf); allowed range [-1, 1]"
+
+
+def check_action_shape(actions: Any, shape: tuple[int, ...]) -> np.ndarray:
+    """Actions as a numeric array of exactly ``shape`` (a same-size array of another
+    rank is reshaped); a non-numeric dtype or another size → :class:`ValueError`."""
+    a = np.asarray(actions)
+    if a.dtype == object or not (
+        np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)
+    ):
+        raise ValueError(f"actions must be a numeric array of shape {shape}, got dtype {a.dtype}")
+    if a.shape != shape:
+        if a.size == int(np.prod(shape)) and a.ndim != len(shape):
+            a = a.reshape(shape)
+        else:
+            raise ValueError(f"actions must have shape {shape}, got {a.shape}")
+    return a
+
+
+def check_actions(actions: Any, shape: tuple[int, ...]) -> np.ndarray:
+    """Actions as a float array of exactly ``shape``; NaN/inf or wrong shape → ValueError.
+
+    Finite values outside [−1, 1] are clipped (the Box convention of SB3 and RLlib).
+    """
+    a = check_action_shape(actions, shape)
+    if not np.isfinite(a).all():
+        raise ValueError(NON_FINITE_ACTIONS)
+    return np.clip(a, -1.0, 1.0)
+
+
+def check_batch(batch: Any) -> int:
+    """The number of swarms of a core: an integer ``≥ 1``, else :class:`ValueError`."""
+    if isinstance(batch, bool) or not isinstance(batch, (int, np.integer)) or batch < 1:
+        raise ValueError(f"batch must be an integer >= 1, got {batch!r}")
+    return int(batch)
+
+
+def draw_starts(
+    cfg: Any, rng: np.random.Generator, n: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``n`` new starts ``(x (n, N, d), v (n, N, d), goal (n, d))``, float64.
+
+    Agents uniform in a disc (ball) of ``init_radius`` around the origin, velocities
+    uniform in a disc of ``init_speed``; the goal at a uniform random bearing and a
+    distance uniform in ``[goal_distance_min, goal_distance_max]``.
+    """
+    N, d = cfg.n_agents, cfg.dim
+    x = uniform_ball(rng, (n, N, d), cfg.init_radius)
+    v = uniform_ball(rng, (n, N, d), cfg.init_speed)
+    bearing = rng.standard_normal((n, d))
+    bearing /= np.maximum(np.linalg.norm(bearing, axis=-1, keepdims=True), 1e-12)
+    dist = rng.uniform(cfg.goal_distance_min, cfg.goal_distance_max, size=(n, 1))
+    return x, v, bearing * dist
+
+
+def wide_dtypes(dtype: np.dtype) -> dict[str, np.dtype]:
+    """The dtype of each statistic a core reports: float64 for the ``wide`` ones
+    (counts, fractions, flags), ``dtype`` for the rest."""
+    from swarm_envs.envs.task.statistics import STATISTICS
+
+    return {s.name: np.dtype(np.float64) if s.wide else np.dtype(dtype) for s in STATISTICS}

@@ -1,0 +1,263 @@
+"""The contract between Python and the C step, generated from the config dataclasses.
+
+The C step reads its parameters from a struct, ``StepParams``, whose fields, C header
+and ctypes mirror are all generated here from one list, :func:`step_fields`, which is
+itself derived from the dataclasses:
+
+- every field of :class:`~swarm_envs.physics.SocialPotentialParams`, as
+  ``physics_<name>`` (a new physics parameter enters the struct by itself);
+- the :class:`~swarm_envs.config.SwarmConfig` fields of :data:`KERNEL_CONFIG_FIELDS`,
+  typed from the dataclass's annotations;
+- a few derived values (:data:`DERIVED`), each with the function that computes it.
+
+The statistics' column indices (``PK_<name>``, in the order of ``STAT_KEYS``, then
+``PK_effort``) come from :mod:`swarm_envs.envs.task.statistics`. The generated header is
+part of the build (and of the cache key); the C code refers to fields and columns by
+name, so a field or statistic renamed or removed on the Python side fails the build. The
+other direction: the kernel declares the physics parameters, statistics and observation
+layout it implements (:class:`KernelInfo`, read from the library), and
+:func:`unsupported` refuses a config that needs more than that, naming what.
+
+Every :class:`~swarm_envs.config.SwarmConfig` field is either read by the kernel or
+listed in :data:`HOST_CONFIG_FIELDS` (handled in Python, or irrelevant to the social
+potential step); a field in neither makes :func:`unsupported` refuse every config, so a
+new config field cannot be silently ignored by the C step.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import dataclasses
+import hashlib
+import math
+import typing
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from swarm_envs.config import SwarmConfig
+from swarm_envs.envs.task import (
+    OBS_BOUND,
+    STAT_KEYS,
+    observation_size,
+    ranked_neighbors,
+    success_count,
+)
+from swarm_envs.envs.task.observation import LAYOUT
+from swarm_envs.metrics import CENTRE_RTOL
+from swarm_envs.physics import SocialPotentialParams
+from swarm_envs.physics.social_potential import RHO_FLOOR
+
+__all__ = [
+    "DERIVED",
+    "HOST_CONFIG_FIELDS",
+    "KERNEL_CONFIG_FIELDS",
+    "PACKED_COLUMNS",
+    "Field",
+    "KernelInfo",
+    "header",
+    "layout_hash",
+    "params_struct",
+    "step_fields",
+    "step_params",
+    "unsupported",
+]
+
+#: The :class:`SwarmConfig` fields the C step reads (as struct fields of the same name).
+KERNEL_CONFIG_FIELDS = (
+    "n_agents",
+    "dim",
+    "n_neighbors",
+    "dt",
+    "u_max",
+    "goal_radius",
+    "collision_radius",
+    "obs_goal_scale",
+    "obs_neighbor_scale",
+    "obs_velocity_scale",
+    "goal_in_physics",
+)
+
+#: The :class:`SwarmConfig` fields the C step does not read, and why.
+HOST_CONFIG_FIELDS = {
+    "physics": "expanded into the physics_* fields",
+    "dynamics": "social_potential only (checked)",
+    "integrator": "semi_implicit_euler only (checked)",
+    "zone": "another model's section",
+    "piecewise": "another model's section",
+    "lagrangian": "another model's section",
+    "init_radius": "starts are drawn in Python",
+    "init_speed": "starts are drawn in Python",
+    "goal_distance_min": "starts are drawn in Python",
+    "goal_distance_max": "starts are drawn in Python",
+    "success_fraction": "as the derived count `need`",
+    "max_steps": "truncation is counted in Python",
+    "reward": "the reward is combined in Python from the kernel's columns",
+    "backend": "selects the core",
+    "device": "the C step runs on the CPU",
+}
+
+#: Columns of the kernel's per-swarm output: the statistics, then the actions' effort.
+PACKED_COLUMNS = (*STAT_KEYS, "effort")
+
+
+@dataclass(frozen=True)
+class Field:
+    """One field of ``StepParams``: its C name and type, and how a config gives it."""
+
+    name: str
+    ctype: str  # "int64_t" or "double"
+    value: Callable[[SwarmConfig, np.dtype], float]
+    source: str
+
+
+def _eps(dtype: np.dtype) -> float:
+    return float(np.finfo(dtype).eps)
+
+
+#: Derived fields: (name, C type, value(cfg, dtype), what it is).
+DERIVED: tuple[tuple[str, str, Callable[[SwarmConfig, np.dtype], float], str], ...] = (
+    ("k_real", "int64_t", lambda c, dt: min(c.n_neighbors, c.n_agents - 1), "observed neighbours"),
+    ("k_rank", "int64_t", lambda c, dt: max(ranked_neighbors(c), 0), "ranked neighbours"),
+    ("need", "int64_t", lambda c, dt: success_count(c.n_agents, c.success_fraction), "success"),
+    ("obs_dim", "int64_t", lambda c, dt: observation_size(c), "observation size"),
+    (
+        "physics_goal",
+        "int64_t",
+        lambda c, dt: int(c.goal_in_physics and c.physics.C_g > 0),
+        "the sink acts passively",
+    ),
+    ("obs_bound", "double", lambda c, dt: OBS_BOUND, "observation clip"),
+    ("rho_floor", "double", lambda c, dt: RHO_FLOOR, "distance floor"),
+    (
+        "centre_tol",
+        "double",
+        lambda c, dt: CENTRE_RTOL * _eps(dt) * math.sqrt(c.n_agents),
+        "centring tolerance / max |x|",
+    ),
+)
+
+_CTYPE_OF = {int: "int64_t", bool: "int64_t", float: "double"}
+
+
+def step_fields() -> tuple[Field, ...]:
+    """The fields of ``StepParams`` in order: ``batch``, the config's, the physics', the
+    derived ones."""
+    out = [Field("batch", "int64_t", lambda c, dt: 0, "swarms in this call")]
+    hints = typing.get_type_hints(SwarmConfig)
+    for name in KERNEL_CONFIG_FIELDS:
+        ctype = _CTYPE_OF[hints[name]]
+        out.append(Field(name, ctype, _getter(name), f"SwarmConfig.{name}"))
+    for f in dataclasses.fields(SocialPotentialParams):
+        out.append(
+            Field(f"physics_{f.name}", "double", _physics_getter(f.name), f"physics.{f.name}")
+        )
+    for name, ctype, value, what in DERIVED:
+        out.append(Field(name, ctype, value, f"derived: {what}"))
+    return tuple(out)
+
+
+def _getter(name: str) -> Callable[[SwarmConfig, np.dtype], float]:
+    return lambda cfg, dtype: getattr(cfg, name)
+
+
+def _physics_getter(name: str) -> Callable[[SwarmConfig, np.dtype], float]:
+    return lambda cfg, dtype: getattr(cfg.physics, name)
+
+
+def _header_body() -> list[str]:
+    lines = [
+        "/* Generated by swarm_envs.envs.native.contract from the config dataclasses.",
+        " * Do not edit: it is written into the build of every C step. */",
+        "#ifndef SWARM_ENVS_STEP_PARAMS_H",
+        "#define SWARM_ENVS_STEP_PARAMS_H",
+        "#include <stdint.h>",
+        "typedef struct {",
+    ]
+    for f in step_fields():
+        lines.append(f"    {f.ctype} {f.name}; /* {f.source} */")
+    lines.append("} StepParams;")
+    columns = ", ".join(f"PK_{name}" for name in PACKED_COLUMNS)
+    lines.append(f"enum {{ {columns}, PK_SIZE }};")
+    lines.append(f'#define STEP_OBS_LAYOUT "{LAYOUT}"')
+    return lines
+
+
+def layout_hash() -> int:
+    """A hash of the generated contract; the library returns it from
+    ``fused_step_layout()``, and a library built for another contract is not loaded."""
+    return int(hashlib.sha256("\n".join(_header_body()).encode()).hexdigest()[:15], 16)
+
+
+def header() -> str:
+    """The generated C header: ``StepParams``, the ``PK_*`` columns, the layout hash."""
+    lines = [*_header_body(), f"#define STEP_LAYOUT_HASH {layout_hash()}LL", "#endif"]
+    return "\n".join(lines) + "\n"
+
+
+def params_struct() -> type[ctypes.Structure]:
+    """The ctypes mirror of ``StepParams``, from the same field list."""
+    types = {"int64_t": ctypes.c_int64, "double": ctypes.c_double}
+    return type(
+        "StepParams",
+        (ctypes.Structure,),
+        {"_fields_": [(f.name, types[f.ctype]) for f in step_fields()]},
+    )
+
+
+def step_params(cfg: SwarmConfig, dtype: Any) -> ctypes.Structure:
+    """``StepParams`` for ``cfg`` and a state of ``dtype`` (``batch`` set per call)."""
+    dtype = np.dtype(dtype)
+    struct = params_struct()()
+    for f in step_fields():
+        value = f.value(cfg, dtype)
+        setattr(struct, f.name, int(value) if f.ctype == "int64_t" else float(value))
+    return struct
+
+
+@dataclass(frozen=True)
+class KernelInfo:
+    """What a built C step implements (its own declarations, read from the library).
+
+    Attributes:
+        physics: the ``SocialPotentialParams`` fields its force law uses.
+        statistics: the statistics it writes (the others are computed in Python).
+        obs_layout: its observation layout (:data:`~swarm_envs.envs.task.observation.
+            LAYOUT` when it matches the shared definition).
+        kmax: the most neighbours it ranks.
+    """
+
+    physics: tuple[str, ...]
+    statistics: tuple[str, ...]
+    obs_layout: str
+    kmax: int
+
+
+def unsupported(cfg: SwarmConfig, kernel: KernelInfo) -> str | None:
+    """Why the C step cannot run ``cfg`` (``None`` if it can), naming what it lacks."""
+    if cfg.dynamics != "social_potential":
+        return f"supports dynamics='social_potential' only, got {cfg.dynamics!r}"
+    if cfg.integrator != "semi_implicit_euler":
+        return f"supports integrator='semi_implicit_euler' only, got {cfg.integrator!r}"
+    if cfg.device != "cpu":
+        return f"runs on the CPU only, got device={cfg.device!r}"
+    known = set(KERNEL_CONFIG_FIELDS) | set(HOST_CONFIG_FIELDS)
+    for f in dataclasses.fields(SwarmConfig):
+        if f.name not in known:
+            return f"config field {f.name!r} has no meaning in the C step yet"
+    default = SocialPotentialParams()
+    for f in dataclasses.fields(SocialPotentialParams):
+        if f.name not in kernel.physics and getattr(cfg.physics, f.name) != getattr(
+            default, f.name
+        ):
+            return f"physics.{f.name} is not implemented in the C step"
+    if kernel.obs_layout != LAYOUT:
+        return f"its observation layout {kernel.obs_layout!r} is not {LAYOUT!r}"
+    if ranked_neighbors(cfg) > kernel.kmax:
+        return (
+            f"ranks at most {kernel.kmax} neighbours, got n_neighbors={cfg.n_neighbors} "
+            f"with n_agents={cfg.n_agents}"
+        )
+    return None

@@ -1,0 +1,309 @@
+"""The SwarmNav core whose step runs in C: numpy arrays in and out, no torch.
+
+:class:`NativeSwarmNavCore` implements :class:`~swarm_envs.envs.protocol.Core` for the
+social potential model with the semi-implicit Euler integrator. Its step is the C step
+of ``fused_step.c`` (:mod:`swarm_envs.envs.native.build`): the same physics, neighbour
+ranking, observation layout and statistics as the shared definitions, computed per swarm
+in a few kilobytes of scratch memory, the swarms spread over OpenMP threads. The reward
+is the shared definition (:func:`swarm_envs.envs.task.reward`) applied to the statistics
+and the effort the C step writes; a statistic the kernel does not declare is computed by
+its shared definition from the state (:mod:`swarm_envs.envs.task.statistics`).
+
+State: positions, velocities and the carried passive force live component first,
+``(d, B, N)``, the layout the kernel vectorises, and are updated in place; ``x`` and
+``v`` read as ``(B, N, d)`` copies. Observations are written into buffers that are
+recycled once nobody else holds them (:class:`_BufferPool`), so a step allocates no
+large array. A reset of a few swarms re-measures those swarms only, in place.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Any
+
+import numpy as np
+
+from swarm_envs._array import NUMPY, SCALAR
+from swarm_envs.envs.common import (
+    NON_FINITE_ACTIONS,
+    check_action_shape,
+    check_batch,
+    draw_starts,
+    wide_dtypes,
+)
+from swarm_envs.envs.native.build import Library, load_library
+from swarm_envs.envs.native.contract import PACKED_COLUMNS, step_params, unsupported
+from swarm_envs.envs.task import (
+    STAT_KEYS,
+    STATISTICS,
+    Frame,
+    RewardInputs,
+    observation_size,
+    reward,
+)
+
+__all__ = ["NativeSwarmNavCore"]
+
+_EFFORT = PACKED_COLUMNS.index("effort")
+
+
+class _BufferPool:
+    """Observation buffers ``(B, N, obs_dim)`` float32, reused once only the pool holds
+    them (a caller that keeps an observation keeps its buffer out of the pool)."""
+
+    def __init__(self, shape: tuple[int, ...], size: int = 4) -> None:
+        self.shape, self.size = shape, size
+        self.buffers: list[np.ndarray] = []
+
+    def get(self) -> np.ndarray:
+        for buf in self.buffers:
+            # The pool's list, this loop's name and getrefcount's argument: nobody else.
+            if sys.getrefcount(buf) <= 3:
+                return buf
+        buf = np.empty(self.shape, np.float32)
+        if len(self.buffers) < self.size:
+            self.buffers.append(buf)
+        return buf
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {"shape": self.shape, "size": self.size, "buffers": []}
+
+
+class NativeSwarmNavCore:
+    """State and dynamics of ``batch`` SwarmNav swarms, stepped in C.
+
+    Args:
+        cfg: the scenario (:class:`~swarm_envs.config.SwarmConfig`).
+        batch: number of swarms ``B ≥ 1``.
+        dtype: ``np.float64`` (default) or ``np.float32``, the state's precision.
+
+    Raises:
+        RuntimeError: the C step cannot be built or loaded here
+            (:func:`~swarm_envs.envs.native.build.native_support` says why).
+        ValueError: ``cfg`` needs what the C step does not implement
+            (:meth:`unsupported` names it).
+
+    >>> from swarm_envs.config import SwarmConfig
+    >>> core = NativeSwarmNavCore(SwarmConfig(n_agents=4), batch=2)
+    >>> core.reset(np.random.default_rng(0))
+    >>> reward, terminated, truncated, stats = core.step(np.zeros((2, 4, 2)))
+    >>> core.observe().shape, reward.shape, list(stats) == list(STAT_KEYS)
+    ((2, 4, 34), (2,), True)
+    """
+
+    backend = "native"
+
+    def __init__(self, cfg: Any, batch: int = 1, dtype: Any = np.float64) -> None:
+        self._lib: Library = load_library()
+        reason = unsupported(cfg, self._lib.info)
+        if reason is not None:
+            raise ValueError(f"NativeSwarmNavCore: {reason}")
+        self.cfg = cfg
+        self.batch = check_batch(batch)
+        self.dtype = np.dtype(dtype)
+        if self.dtype not in (np.dtype(np.float32), np.dtype(np.float64)):
+            raise ValueError(f"dtype must be float32 or float64, got {dtype!r}")
+        B, N, d = self.batch, cfg.n_agents, cfg.dim
+        self.obs_dim = observation_size(cfg)
+        self.t = np.zeros(B, np.int64)
+        self._wide = wide_dtypes(self.dtype)
+        self._x = np.zeros((d, B, N), self.dtype)
+        self._v = np.zeros((d, B, N), self.dtype)
+        self._f = np.zeros((d, B, N), self.dtype)
+        self._goal = np.zeros((B, d), self.dtype)
+        self._zero_actions = np.zeros((B, N, d), self.dtype)
+        self._move_all = np.ones(B, np.bool_)
+        self._move_none = np.zeros(B, np.bool_)
+        self._pool = _BufferPool((B, N, self.obs_dim))
+        self._obs = self._pool.get()
+        self._obs_given = False
+        self._packed = np.zeros((B, len(PACKED_COLUMNS)), self.dtype)
+        self._stats: dict[str, np.ndarray] = {}
+        self._prev: dict[str, np.ndarray] = {}
+        self._start: dict[str, np.ndarray] = {}
+        self._params = step_params(cfg, self.dtype)
+        self._params.batch = B
+        self._fn = self._lib.f32 if self.dtype == np.float32 else self._lib.f64
+        self._extra = tuple(s for s in STATISTICS if s.name not in self._lib.info.statistics)
+        self._measure()
+        self._prev, self._start = self.stats(), self.stats()
+
+    @staticmethod
+    def unsupported(cfg: Any) -> str | None:
+        """Why this core cannot run ``cfg`` here (``None`` if it can): the C step does
+        not build, or ``cfg`` needs what it does not implement."""
+        try:
+            library = load_library()
+        except RuntimeError as err:
+            return f"the C step is not available ({err})"
+        return unsupported(cfg, library.info)
+
+    # ------------------------------------------------------------------ the C step
+    def _call(
+        self, actions: np.ndarray, move: np.ndarray, obs: np.ndarray, rows: np.ndarray | None
+    ) -> None:
+        """The C step on all swarms (``rows`` None) or on ``rows``, in place."""
+        n = self.batch if rows is None else rows.size
+        ptr = np.ndarray.__array_interface__.__get__
+        code = self._fn(
+            self._params_ptr(),
+            0,
+            n,
+            None if rows is None else ptr(rows)["data"][0],
+            *(ptr(a)["data"][0] for a in (self._x, self._v, self._f, self._goal, actions, move)),
+            *(ptr(a)["data"][0] for a in (self._x, self._v, self._f, obs, self._packed)),
+        )
+        if code == 3:
+            raise ValueError(NON_FINITE_ACTIONS)
+        if code:
+            raise MemoryError("the C step could not allocate its scratch memory")
+
+    def _params_ptr(self) -> int:
+        import ctypes
+
+        return ctypes.addressof(self._params)
+
+    def _measure(self, rows: np.ndarray | None = None) -> None:
+        """Observations and statistics of the current state (no step)."""
+        if rows is None:
+            self._obs = self._pool.get()
+            self._obs_given = False
+        elif self._obs_given:  # handed out: write the rows into a copy
+            fresh = self._pool.get()
+            fresh[...] = self._obs
+            self._obs, self._obs_given = fresh, False
+        self._call(self._zero_actions, self._move_none, self._obs, rows)
+        self._stats = self._unpack()
+
+    def _unpack(self) -> dict[str, np.ndarray]:
+        """The statistics of the packed columns, plus any the kernel does not write."""
+        packed = self._packed
+        stats = {key: packed[:, i].astype(self._wide[key]) for i, key in enumerate(STAT_KEYS)}
+        if self._extra:
+            frame = self._frame(packed)
+            for s in self._extra:
+                stats[s.name] = np.asarray(s.value(frame, self.cfg, NUMPY), self._wide[s.name])
+        return stats
+
+    def _frame(self, packed: np.ndarray) -> Frame:
+        """A numpy :class:`Frame` of the current state, for statistics the kernel does
+        not write (pairwise distances in numpy: slower, and only then)."""
+        x, v = self.x, self.v
+        rho = np.linalg.norm(x[:, :, None, :] - x[:, None, :, :], axis=-1)
+        n = self.cfg.n_agents
+        rho[:, np.arange(n), np.arange(n)] = np.inf
+        nearest = rho.min(axis=-1) if n > 1 else np.zeros((self.batch, 1), self.dtype)
+        offset = self.goal[:, None, :] - x
+        return Frame(
+            x,
+            v,
+            self.goal,
+            np.sqrt(np.einsum("bik,bik->bi", offset, offset)),
+            nearest,
+            packed[:, STAT_KEYS.index("collisions")],
+            packed[:, STAT_KEYS.index("energy")],
+        )
+
+    # ------------------------------------------------------------------ reset
+    def reset(self, rng: np.random.Generator, which: np.ndarray | None = None) -> None:
+        """Draw new starts for the swarms in ``which`` (bool mask ``(B,)``; all if None),
+        with :func:`~swarm_envs.envs.common.draw_starts` as every core; a proper subset
+        is re-measured alone, in place."""
+        idx = np.arange(self.batch) if which is None else np.flatnonzero(which)
+        if idx.size == 0:
+            return
+        x, v, goal = draw_starts(self.cfg, rng, idx.size)
+        self.t[idx] = 0
+        self._x[:, idx] = x.transpose(2, 0, 1)
+        self._v[:, idx] = v.transpose(2, 0, 1)
+        self._goal[idx] = goal
+        self._measure(None if idx.size == self.batch else idx.astype(np.int64))
+        for key, value in self._stats.items():
+            self._prev[key][idx] = value[idx]
+            self._start[key][idx] = value[idx]
+
+    # ------------------------------------------------------------------ step
+    def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+        """Advance every swarm by one step.
+
+        Args:
+            actions: ``(B, N, d)`` in [−1, 1]; the C step checks them (NaN or inf:
+                :class:`ValueError` before anything changes) and clips them.
+
+        Returns:
+            ``(reward (B,), terminated (B,), truncated (B,), stats)`` as in every core.
+        """
+        shape = (self.batch, self.cfg.n_agents, self.cfg.dim)
+        a = np.ascontiguousarray(check_action_shape(actions, shape), dtype=self.dtype)
+        obs = self._pool.get()
+        self._call(a, self._move_all, obs, None)
+        self._obs, self._obs_given = obs, False
+        self.t += 1
+        stats = self._stats = self._unpack()
+        effort = self._packed[:, _EFFORT]
+        xp = NUMPY
+        prev, start = self._prev, self._start
+        if self.batch == 1:  # plain floats: the same definitions, no array overhead
+            xp = SCALAR
+            stats_1 = {k: float(v[0]) for k, v in stats.items()}
+            prev = {k: float(v[0]) for k, v in prev.items()}
+            start = {k: float(v[0]) for k, v in start.items()}
+            inputs = RewardInputs(stats_1, prev, start, float(effort[0]), self.cfg.n_agents, xp)
+            r = np.array([reward(self.cfg.reward, inputs)], dtype=np.float64)
+        else:
+            inputs = RewardInputs(stats, prev, start, effort, self.cfg.n_agents, xp)
+            r = np.asarray(reward(self.cfg.reward, inputs), dtype=np.float64)
+        self._prev = {key: value.copy() for key, value in stats.items()}
+        success = stats["success"].astype(bool)
+        truncated = (self.t >= self.cfg.max_steps) & ~success
+        return r, success, truncated, self.stats()
+
+    # ------------------------------------------------------------------ views
+    def stats(self) -> dict[str, np.ndarray]:
+        """Group statistics and task measures per swarm, each ``(B,)`` (fresh arrays)."""
+        return {key: value.copy() for key, value in self._stats.items()}
+
+    def observe(self, which: np.ndarray | None = None) -> np.ndarray:
+        """Local observations ``(B, N, obs_dim)``, float32 (the shared layout).
+
+        The first call after a step returns the step's buffer itself; later calls on the
+        same state return copies. ``which`` (bool ``(B,)``): those swarms' rows, copied.
+        """
+        if which is not None:
+            return self._obs[np.flatnonzero(which)]
+        if self._obs_given:
+            return self._obs.copy()
+        self._obs_given = True
+        return self._obs
+
+    @property
+    def x(self) -> np.ndarray:
+        """Positions ``(B, N, d)`` (a copy)."""
+        return self._x.transpose(1, 2, 0).copy()
+
+    @property
+    def v(self) -> np.ndarray:
+        """Velocities ``(B, N, d)`` (a copy)."""
+        return self._v.transpose(1, 2, 0).copy()
+
+    @property
+    def goal(self) -> np.ndarray:
+        """Goals ``(B, d)`` (a copy)."""
+        return self._goal.copy()
+
+    # ------------------------------------------------------------------ pickling
+    def __getstate__(self) -> dict[str, Any]:
+        state = {
+            k: v for k, v in self.__dict__.items() if k not in ("_lib", "_params", "_fn", "_pool")
+        }
+        state["_obs"] = self._obs.copy()
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._lib = load_library()
+        self._params = step_params(self.cfg, self.dtype)
+        self._params.batch = self.batch
+        self._fn = self._lib.f32 if self.dtype == np.float32 else self._lib.f64
+        B, N = self.batch, self.cfg.n_agents
+        self._pool = _BufferPool((B, N, self.obs_dim))

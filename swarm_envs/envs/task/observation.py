@@ -1,0 +1,88 @@
+"""The SwarmNav observation of each agent: its layout and features, defined once.
+
+Per agent i, in this order (``d`` the dimension, ``k = n_neighbors``):
+
+========================================  ====================================
+features                                  size
+========================================  ====================================
+goal offset ``(r_g − r_i) / obs_goal_scale``                   ``d``
+own velocity ``v_i / obs_velocity_scale``                      ``d``
+for each of the k nearest neighbours j, nearest first:
+  offset ``(r_j − r_i) / obs_neighbor_scale``                  ``d``
+  relative velocity ``(v_j − v_i) / obs_velocity_scale``       ``d``
+  mask: 1 for a real neighbour, 0 for a padding slot           ``1``
+========================================  ====================================
+
+"Nearest first" orders by ``(ρ_ij, j)``: equal distances by the lower index. When
+``N − 1 < k`` the last ``k − (N − 1)`` slots are padding (all zeros). Every entry is
+clipped to ``[−OBS_BOUND, OBS_BOUND]``; observations are float32 whatever the state's
+dtype. :func:`observation` computes this from the state and each agent's neighbour
+indices, on numpy arrays or torch tensors; the C step writes the same layout.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from swarm_envs._array import ArrayNamespace
+
+Array = Any
+
+#: Every observation component is clipped into ``[−OBS_BOUND, OBS_BOUND]``.
+OBS_BOUND = 10.0
+
+#: The layout of the module docstring in one line: the agent's own features, then each
+#: neighbour block's (a backend that writes observations itself declares the layout it
+#: writes, and is refused when it is not this one).
+LAYOUT = (
+    "goal_offset/obs_goal_scale,velocity/obs_velocity_scale;"
+    "offset/obs_neighbor_scale,relative_velocity/obs_velocity_scale,mask"
+)
+
+
+def observation_size(task: Any) -> int:
+    """``2d + k (2d + 1)``: goal offset, own velocity, k × (offset, velocity, mask)."""
+    d = task.dim
+    return 2 * d + task.n_neighbors * (2 * d + 1)
+
+
+def ranked_neighbors(task: Any) -> int:
+    """How many nearest neighbours a core ranks: ``min(max(k, 1), N − 1)`` (at least
+    one, for the nearest-neighbour distance; 0 when ``N = 1``)."""
+    return min(max(task.n_neighbors, 1), task.n_agents - 1)
+
+
+def observation(
+    x: Array, v: Array, goal: Array, near: Array | None, task: Any, xp: ArrayNamespace
+) -> Array:
+    """Observations ``(B, N, obs_dim)`` float32 (the layout of the module docstring).
+
+    Args:
+        x, v: positions and velocities ``(B, N, d)``.
+        goal: goals ``(B, d)``.
+        near: each agent's neighbour indices, nearest first, ``(B, N, k')`` with
+            ``k' ≥ min(k, N − 1)`` (only the first ``min(k, N − 1)`` are read), or
+            ``None`` when no neighbour is observed.
+        task: the :class:`~swarm_envs.config.SwarmConfig`.
+        xp: the array namespace of ``x``.
+    """
+    B, N, d = x.shape
+    k = task.n_neighbors
+    k_real = min(k, N - 1)
+    parts = [(goal[:, None, :] - x) / task.obs_goal_scale, v / task.obs_velocity_scale]
+    if k_real > 0:
+        assert near is not None
+        # Every agent's row (x, v, 1); a neighbour block is (row_j − row_i · keep) · scale:
+        # the offsets and relative velocities, scaled, and the mask 1.
+        table = xp.concat([x, v, xp.ones((B, N, 1), like=x)], axis=-1)
+        keep = xp.array([1.0] * (2 * d) + [0.0], like=x)
+        scale = xp.array(
+            [1.0 / task.obs_neighbor_scale] * d + [1.0 / task.obs_velocity_scale] * d + [1.0],
+            like=x,
+        )
+        blocks = xp.gather_agents(table, near[..., :k_real]) - (table * keep)[:, :, None, :]
+        parts.append((blocks * scale).reshape(B, N, k_real * (2 * d + 1)))
+    if k > k_real:
+        parts.append(xp.zeros((B, N, (k - k_real) * (2 * d + 1)), like=x))
+    obs = xp.concat(parts, axis=-1)
+    return xp.float32(xp.clip(obs, -OBS_BOUND, OBS_BOUND))

@@ -1,0 +1,147 @@
+"""The statistics SwarmNav reports per swarm: each one defined once, for every backend.
+
+A :class:`Statistic` maps a :class:`Frame` (what a step measured: the state and the few
+quantities that need a backend's own machinery, such as neighbour search and the pair
+pass) to one value per swarm. The numpy and torch cores evaluate these very functions on
+their arrays (:mod:`swarm_envs._array`); the C step writes the same quantities with its
+own loops and is held to these definitions by the conformance tests. The group
+statistics come from :mod:`swarm_envs.metrics` (``docs/models.md`` §2).
+
+Adding a statistic is one entry in :data:`STATISTICS`; every core then reports it in
+``info`` (the C step computes the ones it knows and leaves the others to these
+definitions, evaluated on its state).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+from swarm_envs import metrics
+from swarm_envs._array import ArrayNamespace
+
+Array = Any
+
+
+class Frame(NamedTuple):
+    """What one step measured, for ``B`` swarms of ``N`` agents (numpy or torch arrays).
+
+    Attributes:
+        x: positions ``(B, N, d)``.
+        v: velocities ``(B, N, d)``.
+        goal: goals ``(B, d)``.
+        goal_distance: ``|r_g − r_i|`` per agent, ``(B, N)``.
+        nearest_distance: distance to each agent's nearest other agent ``(B, N)``
+            (zeros when ``N = 1``).
+        close_pairs: unordered pairs closer than ``collision_radius`` ``(B,)``.
+        energy: the model's energy statistic ``(B,)`` (``swarm_envs.envs.dynamics``).
+    """
+
+    x: Array
+    v: Array
+    goal: Array
+    goal_distance: Array
+    nearest_distance: Array
+    close_pairs: Array
+    energy: Array
+
+
+@dataclass(frozen=True)
+class Statistic:
+    """One statistic: ``value(frame, task, xp) -> (B,)``.
+
+    ``task`` is the :class:`~swarm_envs.config.SwarmConfig`; ``wide`` statistics (counts,
+    fractions, flags) are reported as float64 whatever the state's dtype.
+    """
+
+    name: str
+    doc: str
+    value: Callable[[Frame, Any, ArrayNamespace], Array]
+    wide: bool = False
+
+
+def success_count(n_agents: int, success_fraction: float) -> int:
+    """Smallest count c of arrived agents with ``c/N ≥ success_fraction − 1e-9``.
+
+    (``N + 1`` if none reaches it, which ``success_fraction ≤ 1`` rules out.)
+
+    >>> success_count(10, 1.0), success_count(10, 0.55), success_count(3, 1 / 3)
+    (10, 6, 1)
+    """
+    for c in range(n_agents + 1):
+        if c / n_agents >= success_fraction - 1e-9:
+            return c
+    return n_agents + 1  # pragma: no cover - success_fraction ≤ 1 always reaches c = N
+
+
+def _arrived_count(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
+    return xp.sum(xp.astype(f.goal_distance <= task.goal_radius, f.goal_distance), axis=-1)
+
+
+def _centroid_distance(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
+    offset = xp.mean(f.x, axis=-2) - f.goal
+    return xp.sqrt(xp.sum(offset * offset, axis=-1))
+
+
+def _success(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
+    need = success_count(task.n_agents, task.success_fraction)
+    return xp.astype(_arrived_count(f, task, xp) >= need, f.goal_distance)
+
+
+#: Every statistic in ``info``, in this order (``STAT_KEYS``).
+STATISTICS: tuple[Statistic, ...] = (
+    Statistic(
+        "polarization",
+        "unit-heading polarization |Σ v̂_i|/N (metrics.polarization)",
+        lambda f, task, xp: metrics.polarization(f.v),
+    ),
+    Statistic(
+        "angular_momentum",
+        "unit-heading angular momentum |Σ r̂_ic × v̂_i|/N (metrics.angular_momentum)",
+        lambda f, task, xp: metrics.angular_momentum(f.x, f.v),
+    ),
+    Statistic(
+        "expanse",
+        "mean distance to the centroid (metrics.expanse)",
+        lambda f, task, xp: metrics.expanse(f.x),
+    ),
+    Statistic(
+        "nearest_neighbor_distance",
+        "mean distance to the nearest other agent (0 for N = 1)",
+        lambda f, task, xp: xp.mean(f.nearest_distance, axis=-1),
+    ),
+    Statistic("energy", "the model's energy", lambda f, task, xp: f.energy),
+    Statistic(
+        "fraction_arrived",
+        "fraction of agents within goal_radius of the goal",
+        lambda f, task, xp: _arrived_count(f, task, xp) / task.n_agents,
+        wide=True,
+    ),
+    Statistic(
+        "collisions",
+        "pairs closer than collision_radius (this step)",
+        lambda f, task, xp: f.close_pairs,
+        wide=True,
+    ),
+    Statistic("centroid_distance", "|r_c − r_g|", _centroid_distance),
+    Statistic(
+        "mean_goal_distance",
+        "mean agent-to-goal distance",
+        lambda f, task, xp: xp.mean(f.goal_distance, axis=-1),
+    ),
+    Statistic(
+        "success",
+        "1 when at least success_fraction of the agents are within goal_radius",
+        _success,
+        wide=True,
+    ),
+)
+
+#: The statistics' names, in the order of :data:`STATISTICS`.
+STAT_KEYS: tuple[str, ...] = tuple(s.name for s in STATISTICS)
+
+
+def statistics(frame: Frame, task: Any, xp: ArrayNamespace) -> dict[str, Array]:
+    """Every statistic of :data:`STATISTICS` for ``frame``, as ``{name: (B,)}``."""
+    return {s.name: s.value(frame, task, xp) for s in STATISTICS}

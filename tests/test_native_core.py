@@ -1,0 +1,350 @@
+"""The C step (swarm_envs.envs.native): the core that runs it, its build and its contract.
+
+Its agreement with the shared definitions over every config field is the conformance
+suite's (tests/test_conformance.py). Here: what is particular to the C step — resets of a
+few swarms measured alone and in place, results independent of the thread count,
+actions checked in C, the inlined float32 exponential, coincident agents, ties in the
+neighbour ranking, pickling, the generated contract, the build cache and the fallbacks
+(no compiler, a failing build, more neighbours than the kernel ranks).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import dataclasses
+import pickle
+
+import numpy as np
+import pytest
+from helpers import CORE_TOL
+
+from swarm_envs import swarm_nav_v0
+from swarm_envs.config import SwarmConfig, load_swarm_config
+from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.native import NativeSwarmNavCore, build, contract, native_support
+from swarm_envs.envs.native.build import resolve_native
+
+SUPPORTED, WHY = native_support()
+needs_native = pytest.mark.skipif(not SUPPORTED, reason=f"C step unavailable: {WHY}")
+
+
+@pytest.fixture
+def fresh_library(monkeypatch, tmp_path):
+    """The loader's state reset (and restored afterwards), its cache in ``tmp_path``."""
+    monkeypatch.setattr(build, "_LIBRARIES", {})
+    monkeypatch.setattr(build, "_FAILURES", {})
+    monkeypatch.setenv("SWARM_ENVS_CACHE", str(tmp_path))
+    monkeypatch.delenv(build.NATIVE_ENV, raising=False)
+    return tmp_path
+
+
+@needs_native
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_resets_measure_exactly_the_reset_swarms_in_place(monkeypatch, dtype):
+    # A reset of n < B swarms re-measures those n alone, in place (no step of the batch,
+    # no copy of the observations when none were handed out); a reset of all B measures
+    # the whole batch. The results match the numpy core.
+    cfg = SwarmConfig(n_agents=6, n_neighbors=3)
+    core = NativeSwarmNavCore(cfg, batch=64, dtype=dtype)
+    ref = SwarmNavCore(cfg, batch=64, dtype=dtype)
+    calls: list[int] = []
+    inner = core._call
+    monkeypatch.setattr(
+        core,
+        "_call",
+        lambda a, move, obs, rows: (
+            calls.append(64 if rows is None else rows.size) or inner(a, move, obs, rows)
+        ),
+    )
+    rng, ref_rng = np.random.default_rng(4), np.random.default_rng(4)
+    core.reset(rng)
+    ref.reset(ref_rng)
+    actions = np.random.default_rng(5).uniform(-1, 1, (64, 6, 2)).astype(dtype)
+    for swarms in ([0], [1, 3, 5, 7, 9, 10, 11, 12, 13, 14], list(range(63)), list(range(64))):
+        core.step(actions)
+        ref.step(actions)
+        which = np.isin(np.arange(64), swarms)
+        last = core.observe(which=which)  # a copy of those rows
+        np.testing.assert_allclose(last, ref.observe(which=which), **CORE_TOL[dtype])
+        memory = core._obs.ctypes.data
+        calls.clear()
+        core.reset(rng, which=which)
+        ref.reset(ref_rng, which=which)
+        assert calls == [len(swarms)]
+        if len(swarms) < 64:
+            assert core._obs.ctypes.data == memory  # nothing handed out: in place
+        assert not np.array_equal(core.observe(which=which), last)  # new starts
+        np.testing.assert_allclose(core.observe(), ref.observe(), **CORE_TOL[dtype])
+        for key, value in core.stats().items():
+            np.testing.assert_allclose(value, ref.stats()[key], **CORE_TOL[dtype], err_msg=key)
+
+
+@needs_native
+def test_observations_handed_out_keep_their_values():
+    core = NativeSwarmNavCore(SwarmConfig(n_agents=5), batch=8)
+    rng = np.random.default_rng(0)
+    core.reset(rng)
+    first = core.observe()
+    saved = first.copy()
+    for _ in range(6):  # the buffer pool must not hand this array's memory out again
+        core.step(np.ones((8, 5, 2)))
+        core.observe()
+    core.reset(rng, which=np.arange(8) < 3)
+    np.testing.assert_array_equal(first, saved)
+    again = core.observe()
+    assert again is not core.observe()  # a second call on the same state: a copy
+
+
+@needs_native
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_results_do_not_depend_on_the_thread_count(dtype):
+    import torch  # the kernel runs on torch's OpenMP pool once torch is loaded
+
+    cfg = SwarmConfig(n_agents=9, dim=3)
+    a = np.random.default_rng(2).uniform(-1, 1, (11, 9, 3))
+    threads = torch.get_num_threads()
+    outs = []
+    try:
+        for n in (1, 2, 5):
+            torch.set_num_threads(n)
+            core = NativeSwarmNavCore(cfg, batch=11, dtype=dtype)
+            core.reset(np.random.default_rng(1))
+            outs.append((core.step(a)[0], core.observe(), core.x))
+    finally:
+        torch.set_num_threads(threads)
+    for out in outs[1:]:
+        for ours, ref in zip(out, outs[0], strict=True):
+            assert np.array_equal(ours, ref)
+
+
+@needs_native
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf], ids=["nan", "inf", "-inf"])
+def test_non_finite_actions_raise_in_the_c_step_and_change_nothing(dtype, bad):
+    # The C step checks the actions itself: any NaN or inf, in the first or the last
+    # swarm, raises before anything is written; finite values beyond [-1, 1] are clipped
+    # as numpy clips them.
+    cfg = SwarmConfig(n_agents=5, max_steps=50)
+    core = NativeSwarmNavCore(cfg, batch=3, dtype=dtype)
+    core.reset(np.random.default_rng(0))
+    x, v, t, obs = core.x, core.v, core.t.copy(), core.observe().copy()
+    for where in [(0, 0, 0), (2, 4, 1)]:
+        actions = np.zeros((3, 5, 2), dtype)
+        actions[where] = bad
+        with pytest.raises(ValueError, match="finite"):
+            core.step(actions)
+        assert np.array_equal(core.x, x) and np.array_equal(core.v, v)
+        assert np.array_equal(core.t, t) and np.array_equal(core.observe(), obs)
+    big = np.random.default_rng(1).uniform(-4, 4, (3, 5, 2)).astype(dtype)
+    twin = pickle.loads(pickle.dumps(core))
+    got, ref = core.step(big), twin.step(np.clip(big, -1, 1))
+    assert np.array_equal(got[0], ref[0]) and np.array_equal(core.x, twin.x)
+    assert np.array_equal(core.observe(), twin.observe())
+
+
+@needs_native
+def test_inlined_float32_exp_is_within_3_ulp_and_flushes_below_the_normal_range():
+    # exp_f32, the exponential of the float32 pair loop (its arguments are -r/l <= 0):
+    # within 4e-7 relative of the float64 exp from -87.28 (e^x = 1.2e-38, the smallest
+    # normal numbers) up to 88.3, 0 below (the subnormal range, flushed), finite and
+    # clamped above.
+    fn = build.load_library().lib.fused_exp_f32
+    fn.restype = None
+    fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int64]
+    x = np.concatenate(
+        [np.linspace(-120, 95, 400_001), [-87.28, -87.279, 0.0, -0.0, 88.3, 1e30, -1e30]]
+    ).astype(np.float32)
+    y = np.empty_like(x)
+    fn(x.ctypes.data, y.ctypes.data, x.size)
+    with np.errstate(over="ignore"):
+        ref = np.exp(x.astype(np.float64))
+    normal = (x >= np.float32(-87.28)) & (x <= np.float32(88.3))
+    np.testing.assert_allclose(y[normal], ref[normal], rtol=4e-7, atol=0)
+    assert (y[x < np.float32(-87.28)] == 0).all()
+    assert np.isfinite(y).all() and (y[x > 88.3] == y[x == np.float32(88.3)][0]).all()
+
+
+def _set_state(core, x, v) -> None:
+    """Put ``x, v`` (B, N, d) into a core and re-measure (test-only access)."""
+    if isinstance(core, NativeSwarmNavCore):
+        core._x[...] = np.transpose(x, (2, 0, 1))
+        core._v[...] = np.transpose(v, (2, 0, 1))
+        core._measure()
+    else:
+        core.x, core.v = x.astype(core.dtype), v.astype(core.dtype)
+        core._after_reset(np.arange(core.batch), np.random.default_rng(0))
+        core._measure()
+
+
+@needs_native
+def test_coincident_agents_stay_finite():
+    cfg = SwarmConfig(n_agents=5, collision_radius=0.5)
+    cores = [NativeSwarmNavCore(cfg, batch=2), SwarmNavCore(cfg, batch=2)]
+    results = []
+    for core in cores:
+        core.reset(np.random.default_rng(0))
+        _set_state(core, np.zeros((2, 5, 2)), np.zeros((2, 5, 2)))
+        results.append((*core.step(np.ones((2, 5, 2))), core.observe()))
+    (reward, _, _, stats, obs), (ref_reward, _, _, ref_stats, ref_obs) = results
+    assert np.isfinite(obs).all() and np.isfinite(reward).all()
+    assert all(np.isfinite(value).all() for value in stats.values())
+    np.testing.assert_allclose(reward, ref_reward, **CORE_TOL[np.float64])
+    np.testing.assert_allclose(obs, ref_obs, **CORE_TOL[np.float64])
+    assert stats["collisions"].tolist() == ref_stats["collisions"].tolist() == [10.0, 10.0]
+
+
+@needs_native
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_equal_distances_rank_neighbours_by_index(dtype):
+    # Agents on a lattice: many pairs at exactly the same distance, and the tiles hand
+    # candidates over in rotated order. Distinct velocities make the order visible in
+    # the observations; it must be the (ρ, j) order of the shared definition.
+    N = 37  # three blocks of 16 lanes (five of 8 in float64): tiles (J, I) with J < I
+    cfg = SwarmConfig(n_agents=N, n_neighbors=8)
+    idx = np.arange(N)
+    x = np.stack([idx % 7, idx // 7], axis=-1) * 0.5
+    v = np.stack([idx * 0.01, -idx * 0.02], axis=-1)
+    obs = []
+    for core in (NativeSwarmNavCore(cfg, 2, dtype), SwarmNavCore(cfg, 2, dtype)):
+        core.reset(np.random.default_rng(0))
+        _set_state(core, np.stack([x, x[::-1]]), np.stack([v, v]))
+        obs.append(core.observe())
+    np.testing.assert_allclose(obs[0], obs[1], **CORE_TOL[dtype])
+    ranked = obs[0][..., 2 * 2 :].reshape(2, N, 8, 5)[..., 2:4]  # relative velocities
+    assert np.unique(ranked.round(6), axis=2).shape[2] == 8  # the order is visible
+
+
+@needs_native
+def test_pickle_round_trip_reproduces_the_rollout():
+    core = NativeSwarmNavCore(SwarmConfig(n_agents=5), batch=3)
+    core.reset(np.random.default_rng(0))
+    clone = pickle.loads(pickle.dumps(core))
+    for a in np.random.default_rng(4).uniform(-1, 1, (4, 3, 5, 2)):
+        np.testing.assert_array_equal(core.step(a)[0], clone.step(a)[0])
+        np.testing.assert_array_equal(core.observe(), clone.observe())
+
+
+@needs_native
+def test_the_envs_run_on_it_by_default():
+    venv = swarm_nav_v0.vec_env(64, n_agents=8)
+    assert venv.backend == "native" and isinstance(venv.core, NativeSwarmNavCore)
+    venv.seed(0)
+    obs = venv.reset()
+    obs, rewards, _, _ = venv.step(np.zeros((venv.num_envs, 2), np.float32))
+    assert np.isfinite(rewards).all()
+    assert obs.shape == (64 * 8, venv.observation_space.shape[0]) and np.isfinite(obs).all()
+    assert isinstance(swarm_nav_v0.parallel_env(n_agents=8).core, NativeSwarmNavCore)
+
+
+@needs_native
+def test_too_many_neighbours_are_refused_with_the_reason(recwarn):
+    cfg = SwarmConfig(n_agents=80, n_neighbors=70)
+    assert "at most 64 neighbours, got n_neighbors=70" in NativeSwarmNavCore.unsupported(cfg)
+    with pytest.raises(ValueError, match="at most 64 neighbours, got n_neighbors=70"):
+        NativeSwarmNavCore(cfg)
+    with pytest.warns(UserWarning, match="backend 'native' cannot run this config"):
+        env = swarm_nav_v0.parallel_env(**{**dataclasses.asdict(cfg), "backend": "native"})
+    assert env.core.backend == "numpy"
+
+
+# --------------------------------------------------------------------------- contract
+
+
+def test_every_config_field_has_a_place_in_the_contract():
+    names = {f.name for f in dataclasses.fields(SwarmConfig)}
+    kernel, host = set(contract.KERNEL_CONFIG_FIELDS), set(contract.HOST_CONFIG_FIELDS)
+    assert not kernel & host
+    assert kernel | host == names, "classify the new SwarmConfig field in the C contract"
+
+
+def test_the_struct_is_generated_from_the_dataclasses():
+    from swarm_envs.physics import SocialPotentialParams
+
+    fields = [f.name for f in contract.step_fields()]
+    for f in dataclasses.fields(SocialPotentialParams):
+        assert f"physics_{f.name}" in fields
+    struct = contract.params_struct()
+    assert [name for name, _ in struct._fields_] == fields
+    text = contract.header()
+    assert all(f" {name};" in text for name in fields)
+    cfg = load_swarm_config(overrides={"n_agents": 7, "dt": 0.03, "physics": {"C_o": 0.25}})
+    params = contract.step_params(cfg, np.float64)
+    assert (params.n_agents, params.dt, params.physics_C_o) == (7, 0.03, 0.25)
+
+
+def test_a_config_the_kernel_does_not_implement_is_refused():
+    from swarm_envs.physics import SocialPotentialParams
+
+    info = contract.KernelInfo(
+        physics=("C_a", "C_r", "l_a", "l_r"),  # as if alignment were missing
+        statistics=(),
+        obs_layout="another layout",
+        kmax=64,
+    )
+    cfg = SwarmConfig()
+    assert "physics.C_o is not implemented" in contract.unsupported(cfg, info)
+    no_alignment = dataclasses.replace(cfg, physics=SocialPotentialParams())
+    assert "observation layout" in contract.unsupported(no_alignment, info)
+    assert "dynamics='social_potential'" in contract.unsupported(SwarmConfig(dynamics="zone"), info)
+
+
+@needs_native
+def test_the_kernel_declares_what_it_implements():
+    info = build.load_library().info
+    assert info.obs_layout == contract.LAYOUT
+    assert info.kmax == 64
+    assert set(info.statistics) <= set(contract.PACKED_COLUMNS)
+    from swarm_envs.physics import SocialPotentialParams
+
+    assert set(info.physics) == {f.name for f in dataclasses.fields(SocialPotentialParams)}
+
+
+# --------------------------------------------------------------------------- build
+
+
+def test_without_a_compiler_auto_warns_and_runs_numpy(monkeypatch, fresh_library):
+    monkeypatch.setattr(build, "_compiler", lambda: None)
+    assert resolve_native("auto") == (False, "no C compiler found ($CC, cc, gcc)")
+    assert "no C compiler" in NativeSwarmNavCore.unsupported(SwarmConfig())
+    from swarm_envs.envs import backends
+
+    monkeypatch.setattr(backends, "_WARNED", set())
+    with pytest.warns(UserWarning, match="backend 'native' unavailable .*no C compiler"):
+        env = swarm_nav_v0.parallel_env(n_agents=4)
+    assert env.core.backend == "numpy"
+    with pytest.raises(RuntimeError, match="required but cannot be used: no C compiler"):
+        resolve_native(True)
+    monkeypatch.setenv(build.NATIVE_ENV, "1")
+    with pytest.raises(RuntimeError, match="no C compiler"):
+        resolve_native("auto")
+
+
+def test_a_failing_build_names_the_compiler_error(monkeypatch, fresh_library, tmp_path):
+    broken = tmp_path / "cc"
+    broken.write_text("#!/bin/sh\necho 'cc: fatal error: out of cheese' >&2\nexit 1\n")
+    broken.chmod(0o755)
+    monkeypatch.setattr(build, "_compiler", lambda: str(broken))
+    ok, why = native_support()
+    assert not ok and "out of cheese" in why
+    assert not list(tmp_path.glob("fused_step-*.so"))  # nothing half-built is left
+
+
+@needs_native
+def test_the_library_is_built_once_into_the_cache(fresh_library):
+    assert native_support() == (True, "supported")
+    built = list(fresh_library.glob("fused_step-*.so"))
+    assert len(built) == 1
+    stamp = built[0].stat().st_mtime_ns
+    build._LIBRARIES.clear()  # a new process: loads the cached file
+    assert native_support() == (True, "supported")
+    assert built[0].stat().st_mtime_ns == stamp
+
+
+def test_flags_follow_the_arch_variable_and_cflags(monkeypatch):
+    monkeypatch.delenv(build.ARCH_ENV, raising=False)
+    monkeypatch.delenv("CFLAGS", raising=False)
+    assert "-march=native" in build.build_flags()
+    monkeypatch.setenv(build.ARCH_ENV, "x86-64-v3")
+    monkeypatch.setenv("CFLAGS", "-g -DEXTRA=1")
+    flags = build.build_flags()
+    assert "-march=x86-64-v3" in flags and flags[-2:] == ("-g", "-DEXTRA=1")
