@@ -348,3 +348,19 @@ def test_flags_follow_the_arch_variable_and_cflags(monkeypatch):
     monkeypatch.setenv("CFLAGS", "-g -DEXTRA=1")
     flags = build.build_flags()
     assert "-march=x86-64-v3" in flags and flags[-2:] == ("-g", "-DEXTRA=1")
+
+
+def test_the_switch_turns_it_off_or_requires_it(monkeypatch):
+    from swarm_envs.envs import backends
+
+    monkeypatch.setattr(backends, "_WARNED", set())
+    monkeypatch.setenv(build.NATIVE_ENV, "0")
+    assert NativeSwarmNavCore.unsupported(SwarmConfig()) == "switched off (SWARM_ENVS_NATIVE=0)"
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # switched off on purpose: no warning
+        assert swarm_nav_v0.vec_env(4, n_agents=3).backend == "numpy"
+    monkeypatch.setenv(build.NATIVE_ENV, "sometimes")
+    with pytest.raises(ValueError, match="SWARM_ENVS_NATIVE must be 0, 1 or auto"):
+        NativeSwarmNavCore.unsupported(SwarmConfig())

@@ -165,7 +165,9 @@ def test_forces_match_pairwise_loop_reference(dim: int, with_goal: bool) -> None
 
 @pytest.mark.parametrize("dim", [2, 3])
 def test_energy_rate_matches_closed_form(dim: int) -> None:
-    """dφ/dt = −β Σ|v_i|² − ½ Σ_{i≠j} C_o (v_ij·u_ij)² e^{−ρ_ij/l_o} + Σ v_i·u_i (docs/models.md §1).
+    """dφ/dt = −β Σ|v_i|² − ½ Σ_{i≠j} C_o (v_ij·u_ij)² e^{−ρ_ij/l_o} + Σ v_i·u_i.
+
+    (docs/models.md §1.)
 
     dφ/dt is measured by a central difference of ``energy`` along the exact vector field
     ``(ṙ, v̇) = (v, (F + u)/m)``, so a wrong sign or factor in the alignment term, or a

@@ -197,7 +197,8 @@ class ZoneDynamics(Dynamics):
         norm = np.linalg.norm(speed, axis=-1, keepdims=True)
         random = rng.standard_normal(speed.shape)  # headings for agents at rest
         random /= np.maximum(np.linalg.norm(random, axis=-1, keepdims=True), 1e-12)
-        heading = np.where(norm > 1e-12, speed / np.maximum(norm, 1e-300), random)
+        moving = norm > 1e-12
+        heading = np.where(moving, speed / np.where(moving, norm, 1.0), random)
         v[idx] = self.agent_params.speed[idx][..., None] * heading
 
     def step(self, x, v, goal, control):

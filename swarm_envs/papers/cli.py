@@ -27,6 +27,7 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from swarm_envs._runtime.allocator import tune_allocator
 from swarm_envs.papers import PAPERS
 from swarm_envs.papers.claims import format_claim, tally
 from swarm_envs.papers.result import PaperResult
@@ -191,6 +192,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Console entry point; returns the exit status (0, or 2 for bad arguments)."""
     parser = _parser()
     args = parser.parse_args(argv)
+    tune_allocator()  # a long-running tool: keep freed heap for reuse
     try:
         papers = parse_papers(args.papers)
         only = None if args.only is None else parse_only(args.only, all_parts(papers))

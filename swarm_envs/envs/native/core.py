@@ -31,7 +31,7 @@ from swarm_envs.envs.common import (
     draw_starts,
     wide_dtypes,
 )
-from swarm_envs.envs.native.build import Library, load_library
+from swarm_envs.envs.native.build import NATIVE_ENV, Library, load_library, resolve_native
 from swarm_envs.envs.native.contract import PACKED_COLUMNS, step_params, unsupported
 from swarm_envs.envs.task import (
     STAT_KEYS,
@@ -132,11 +132,12 @@ class NativeSwarmNavCore:
     def unsupported(cfg: Any) -> str | None:
         """Why this core cannot run ``cfg`` here (``None`` if it can): the C step does
         not build, or ``cfg`` needs what it does not implement."""
-        try:
-            library = load_library()
-        except RuntimeError as err:
-            return f"the C step is not available ({err})"
-        return unsupported(cfg, library.info)
+        use, why = resolve_native("auto")  # SWARM_ENVS_NATIVE=1 raises where it cannot build
+        if not use:
+            if why == f"{NATIVE_ENV}=0":
+                return f"switched off ({NATIVE_ENV}=0)"
+            return f"the C step is not available ({why})"
+        return unsupported(cfg, load_library().info)
 
     # ------------------------------------------------------------------ the C step
     def _call(

@@ -504,6 +504,11 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
     pk[PK_mean_goal_distance] = mean_goal_distance;
     pk[PK_success] = success;
     pk[PK_effort] = effort;
+#ifdef SWARM_ENVS_PERTURB_COLUMN
+    /* A deliberately broken term, for the conformance tests only (built with
+     * -DSWARM_ENVS_PERTURB_COLUMN=PK_<name>): they check that the suite catches it. */
+    pk[SWARM_ENVS_PERTURB_COLUMN] += (REAL)0.25;
+#endif
     for (int64_t c = 0; c < d; c++)
         for (int64_t i = 0; i < N; i++) {
             x_out[(c * B + b) * N + i] = xs[c * S + i];

@@ -1,0 +1,324 @@
+"""The conformance suite's machinery: every backend against the reference, config by config.
+
+A *variant* is a backend and a state dtype (plus, for the C step, its build flags). For a
+config, :func:`check` runs the same seeded rollout, with random actions and the VecEnv's
+automatic resets of ended swarms, on the variant and on the reference (the numpy core in
+float64), and returns the mismatches it finds, each naming the quantity (an observation
+feature, a statistic, the reward, a flag). A variant that cannot run the config must
+refuse it up front with a reason (``unsupported``); :func:`check` then returns that
+reason instead.
+
+Comparisons stop at the first step whose outcome the reference cannot decide to the
+variant's precision: a pair at the collision radius, an agent at the goal radius, two
+neighbours at (almost) the same distance. There the rounding of an exact computation may
+legitimately go either way; everything before it must agree.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import os
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+from hypothesis import strategies as st
+
+from swarm_envs.config import DYNAMICS, INTEGRATORS, SwarmConfig, config_from_mapping
+from swarm_envs.envs import backends
+from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.task import STAT_KEYS, ranked_neighbors
+
+#: Tolerances against the float64 reference, per state dtype (float64: round-off).
+TOLERANCE = {
+    np.dtype(np.float64): dict(rtol=1e-9, atol=1e-9),
+    np.dtype(np.float32): dict(rtol=2e-3, atol=2e-3),
+}
+#: How close to a threshold the reference may be before a step is undecidable.
+MARGIN = {np.dtype(np.float64): 1e-9, np.dtype(np.float32): 2e-4}
+
+BATCH = 3
+STEPS = 14
+
+
+@dataclasses.dataclass(frozen=True)
+class Variant:
+    """A backend, a dtype and, for the C step, the ``-march`` target of its build."""
+
+    backend: str
+    dtype: Any
+    arch: str | None = None
+
+    @property
+    def name(self) -> str:
+        arch = f"-{self.arch}" if self.arch else ""
+        return f"{self.backend}{arch}-{np.dtype(self.dtype).name}"
+
+    @contextlib.contextmanager
+    def environment(self) -> Iterator[None]:
+        """The C step's build flags for this variant (its own cached library)."""
+        if self.arch is None:
+            yield
+            return
+        old = os.environ.get("SWARM_ENVS_NATIVE_ARCH")
+        os.environ["SWARM_ENVS_NATIVE_ARCH"] = self.arch
+        try:
+            yield
+        finally:
+            if old is None:
+                del os.environ["SWARM_ENVS_NATIVE_ARCH"]
+            else:
+                os.environ["SWARM_ENVS_NATIVE_ARCH"] = old
+
+    def unsupported(self, cfg: SwarmConfig) -> str | None:
+        with self.environment():
+            return backends.unsupported(cfg, self.backend)
+
+    def make(self, cfg: SwarmConfig) -> Any:
+        with self.environment():
+            cls = backends._core_class(self.backend)
+            if self.backend == "torch":
+                return cls(cfg, batch=BATCH, dtype=self.dtype, compile=False)
+            if self.backend == "sparse":  # a cut-off past every pair: exact up to round-off
+                return cls(cfg, batch=BATCH, dtype=self.dtype, cutoff_tol=1e-300)
+            return cls(cfg, batch=BATCH, dtype=self.dtype)
+
+
+VARIANTS = (
+    Variant("numpy", np.float32),
+    Variant("sparse", np.float64),
+    Variant("torch", np.float64),
+    Variant("torch", np.float32),
+    Variant("native", np.float64),
+    Variant("native", np.float32),
+    Variant("native", np.float64, arch="x86-64-v3"),
+    Variant("native", np.float32, arch="x86-64-v3"),
+)
+
+
+# --------------------------------------------------------------------------- configs
+
+
+def _real(low: float, high: float) -> st.SearchStrategy[float]:
+    return st.floats(low, high, allow_nan=False, allow_infinity=False)
+
+
+def field_strategies(dynamics: tuple[str, ...] = ("social_potential",)) -> dict[str, Any]:
+    """A strategy per drawn :class:`SwarmConfig` field (a dict of strategies for a section).
+
+    The physics stays in ranges where a few dozen steps of the explicit integration stay
+    finite and smooth (stiff settings are for the step-size control, not for a
+    comparison of backends).
+    """
+    weight = st.one_of(st.just(0.0), _real(0.0, 20.0))
+    return {
+        "n_agents": st.integers(1, 40),
+        "dim": st.sampled_from((2, 3)),
+        "dt": _real(0.005, 0.1),
+        "integrator": st.sampled_from(INTEGRATORS),
+        "dynamics": st.sampled_from(dynamics),
+        "init_radius": _real(0.3, 4.0),
+        "init_speed": _real(0.0, 1.0),
+        "goal_distance_min": _real(0.0, 6.0),
+        "goal_distance_max": _real(0.0, 6.0),  # added to the minimum
+        "goal_radius": _real(0.05, 5.0),
+        "success_fraction": _real(0.05, 1.0),
+        "max_steps": st.integers(1, 10),
+        "u_max": _real(0.1, 5.0),
+        "goal_in_physics": st.booleans(),
+        "n_neighbors": st.integers(0, 9),
+        "collision_radius": _real(0.0, 1.0),
+        "obs_goal_scale": _real(0.5, 20.0),
+        "obs_neighbor_scale": _real(0.2, 5.0),
+        "obs_velocity_scale": _real(0.2, 5.0),
+        "reward": {
+            name: weight
+            for name in ("progress", "arrival", "success", "collision", "effort", "time")
+        },
+        "physics": {
+            "C_a": _real(0.0, 2.0),
+            "C_r": _real(0.0, 2.0),
+            "l_a": _real(0.5, 2.0),
+            "l_r": _real(0.2, 1.0),
+            "C_o": st.one_of(st.just(0.0), _real(0.0, 1.0)),
+            "l_o": _real(0.5, 2.0),
+            "beta": _real(0.0, 2.0),
+            "C_g": st.one_of(st.just(0.0), _real(0.0, 15.0)),
+            "l_g": _real(1.0, 10.0),
+            "m": _real(0.5, 2.0),
+        },
+    }
+
+
+@st.composite
+def configs(draw: Any, dynamics: tuple[str, ...] = ("social_potential",)) -> SwarmConfig:
+    """A random valid config: every field of :func:`field_strategies` drawn."""
+    fields: dict[str, Any] = {}
+    for name, strategy in field_strategies(dynamics).items():
+        if isinstance(strategy, dict):
+            fields[name] = {key: draw(s) for key, s in strategy.items()}
+        else:
+            fields[name] = draw(strategy)
+    fields["goal_distance_max"] += fields["goal_distance_min"]
+    if fields["dynamics"] == "lagrangian":
+        fields["lagrangian"] = {"r": 0.01}  # bins small enough for any start radius
+        fields["init_radius"] = max(fields["init_radius"], 0.1 * fields["n_agents"])
+    return config_from_mapping(SwarmConfig, fields)
+
+
+#: The fields the strategy does not draw, and why.
+NOT_DRAWN = {
+    "backend": "the suite runs each backend itself",
+    "device": "CUDA is covered by the GPU tests",
+    "zone": "other models' sections: drawn with their defaults (numpy only)",
+    "piecewise": "other models' sections: drawn with their defaults (numpy only)",
+    "lagrangian": "other models' sections: drawn with their defaults (numpy only)",
+}
+
+#: Every dynamics, for the refusal checks.
+ALL_DYNAMICS = DYNAMICS
+
+
+# --------------------------------------------------------------------------- rollouts
+
+
+def rollout(core: Any, seed: int, steps: int = STEPS) -> list[tuple]:
+    """``(obs, reward, terminated, truncated, stats)`` per step of a seeded rollout with
+    random actions, the ended swarms reset after each step as the VecEnv resets them
+    (their observations after the reset as a further entry)."""
+    rng = np.random.default_rng(seed)
+    core.reset(rng)
+    out = [(core.observe(), None, None, None, core.stats())]
+    shape = (core.batch, core.cfg.n_agents, core.cfg.dim)
+    actions = np.random.default_rng(seed + 1)
+    for _ in range(steps):
+        a = actions.uniform(-1.2, 1.2, shape)
+        reward, terminated, truncated, stats = core.step(a.astype(core.dtype))
+        out.append((core.observe(), reward, terminated, truncated, stats))
+        ended = terminated | truncated
+        if ended.any():
+            core.reset(rng, which=ended)
+            out.append((core.observe(), None, None, None, core.stats()))
+    return out
+
+
+def _undecidable(core: SwarmNavCore, margin: float) -> str | None:
+    """What makes the reference's current state undecidable at ``margin``, if anything."""
+    cfg, x, goal = core.cfg, core.x, core.goal
+    n = cfg.n_agents
+    scale = max(1.0, float(np.abs(x).max()))
+    tol = margin * scale
+    speed = np.linalg.norm(core.v, axis=-1)
+    if ((speed > 0) & (speed < 1e-30)).any():
+        return "a speed below float32's range (no heading in float32)"
+    radius = np.linalg.norm(x - x.mean(axis=-2, keepdims=True), axis=-1)
+    if n > 1 and ((radius > 0) & (radius < 1e3 * np.finfo(np.float32).eps * scale)).any():
+        return "an agent at the centroid to float32's precision (no radial direction)"
+    gd = np.linalg.norm(goal[:, None, :] - x, axis=-1)
+    if (np.abs(gd - cfg.goal_radius) < tol).any():
+        return "an agent at the goal radius"
+    if n > 1:
+        rho = np.linalg.norm(x[:, :, None] - x[:, None, :], axis=-1)
+        rho[:, np.arange(n), np.arange(n)] = np.inf
+        if (np.abs(rho - cfg.collision_radius) < tol).any():
+            return "a pair at the collision radius"
+        k = min(ranked_neighbors(cfg) + 1, n - 1)
+        ranked = np.sort(rho, axis=-1)[..., :k]
+        if (np.diff(ranked, axis=-1) < tol).any():
+            return "two neighbours at the same distance"
+    return None
+
+
+def check(variant: Variant, cfg: SwarmConfig, seed: int = 0) -> list[str]:
+    """Mismatches of ``variant`` against the reference on ``cfg`` (empty: it conforms).
+
+    A variant that refuses ``cfg`` returns ``["refused: <reason>"]``; a refusal without
+    a reason, or a core that raises after not refusing, is itself a mismatch.
+    """
+    reason = variant.unsupported(cfg)
+    if reason is not None:
+        return [f"refused: {reason}"] if reason.strip() else ["refused without a reason"]
+    dtype = np.dtype(variant.dtype)
+    tol, margin = TOLERANCE[dtype], MARGIN[dtype]
+    ref_core = SwarmNavCore(cfg, batch=BATCH, dtype=np.float64)
+    ours_core = variant.make(cfg)
+    return compare(ours_core, ref_core, seed, tol, margin)
+
+
+def compare(
+    ours_core: Any, ref_core: SwarmNavCore, seed: int, tol: dict, margin: float
+) -> list[str]:
+    """Step both cores in lockstep and name what differs (see :func:`check`)."""
+    cfg = ref_core.cfg
+    rng, ref_rng = np.random.default_rng(seed), np.random.default_rng(seed)
+    ours_core.reset(rng)
+    ref_core.reset(ref_rng)
+    actions = np.random.default_rng(seed + 1)
+    shape = (BATCH, cfg.n_agents, cfg.dim)
+    problems: list[str] = []
+    for step in range(STEPS + 1):
+        if _undecidable(ref_core, margin) is not None:
+            break
+        obs, ref_obs = ours_core.observe(), ref_core.observe()
+        problems += _obs_mismatch(obs, ref_obs, cfg, tol, step)
+        problems += _stats_mismatch(ours_core.stats(), ref_core.stats(), tol, step)
+        if problems or step == STEPS:
+            break
+        a = actions.uniform(-1.2, 1.2, shape)
+        ours = ours_core.step(a.astype(ours_core.dtype))
+        ref = ref_core.step(a)
+        if ours[0].dtype != np.float64 or ours[0].shape != (BATCH,):
+            problems.append(f"step {step}: reward dtype/shape {ours[0].dtype} {ours[0].shape}")
+        if _undecidable(ref_core, margin) is not None:
+            break
+        if not np.allclose(ours[0], ref[0], **tol):
+            problems.append(f"step {step}: reward {ours[0]} != {ref[0]}")
+        for name, i in (("terminated", 1), ("truncated", 2)):
+            if not np.array_equal(ours[i], ref[i]):
+                problems.append(f"step {step}: {name} {ours[i]} != {ref[i]}")
+        problems += _stats_mismatch(ours[3], ref[3], tol, step)
+        if problems:
+            break
+        ended = ref[1] | ref[2]
+        if ended.any():
+            ours_core.reset(rng, which=ended)
+            ref_core.reset(ref_rng, which=ended)
+    return problems
+
+
+def observation_features(cfg: SwarmConfig) -> list[str]:
+    """The name of every observation column (the shared layout)."""
+    d, k = cfg.dim, cfg.n_neighbors
+    axes = "xyz"[:d]
+    names = [f"goal_offset.{a}" for a in axes] + [f"velocity.{a}" for a in axes]
+    for s in range(k):
+        names += [f"neighbor{s}.offset.{a}" for a in axes]
+        names += [f"neighbor{s}.relative_velocity.{a}" for a in axes]
+        names.append(f"neighbor{s}.mask")
+    return names
+
+
+def _obs_mismatch(obs: np.ndarray, ref: np.ndarray, cfg: SwarmConfig, tol: dict, step: int):
+    if obs.dtype != np.float32 or obs.shape != ref.shape:
+        return [f"step {step}: observation {obs.dtype} {obs.shape}, expected float32 {ref.shape}"]
+    bad = ~np.isclose(obs, ref, **tol).all(axis=(0, 1))
+    names = observation_features(cfg)
+    return [f"step {step}: observation {names[i]}" for i in np.flatnonzero(bad)]
+
+
+def _stats_mismatch(stats: dict, ref: dict, tol: dict, step: int) -> list[str]:
+    if list(stats) != list(STAT_KEYS):
+        return [f"step {step}: statistics {list(stats)}"]
+    out = []
+    for key in STAT_KEYS:
+        scale = max(1.0, float(np.abs(ref[key]).max()))
+        if stats[key].dtype != ref[key].dtype and key in (
+            "fraction_arrived",
+            "collisions",
+            "success",
+        ):
+            out.append(f"step {step}: statistic {key} dtype {stats[key].dtype}")
+        elif not np.allclose(stats[key], ref[key], rtol=tol["rtol"], atol=tol["atol"] * scale):
+            out.append(f"step {step}: statistic {key} {stats[key]} != {ref[key]}")
+    return out

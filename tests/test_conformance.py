@@ -1,0 +1,209 @@
+"""Every backend executes the same definitions: the conformance suite.
+
+For random valid configs (hypothesis: every numeric field of the env config — reward
+weights, observation scales, k, d, dt, u_max, the goal radius, the physics — and the
+state's dtype), every backend either matches the reference, the numpy core in float64
+(float64: to round-off; float32: to 2e-3), through automatic resets, or refuses the
+config up front with a reason. The C step runs in its default build and in a portable
+``x86-64-v3`` build (no AVX-512 branches). ``tests/conformance.py`` holds the machinery;
+the tests at the end show that it catches one backend's perturbed term.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import warnings
+
+import numpy as np
+import pytest
+from conformance import (
+    NOT_DRAWN,
+    VARIANTS,
+    Variant,
+    check,
+    compare,
+    configs,
+    field_strategies,
+    rollout,
+)
+from hypothesis import HealthCheck, given, settings
+
+from swarm_envs import swarm_nav_v0
+from swarm_envs.config import DYNAMICS, RewardWeights, SwarmConfig
+from swarm_envs.envs import backends
+from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.task import REWARD_TERMS
+from swarm_envs.physics import SocialPotentialParams
+
+SETTINGS = settings(
+    max_examples=int(os.environ.get("SWARM_ENVS_CONFORMANCE_EXAMPLES", "25")),
+    deadline=None,
+    derandomize=bool(os.environ.get("CI")),
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
+
+
+@pytest.mark.parametrize("variant", VARIANTS, ids=lambda v: v.name)
+@SETTINGS
+@given(cfg=configs())
+def test_every_backend_matches_the_reference_or_refuses(variant, cfg):
+    problems = check(variant, cfg)
+    if problems and problems[0].startswith("refused: "):
+        assert len(problems) == 1
+        return
+    assert not problems, f"{variant.name} on {cfg}: {problems}"
+
+
+@pytest.mark.parametrize("variant", VARIANTS, ids=lambda v: v.name)
+def test_every_backend_runs_the_default_and_the_navigation_configs(variant):
+    # A backend that refused everything would pass the property above.
+    for cfg in (SwarmConfig(), SwarmConfig(n_agents=31, dim=3, goal_in_physics=True)):
+        if variant.backend in ("native",) and variant.unsupported(cfg):
+            pytest.skip(f"C step unavailable: {variant.unsupported(cfg)}")
+        assert check(variant, cfg) == []
+
+
+@SETTINGS
+@given(cfg=configs(dynamics=DYNAMICS))
+def test_other_models_are_refused_with_a_reason_and_run_on_numpy(cfg):
+    # The zone, piecewise and Lagrangian models run on the numpy core only; their
+    # discrete rules (zones, turning limits) make float32 and float64 diverge, so they
+    # are checked for finite results in both, not against each other.
+    for backend in ("sparse", "torch", "native"):
+        reason = backends.unsupported(cfg, backend)
+        if cfg.dynamics != "social_potential":
+            assert reason and "social_potential" in reason
+    for dtype in (np.float32, np.float64):
+        for obs, reward, _, _, stats in rollout(SwarmNavCore(cfg, batch=3, dtype=dtype), 0):
+            assert np.isfinite(obs).all() and all(np.isfinite(v).all() for v in stats.values())
+            assert reward is None or np.isfinite(reward).all()
+
+
+def test_a_refused_backend_falls_back_with_one_warning_naming_both(monkeypatch):
+    monkeypatch.setattr(backends, "_WARNED", set())
+    cfg = dict(n_agents=4, dynamics="zone", backend="native")
+    with pytest.warns(
+        UserWarning, match=r"backend 'native' cannot run this config \(.*\); using 'numpy'"
+    ):
+        env = swarm_nav_v0.parallel_env(**cfg)
+    assert env.core.backend == "numpy"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        swarm_nav_v0.parallel_env(**cfg)  # once
+
+
+def test_the_suite_draws_every_field_of_the_env_config():
+    drawn = field_strategies()
+    names = {f.name for f in dataclasses.fields(SwarmConfig)}
+    assert set(drawn) | set(NOT_DRAWN) == names
+    assert set(drawn["reward"]) == {f.name for f in dataclasses.fields(RewardWeights)}
+    assert set(drawn["physics"]) == {f.name for f in dataclasses.fields(SocialPotentialParams)}
+
+
+def test_reward_terms_and_weights_are_the_same_list():
+    assert [t.name for t in REWARD_TERMS] == [f.name for f in dataclasses.fields(RewardWeights)]
+
+
+# --------------------------------------------------------------------------- the suite bites
+
+BROKEN_CONFIG = SwarmConfig(n_agents=12, n_neighbors=4, collision_radius=0.6, goal_radius=3.0)
+
+
+def test_a_perturbed_reward_term_in_one_backend_is_caught(monkeypatch):
+    # The torch core's execution of the reward with the collision term doubled.
+    from swarm_envs.envs import torch_step
+    from swarm_envs.envs.task import reward as shared_reward
+
+    def broken(weights, inputs):
+        heavier = dataclasses.replace(weights, collision=2 * weights.collision)
+        return shared_reward(heavier, inputs)
+
+    monkeypatch.setattr(torch_step, "reward", broken)
+    problems = check(Variant("torch", np.float64), BROKEN_CONFIG)
+    assert problems and "reward" in problems[0]
+
+
+def test_a_perturbed_observation_scale_in_one_backend_is_caught(monkeypatch):
+    # The C step given the wrong velocity scale (as a hand-kept contract could).
+    from swarm_envs.envs.native import core as native_core
+
+    if backends.unsupported(BROKEN_CONFIG, "native"):
+        pytest.skip("C step unavailable")
+    right = native_core.step_params
+
+    def wrong(cfg, dtype):
+        return right(dataclasses.replace(cfg, obs_velocity_scale=2 * cfg.obs_velocity_scale), dtype)
+
+    monkeypatch.setattr(native_core, "step_params", wrong)
+    problems = check(Variant("native", np.float64), BROKEN_CONFIG)
+    assert problems and all("velocity" in p for p in problems)
+
+
+def test_a_perturbed_numpy_term_is_caught(monkeypatch):
+    # The float32 numpy core (the reference's code in another dtype) with its time
+    # penalty doubled: the numpy family is held to the reference too.
+    from swarm_envs.envs import core as numpy_core
+    from swarm_envs.envs.task import RewardInputs
+    from swarm_envs.envs.task import reward as shared_reward
+
+    def broken(weights, inputs: RewardInputs):
+        if inputs.stats["success"].dtype == np.float64 and inputs.effort.dtype == np.float32:
+            weights = dataclasses.replace(weights, time=2 * weights.time)
+        return shared_reward(weights, inputs)
+
+    monkeypatch.setattr(numpy_core, "reward", broken)
+    problems = check(Variant("numpy", np.float32), BROKEN_CONFIG)
+    assert problems and "reward" in problems[0]
+
+
+@pytest.mark.parametrize("column", ["energy", "collisions"])
+def test_a_perturbed_term_in_the_c_step_is_caught(monkeypatch, tmp_path, column):
+    # The C step built with one output column deliberately off (a -D flag the kernel
+    # honours for this test only): the statistic, and for collisions the reward too.
+    from swarm_envs.envs.native import build
+
+    if not build.native_support()[0]:
+        pytest.skip("C step unavailable")
+    monkeypatch.setenv("SWARM_ENVS_CACHE", str(tmp_path))
+    monkeypatch.setenv("CFLAGS", f"-DSWARM_ENVS_PERTURB_COLUMN=PK_{column}")
+    problems = check(Variant("native", np.float64), BROKEN_CONFIG)
+    assert problems and f"statistic {column}" in problems[0]
+
+
+def test_compare_names_the_reference_state_it_could_not_decide():
+    # Two agents exactly at the collision radius: the comparison stops there, clean.
+    cfg = SwarmConfig(n_agents=2, collision_radius=1.0, n_neighbors=1)
+    ref, ours = SwarmNavCore(cfg, batch=3), SwarmNavCore(cfg, batch=3, dtype=np.float32)
+    assert compare(ours, ref, seed=0, tol=dict(rtol=1e-3, atol=1e-3), margin=1e-4) == []
+
+
+def test_a_new_reward_term_is_one_definition_on_every_backend(monkeypatch):
+    # docs/design.md's worked example, done at run time: a term in REWARD_TERMS and a
+    # weight beside the others reach every backend, the C step's included.
+    import importlib
+
+    from swarm_envs.envs.task import RewardTerm
+
+    reward_module = importlib.import_module("swarm_envs.envs.task.reward")
+
+    spread = RewardTerm("spread", -1.0, "expanse", lambda r: r.stats["expanse"])
+    monkeypatch.setattr(reward_module, "REWARD_TERMS", (*REWARD_TERMS, spread))
+
+    @dataclasses.dataclass(frozen=True)
+    class WithSpread(RewardWeights):
+        spread: float = 0.0
+
+    base = SwarmConfig(n_agents=6, max_steps=50, reward=WithSpread())
+    cfg = dataclasses.replace(base, reward=WithSpread(spread=0.5))
+    actions = np.random.default_rng(1).uniform(-1, 1, (3, 6, 2))
+    for backend in ("numpy", "sparse", "torch", "native"):
+        if backends.unsupported(base, backend):
+            continue
+        rewards = []
+        for c in (base, cfg):
+            core = Variant(backend, np.float64).make(c)
+            core.reset(np.random.default_rng(0))
+            rewards.append(core.step(actions)[0])
+            expanse = core.stats()["expanse"]
+        np.testing.assert_allclose(rewards[1], rewards[0] - 0.5 * expanse, rtol=1e-12)
