@@ -66,10 +66,13 @@ def make(row, n, b, tune):
         return step, (lambda: state_of(env.core.x, env.core.v))
     if row == "vec_env":
         backend = "native" if "native" in config.BACKENDS else "torch"
-    else:
+        venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, backend=backend)
+    else:  # the compiled torch core (earlier versions ran the C step inside it)
         os.environ["SWARM_ENVS_NATIVE"] = "0"
-        backend = "torch"
-    venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, backend=backend)
+        try:
+            venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, backend="torch")
+        finally:
+            del os.environ["SWARM_ENVS_NATIVE"]
     venv.seed(0)
     venv.reset()
     a = rng.uniform(-1, 1, (venv.num_envs, 2)).astype(np.float32)

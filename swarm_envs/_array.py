@@ -39,8 +39,21 @@ class ArrayNamespace:
     def exp(self, a: Array) -> Array:
         return np.exp(a)
 
+    def exp_temp(self, a: Array) -> Array:
+        """``e^a`` for a temporary ``a`` the caller does not read again (numpy writes
+        the result into it)."""
+        return np.exp(a, out=a) if isinstance(a, np.ndarray) else np.exp(a)
+
     def sqrt(self, a: Array) -> Array:
         return np.sqrt(a)
+
+    def reciprocal_temp(self, a: Array) -> Array:
+        """``1/a`` for a temporary ``a`` (in place for numpy, as :meth:`exp_temp`)."""
+        return np.reciprocal(a, out=a) if isinstance(a, np.ndarray) else 1.0 / a
+
+    def sqrt_temp(self, a: Array) -> Array:
+        """``√a`` for a temporary ``a`` (in place for numpy, as :meth:`exp_temp`)."""
+        return np.sqrt(a, out=a) if isinstance(a, np.ndarray) else np.sqrt(a)
 
     def abs(self, a: Array) -> Array:
         return np.abs(a)
@@ -52,13 +65,17 @@ class ArrayNamespace:
         return np.where(cond, a, b)
 
     def clip(self, a: Array, low: float | None = None, high: float | None = None) -> Array:
+        if high is None:
+            return np.maximum(a, low)
+        if low is None:
+            return np.minimum(a, high)
         return np.clip(a, low, high)
 
     def sum(self, a: Array, axis: int | tuple[int, ...]) -> Array:
-        return np.sum(a, axis=axis)
+        return a.sum(axis=axis) if isinstance(a, np.ndarray) else np.sum(a, axis=axis)
 
     def mean(self, a: Array, axis: int | tuple[int, ...]) -> Array:
-        return np.mean(a, axis=axis)
+        return a.mean(axis=axis) if isinstance(a, np.ndarray) else np.mean(a, axis=axis)
 
     def sum_product(self, a: Array, b: Array) -> Array:
         """``Σ_j a[..., j] b[..., j]``: the sum of products over the last axis."""
@@ -118,8 +135,17 @@ class TorchNamespace(ArrayNamespace):
     def exp(self, a: Array) -> Array:
         return self.torch.exp(a)
 
+    def exp_temp(self, a: Array) -> Array:
+        return self.torch.exp(a)
+
     def sqrt(self, a: Array) -> Array:
         return self.torch.sqrt(a)
+
+    def sqrt_temp(self, a: Array) -> Array:
+        return self.torch.sqrt(a)
+
+    def reciprocal_temp(self, a: Array) -> Array:
+        return 1.0 / a
 
     def abs(self, a: Array) -> Array:
         return self.torch.abs(a)
@@ -186,8 +212,15 @@ class ScalarNamespace(ArrayNamespace):
     def exp(self, a: Array) -> Array:
         return math.exp(a)
 
+    exp_temp = exp
+
     def sqrt(self, a: Array) -> Array:
         return math.sqrt(a)
+
+    sqrt_temp = sqrt
+
+    def reciprocal_temp(self, a: Array) -> Array:
+        return 1.0 / a
 
     def abs(self, a: Array) -> Array:
         return abs(a)

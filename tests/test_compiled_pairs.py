@@ -6,6 +6,7 @@ import sys
 
 import numpy as np
 import pytest
+from test_cutoff import direct_pair_sums
 
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.sparse_core import SparseSwarmNavCore
@@ -63,6 +64,36 @@ def test_equals_the_numpy_accumulator(d: int, B: int) -> None:
     ref, fast = both(x, v, radius=5.0)
     assert ref.close.sum() > 0 and np.abs(ref.force).max() > 0  # pairs were found
     assert_same(ref, fast)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+@pytest.mark.parametrize("with_v", [True, False])
+def test_applies_pair_law(d: int, with_v: bool) -> None:
+    """The kernel sums exactly what pair_law gives per pair (so a change of the law
+    reaches it): forces, potential and close pairs, coincident agents included."""
+    rng = np.random.default_rng(10 + d)
+    x = rng.uniform(-2.0, 2.0, (2, 25, d))  # every pair of a swarm within the radius
+    x[0, 2] = x[0, 9]  # a coincident pair: no force, U(0)
+    v = rng.normal(size=x.shape) if with_v else None
+    ref = direct_pair_sums(x, v, NAV, close_radius=0.5)
+    cells = CellList.build(x, 8.0 * (1.0 + CELL_MARGIN) / REACH, REACH)
+    order = cells.order
+    fast = compiled_pairs.cell_pair_sums(
+        cells,
+        8.0,
+        NAV,
+        None if v is None else v.reshape(-1, d)[order],
+        groups=order // 25,
+        n_groups=2,
+        close_radius=0.5,
+    )
+    assert ref.close.sum() > 0
+    force = np.empty_like(fast.force)
+    force[order] = fast.force
+    scale = max(1.0, float(np.abs(ref.force).max()))
+    np.testing.assert_allclose(force, ref.force, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(fast.potential, ref.potential, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(fast.close, ref.close)
 
 
 def test_without_alignment_and_velocities() -> None:

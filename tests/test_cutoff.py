@@ -11,6 +11,7 @@ import pytest
 from swarm_envs.physics import SocialPotentialParams, energy, forces
 from swarm_envs.physics.cutoff import (
     PairAccumulator,
+    PairSums,
     _phi,
     cutoff_radius,
     energy_error_bound,
@@ -21,6 +22,7 @@ from swarm_envs.physics.cutoff import (
     sparse_forces,
 )
 from swarm_envs.physics.neighbors import radius_pairs
+from swarm_envs.physics.social_potential import RHO_FLOOR, pair_law
 
 PARAMS = [
     SocialPotentialParams(),
@@ -203,6 +205,64 @@ def test_pair_accumulator_groups_counts_and_chunks() -> None:
     np.testing.assert_allclose(acc.result(2).force, sums.force, atol=1e-12)
     empty = PairAccumulator(p, 5).result(3, np.float32)
     assert empty.force.shape == (5, 3) and empty.force.dtype == np.float32
+
+
+def direct_pair_sums(
+    x: np.ndarray, v: np.ndarray | None, p: SocialPotentialParams, close_radius: float
+) -> PairSums:
+    """Every pair within each swarm of ``x`` ``(B, N, d)``, one at a time through
+    :func:`pair_law` itself on Python floats (``math.exp``): flat forces, the potential
+    per swarm, the close pairs per swarm."""
+    B, N, d = x.shape
+    force = np.zeros((B, N, d))
+    pot = np.zeros(B)
+    close = np.zeros(B, np.int64)
+    for b in range(B):
+        for a in range(N):
+            for c in range(a + 1, N):
+                r = x[b, c] - x[b, a]
+                rho = math.sqrt(sum(float(t) * float(t) for t in r))
+                vdot = None if v is None else float(np.dot(v[b, a] - v[b, c], r))
+                inv = 1.0 / max(rho, RHO_FLOOR)
+                s, u = pair_law(rho, inv, vdot, p.C_a, p.C_r, p.l_a, p.l_r, p.C_o, p.l_o, math.exp)
+                force[b, a] += s * r
+                force[b, c] -= s * r
+                pot[b] += u
+                close[b] += rho < close_radius
+    return PairSums(force.reshape(B * N, d), pot, close)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+@pytest.mark.parametrize("params", PARAMS)
+@pytest.mark.parametrize("with_v", [True, False])
+def test_pair_accumulator_applies_pair_law(
+    d: int, params: SocialPotentialParams, with_v: bool
+) -> None:
+    """The numpy pass sums exactly what pair_law gives per pair (so a change of the law
+    reaches it): forces, potential and close pairs, coincident agents included."""
+    rng = np.random.default_rng(d)
+    x = rng.uniform(-2.0, 2.0, (2, 25, d))
+    x[1, 3] = x[1, 7]  # a coincident pair: no force, U(0)
+    v = rng.normal(size=x.shape) if with_v else None
+    ref = direct_pair_sums(x, v, params, close_radius=0.5)
+    i, j = all_pairs(x)
+    flip = rng.random(i.size) < 0.5  # either orientation of a pair
+    i, j = np.where(flip, j, i), np.where(flip, i, j)
+    flat_x = x.reshape(-1, d)
+    flat_v = None if v is None else v.reshape(-1, d)
+    acc = PairAccumulator(
+        params, 50, flat_v, groups=np.arange(50) // 25, n_groups=2, potential=True, close_radius=0.5
+    )
+    for s in range(0, i.size, 101):  # several chunks
+        ii, jj = i[s : s + 101], j[s : s + 101]
+        dx = [flat_x[jj, k] - flat_x[ii, k] for k in range(d)]
+        acc.add(ii, jj, dx, sum(c * c for c in dx))
+    out = acc.result(d)
+    assert ref.close.sum() > 0
+    scale = max(1.0, float(np.abs(ref.force).max()))
+    np.testing.assert_allclose(out.force, ref.force, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(out.potential, ref.potential, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(out.close, ref.close)
 
 
 def test_invalid_input_raises() -> None:

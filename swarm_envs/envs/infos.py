@@ -74,9 +74,9 @@ class SwarmInfo(Mapping[str, float]):
 class SwarmInfoPool:
     """The B :class:`SwarmInfo` of a step, recycled once nothing outside holds them.
 
-    Building B fresh objects per step costs little by itself, but at 1,024 swarms they
-    keep the garbage collector busy (gen-0 passes every step and, as they age, full
-    passes over every object of the process): about 0.7 ms per step. So a step takes a
+    Building B fresh objects per step costs little by itself, but at a thousand swarms
+    they keep the garbage collector busy (gen-0 passes every step and, as they age, full
+    passes over every object of the process). So a step takes a
     set whose objects are referenced by this pool alone (the caller has dropped that
     step's infos) and points it at the new statistics; if every set is still held, it
     makes a new one. An info kept by the caller thus keeps its step's values.
@@ -199,8 +199,9 @@ class TerminalInfo(MutableMapping[str, Any]):
 class TerminalInfoPool:
     """The B × N :class:`TerminalInfo` of a step, recycled once nothing outside holds them.
 
-    When every swarm ends at once (all at the step limit), 32,768 fresh dicts per reset
-    cost about 43 ms at 1,024 × 32, and as they age, full garbage-collector passes. A
+    When every swarm ends at once (all at the step limit), tens of thousands of fresh
+    dicts per reset cost tens of milliseconds, and as they age, full garbage-collector
+    passes. A
     step takes a set whose objects only this pool references and points it at the new
     :class:`TerminalRecord`; the slots of the swarms that ended get that set's objects.
     A set holds one list of N objects per swarm, so that checking the swarms handed out

@@ -17,10 +17,11 @@ array. One step:
    the ``energy`` statistic and the collision count (the agents are taken in cell
    order, so the pairs' memory accesses stay local). Where numba imports, that pass is
    one compiled loop over the cell pairs
-   (:func:`swarm_envs.physics.compiled_pairs.cell_pair_sums`, 2–3 times faster);
-   otherwise numpy sums chunks of candidates
-   (:class:`swarm_envs.physics.cutoff.PairAccumulator`). Both give the same sums to
-   round-off; ``SWARM_ENVS_NUMBA=0`` picks numpy;
+   (:func:`swarm_envs.physics.compiled_pairs.cell_pair_sums`, each candidate visited
+   once); otherwise numpy sums chunks of candidates
+   (:class:`swarm_envs.physics.cutoff.PairAccumulator`). Both apply the one pair law,
+   :func:`swarm_envs.physics.social_potential.pair_law` (``docs/models.md`` §1), and
+   give the same sums to round-off; ``SWARM_ENVS_NUMBA=0`` picks numpy;
 4. the k nearest neighbours (observations, nearest-neighbour distance) come from the
    same cell-list structure (:func:`swarm_envs.physics.neighbors.knn`), on demand and
    cached per state; the search starts at the previous step's neighbour distances
@@ -40,32 +41,32 @@ the nearest-neighbour distance are exact. A state that is no longer finite raise
 :class:`ValueError` in :meth:`~SparseSwarmNavCore.step` (the dense core would carry NaN).
 
 The defaults, ``cutoff_tol = 0.03`` (1 % of the default action bound ``u_max = 3``) and
-``cutoff_speed = 1``, give ``r_c ≈ 5.08`` with the navigation parameters and one swarm
-of 100,000 agents at about 0.2–0.26 s per full step in 2-D and 0.45–0.75 s in 3-D
-compiled (0.3–0.45 s and 1.1–1.6 s with numpy; on the 2-core development
-machine). What they cost in accuracy, measured at 2,000 agents at the default start
-density (``benchmarks/large_swarms.py --accuracy 2000``): per-agent force errors of
-median 0.1–0.3 and maximum 0.6–1.3 in the first 20 steps, mostly the alignment drag of
-agents beyond ``r_c`` (:mod:`swarm_envs.physics.cutoff`); the bound holds with a factor
-of about 10 to spare. ``cutoff_tol = 0.01`` (``r_c ≈ 6.59``) divides the errors by
-about 2.5 for 1.35 times the step time; ``0.003`` (``r_c ≈ 8.31``) by about 7.
+``cutoff_speed = 1``, give ``r_c ≈ 5.08`` with the navigation parameters. What they cost
+in accuracy, measured at 2,000 agents at the default start density
+(``benchmarks/large_swarms.py --accuracy 2000``): per-agent force errors of median
+0.1–0.3 and maximum 0.6–1.3 in the first 20 steps, mostly the alignment drag of agents
+beyond ``r_c`` (:mod:`swarm_envs.physics.cutoff`); the bound holds with a factor of
+about 10 to spare. ``cutoff_tol = 0.01`` (``r_c ≈ 6.59``) divides the errors by about
+2.5, ``0.003`` (``r_c ≈ 8.31``) by about 7.
 
-Cost is ``O(N)`` per step at bounded density. The paper's parameters are in the
-collapsing regime (``C l² < 1``, ``SocialPotentialParams.h_stability``): a swarm left
-to itself contracts, its density and the number of pairs within ``r_c`` grow over an
-episode, and the stiffening repulsion eventually makes the explicit integration
-unstable (agents at speeds of 20–50): with 2,000 agents at rest after about 50 steps
-of ``dt = 0.1`` (about 700 of ``dt = 0.02``), in both cores.
+Cost is ``O(N)`` per step at bounded density: the cell list and the pair pass visit,
+per agent, a number of candidates proportional to its pairs within ``r_c``, about
+``n ω_d r_c^d`` at density ``n`` (``ω_2 = π``, ``ω_3 = 4π/3``), so a larger ``r_c``
+costs as ``r_c^d``. The paper's parameters are in the collapsing regime (``C l² < 1``,
+``SocialPotentialParams.h_stability``): a swarm left to itself contracts, its density
+and the number of pairs within ``r_c`` grow over an episode, and the stiffening
+repulsion eventually makes the explicit integration unstable (agents at speeds of
+20–50): with 2,000 agents at rest after about 50 steps of ``dt = 0.1`` (about 700 of
+``dt = 0.02``), in both cores.
 Large-N scenarios should start at the density of the default ``N = 10`` case:
 :func:`density_preserving_radius` scales ``init_radius`` with ``N^{1/d}`` (``√N`` in
 2-D, ``∛N`` in 3-D); with the default radius, 100,000 agents would start ``10^4``
 times denser.
 
-Below :data:`SPARSE_MIN_AGENTS` agents per swarm the dense core is as fast or faster
-(and exact); above it this one is faster, increasingly so (``benchmarks/large_swarms.py``
-measures the crossover: about 250 agents in 2-D and 300–400 in 3-D in float64 with the
-compiled loops; with numpy about 300 in 2-D and 500 in 3-D, 400 and 800 in float32).
-:func:`use_sparse_core` is the selection rule.
+Below :data:`SPARSE_MIN_AGENTS` agents per swarm the dense core (``O(N²)`` per step) is
+as fast or faster (and exact); above it this one is faster, increasingly so
+(``benchmarks/large_swarms.py`` measures the crossover on a given machine, with the
+compiled or the numpy pair pass). :func:`use_sparse_core` is the selection rule.
 """
 
 from __future__ import annotations

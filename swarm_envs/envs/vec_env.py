@@ -11,11 +11,11 @@ slots' infos carry ``terminal_observation`` (the last observation of that episod
 ``TimeLimit.truncated`` (true when it ended by the step limit, not by success), which
 SB3 uses to bootstrap the value of truncated episodes, and ``episode``: ``{"r": return,
 "l": length, "t": seconds since the VecEnv was made}``, what SB3's ``VecMonitor`` would
-add (so none is needed: at 1,024 × 32 slots its Python loop over the infos adds about
-2.6 ms to a 4.5 ms step; wrapping one anyway gives the same values). ``swarm_episode``
-is the same dict under its older name.
+add (so none is needed: its Python loop over the infos of every slot would cost more
+than the batched step; wrapping one anyway gives the same values). ``swarm_episode`` is
+the same dict under its older name.
 
-Infos: the swarm's statistics (:data:`swarm_envs.envs.core.STAT_KEYS`) are in the info
+Infos: the swarm's statistics (:data:`swarm_envs.envs.task.STAT_KEYS`) are in the info
 of the swarm's first slot (``b·N``) only, as a read-only :class:`SwarmInfo` mapping; the
 slots of a swarm that just ended get :class:`~swarm_envs.envs.infos.TerminalInfo`
 mappings (with the statistics in the first; writable, a write copies the info into a

@@ -4,16 +4,15 @@ pass (:func:`cell_pair_sums`) and the k-nearest round (:func:`knearest_round`).
 :func:`cell_pair_sums` gives exactly what feeding every chunk of
 :meth:`swarm_envs.physics.neighbors.CellList.iter_pairs` to a
 :class:`swarm_envs.physics.cutoff.PairAccumulator` gives (the forces, pair potential and
-close pairs of every unordered pair within the radius, docs/models.md §1 eqs. 9–11), to
-float64 round-off: the numpy pass makes about 40 array passes over 65,536 candidates at
-a time and spends most of its time in memory; this one visits each candidate once, in
-registers. Per pair within ``r`` (``ρ = |x_j − x_i|``, ``u_ij = (x_j − x_i)/ρ``):
-
-``f_ij = (C_a/l_a) e^{−ρ/l_a} − (C_r/l_r) e^{−ρ/l_r} − C_o ((v_i − v_j)·u_ij) e^{−ρ/l_o}``
-(eqs. 10–11), ``+f_ij u_ij`` on ``i`` and ``−f_ij u_ij`` on ``j``;
-``U(ρ) = C_r e^{−ρ/l_r} − C_a e^{−ρ/l_a}`` (eq. 9) to the swarm of ``i``; a close pair
-when ``ρ² < close_radius²``. ``ρ`` is floored at ``RHO_FLOOR`` in ``1/ρ``, so that
-coincident agents give no force (``x_j − x_i = 0``), never NaN.
+close pairs of every unordered pair within the radius), to float64 round-off. Both apply
+the one pair law, :func:`swarm_envs.physics.social_potential.pair_law` (``docs/models.md``
+§1, eqs. 9–11): the numpy pass to chunks of candidates (about 40 array passes over
+65,536 candidates at a time, bound by memory traffic), this one to each candidate once,
+in registers, with ``pair_law`` compiled by numba (``inline="always"``) on scalars. Per
+pair within ``r`` (``r_ij = x_j − x_i``, ``ρ = |r_ij|``): ``(s_ij, U(ρ)) = pair_law(...)``,
+``+s_ij r_ij`` on ``i`` and ``−s_ij r_ij`` on ``j``; ``U(ρ)`` to the swarm of ``i``; a
+close pair when ``ρ² < close_radius²``. ``1/ρ`` is taken of ``max(ρ, RHO_FLOOR)``, so
+that coincident agents give no force (``r_ij = 0``), never NaN.
 
 :func:`knearest_round` does one round of
 :meth:`swarm_envs.physics.neighbors.CellList.knearest_round` per query, in parallel: it
@@ -25,10 +24,12 @@ arbitrarily too).
 In :func:`cell_pair_sums` the points are split into :data:`BLOCKS` blocks of consecutive
 sorted positions, each summed into its own buffer by whichever thread takes it
 (``numba.prange``), and the buffers are added in block order: the result does not
-depend on the number of threads.
+depend on the number of threads. Both loops are ``O(M)`` in the number of points ``M``
+at bounded density (``O(M)`` candidates of the cell runs, each visited once).
 Without numba (it is optional: ``pip install swarm-envs[fast]``) :data:`AVAILABLE` is
 false and the callers keep the numpy pass; ``SWARM_ENVS_NUMBA=0`` forces that too.
-The first call compiles (a few seconds; cached on disk by numba where it can write).
+The first call compiles (cached on disk by numba where it can write; the pair kernel's
+cache entry is keyed on ``pair_law``'s code too, so a change of the law recompiles).
 Calls are serialised by a lock (numba's fallback threading layer, workqueue, does not
 allow concurrent parallel calls). Its OpenMP layer is not fork-safe: processes that use
 the sparse core after a fork should be started with ``spawn`` or ``forkserver`` (as
@@ -37,8 +38,11 @@ SB3's ``SubprocVecEnv`` and Ray do by default).
 
 from __future__ import annotations
 
+import hashlib
 import importlib.util
 import logging
+import marshal
+import math
 import os
 import threading
 import time
@@ -50,7 +54,7 @@ import numpy as np
 
 from swarm_envs.physics.cutoff import PairSums
 from swarm_envs.physics.neighbors import CellList
-from swarm_envs.physics.social_potential import RHO_FLOOR, SocialPotentialParams
+from swarm_envs.physics.social_potential import RHO_FLOOR, SocialPotentialParams, pair_law
 
 __all__ = [
     "AVAILABLE",
@@ -78,19 +82,32 @@ _KERNEL_LOCK = threading.Lock()
 #: quarter of a second, paid on the first :func:`cell_pair_sums` instead).
 AVAILABLE = importlib.util.find_spec("numba") is not None
 
-# `range` until the kernel is compiled, then numba.prange (the kernel reads this global
-# when numba compiles it).
+
+def _scalar_exp(x: float) -> float:
+    """``e^x`` of a float: the ``exp`` that the pair kernel hands to ``pair_law``."""
+    return math.exp(x)
+
+
+# What the kernels read as globals when numba compiles them, set on the first compile:
+# `range`, `pair_law` and `_scalar_exp` until then (the kernels also run as plain
+# Python), then numba.prange and the two functions through numba.njit(inline="always")
+# (inlined into the kernel's loop, where LLVM folds them into the surrounding code).
 prange = range
+_law = pair_law
+_exp = _scalar_exp
 _compiled_fns: dict[Callable[..., Any], Callable[..., Any]] = {}
 
 
 def _compiled(fn: Callable[..., Any]) -> Callable[..., Any]:
     """``fn`` through ``numba.njit(parallel=True)``, made on first use (under the lock)."""
-    global prange
+    global prange, _law, _exp
     if fn not in _compiled_fns:
         import numba
 
-        prange = numba.prange
+        if prange is range:
+            prange = numba.prange
+            _law = numba.njit(inline="always")(pair_law)
+            _exp = numba.njit(inline="always")(_scalar_exp)
         _compiled_fns[fn] = numba.njit(parallel=True, cache=True, nogil=True)(fn)
     return _compiled_fns[fn]
 
@@ -149,78 +166,94 @@ def numba_enabled() -> bool:
     return usable
 
 
-def _pair_pass(
-    coords: np.ndarray,
-    vel: np.ndarray,
-    cell: np.ndarray,
-    own_end: np.ndarray,
-    lo: np.ndarray,
-    hi: np.ndarray,
-    groups: np.ndarray,
-    n_groups: int,
-    r2: float,
-    close2: float,
-    consts: np.ndarray,
-    blocks: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The kernel that numba compiles (see :func:`cell_pair_sums`).
+def _pair_pass_kernel(law_key: str) -> Callable[..., Any]:
+    """The pair kernel, closed over ``law_key``, a hash of :func:`pair_law`'s code.
 
-    ``coords`` and ``vel`` are ``(3, M)``: 2-D points come with a zero third row, so
-    that one loop body, on scalars, serves both dimensions.
+    numba's disk cache keys a kernel on its own file, bytecode and closure, not on the
+    functions it calls from other files: the closure brings ``pair_law`` into the key,
+    so that a changed law is compiled anew instead of loaded stale.
     """
-    m = coords.shape[1]
-    n_rows = lo.shape[0]
-    ca_la, cr_lr, ca, cr, inv_la, inv_lr, inv_lo, align, floor = consts
-    force = np.zeros((blocks, 3, m))
-    pot = np.zeros((blocks, n_groups))
-    close = np.zeros((blocks, n_groups), dtype=np.int64)
-    for b in prange(blocks):
-        start = b * m // blocks
-        stop = (b + 1) * m // blocks
-        for p in range(start, stop):
-            u = cell[p]
-            x0, x1, x2 = coords[0, p], coords[1, p], coords[2, p]
-            v0, v1, v2 = vel[0, p], vel[1, p], vel[2, p]
-            f0 = f1 = f2 = 0.0  # the force on p, added once at the end
-            pot_p = 0.0
-            close_p = 0
-            for r in range(n_rows + 1):
-                if r == 0:  # the rest of p's own row
-                    q0, q1 = p + 1, own_end[u]
-                else:
-                    q0, q1 = lo[r - 1, u], hi[r - 1, u]
-                for q in range(q0, q1):
-                    d0 = coords[0, q] - x0
-                    d1 = coords[1, q] - x1
-                    d2 = coords[2, q] - x2
-                    rho2 = d0 * d0 + d1 * d1 + d2 * d2
-                    if rho2 > r2:
-                        continue
-                    if rho2 < close2:
-                        close_p += 1
-                    rho = np.sqrt(rho2)
-                    e_a = np.exp(rho * inv_la)
-                    e_r = np.exp(rho * inv_lr)
-                    pot_p += cr * e_r - ca * e_a
-                    inv = 1.0 / max(rho, floor)
-                    s = ca_la * e_a - cr_lr * e_r
-                    if align:
-                        proj = (v0 - vel[0, q]) * d0 + (v1 - vel[1, q]) * d1 + (v2 - vel[2, q]) * d2
-                        s -= proj * inv * np.exp(rho * inv_lo)
-                    s *= inv
-                    w0, w1, w2 = s * d0, s * d1, s * d2
-                    f0 += w0
-                    f1 += w1
-                    f2 += w2
-                    force[b, 0, q] -= w0
-                    force[b, 1, q] -= w1
-                    force[b, 2, q] -= w2
-            force[b, 0, p] += f0
-            force[b, 1, p] += f1
-            force[b, 2, p] += f2
-            pot[b, groups[p]] += pot_p
-            close[b, groups[p]] += close_p
-    return force, pot, close
+
+    def _pair_pass(
+        coords: np.ndarray,
+        vel: np.ndarray,
+        cell: np.ndarray,
+        own_end: np.ndarray,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        groups: np.ndarray,
+        n_groups: int,
+        r2: float,
+        close2: float,
+        consts: np.ndarray,
+        blocks: int,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The kernel that numba compiles (see :func:`cell_pair_sums`).
+
+        ``coords`` and ``vel`` are ``(3, M)``: 2-D points come with a zero third row, so
+        that one loop body, on scalars, serves both dimensions. ``consts`` holds
+        ``C_a, C_r, l_a, l_r, C_o, l_o`` (``pair_law``'s parameters), ``align`` (1 for
+        the alignment term, 0 without) and ``RHO_FLOOR``.
+        """
+        _ = law_key  # in the closure: part of numba's cache key (see above)
+        m = coords.shape[1]
+        n_rows = lo.shape[0]
+        C_a, C_r, l_a, l_r, C_o, l_o, align, floor = consts
+        force = np.zeros((blocks, 3, m))
+        pot = np.zeros((blocks, n_groups))
+        close = np.zeros((blocks, n_groups), dtype=np.int64)
+        for b in prange(blocks):
+            start = b * m // blocks
+            stop = (b + 1) * m // blocks
+            for p in range(start, stop):
+                u = cell[p]
+                x0, x1, x2 = coords[0, p], coords[1, p], coords[2, p]
+                v0, v1, v2 = vel[0, p], vel[1, p], vel[2, p]
+                f0 = f1 = f2 = 0.0  # the force on p, added once at the end
+                pot_p = 0.0
+                close_p = 0
+                for r in range(n_rows + 1):
+                    if r == 0:  # the rest of p's own row
+                        q0, q1 = p + 1, own_end[u]
+                    else:
+                        q0, q1 = lo[r - 1, u], hi[r - 1, u]
+                    for q in range(q0, q1):
+                        d0 = coords[0, q] - x0
+                        d1 = coords[1, q] - x1
+                        d2 = coords[2, q] - x2
+                        rho2 = d0 * d0 + d1 * d1 + d2 * d2
+                        if rho2 > r2:
+                            continue
+                        if rho2 < close2:
+                            close_p += 1
+                        rho = math.sqrt(rho2)
+                        inv = 1.0 / max(rho, floor)
+                        if align:  # vdot = (v_p − v_q)·r_pq
+                            vdot = (v0 - vel[0, q]) * d0 + (v1 - vel[1, q]) * d1
+                            vdot += (v2 - vel[2, q]) * d2
+                            s, u_pq = _law(rho, inv, vdot, C_a, C_r, l_a, l_r, C_o, l_o, _exp)
+                        else:
+                            s, u_pq = _law(rho, inv, None, C_a, C_r, l_a, l_r, C_o, l_o, _exp)
+                        pot_p += u_pq
+                        w0, w1, w2 = s * d0, s * d1, s * d2
+                        f0 += w0
+                        f1 += w1
+                        f2 += w2
+                        force[b, 0, q] -= w0
+                        force[b, 1, q] -= w1
+                        force[b, 2, q] -= w2
+                force[b, 0, p] += f0
+                force[b, 1, p] += f1
+                force[b, 2, p] += f2
+                pot[b, groups[p]] += pot_p
+                close[b, groups[p]] += close_p
+        return force, pot, close
+
+    return _pair_pass
+
+
+#: The pair kernel (see :func:`_pair_pass_kernel`).
+_pair_pass = _pair_pass_kernel(hashlib.sha256(marshal.dumps(pair_law.__code__)).hexdigest())
 
 
 def _knn_round(
@@ -321,21 +354,10 @@ def cell_pair_sums(
     align = v is not None and params.C_o != 0
     vel = np.zeros((3, m_pts))  # read for every point; zero without alignment
     if align:
-        vel[:d] = params.C_o * np.asarray(v, dtype=np.float64).T
+        vel[:d] = np.asarray(v, dtype=np.float64).T
     grp = np.zeros(m_pts, np.int64) if groups is None else np.asarray(groups, np.int64)
-    consts = np.array(
-        [
-            params.C_a / params.l_a,
-            params.C_r / params.l_r,
-            params.C_a,
-            params.C_r,
-            -1.0 / params.l_a,
-            -1.0 / params.l_r,
-            -1.0 / params.l_o if params.l_o > 0 else 0.0,
-            1.0 if align else 0.0,
-            RHO_FLOOR,
-        ]
-    )
+    p = params
+    consts = np.array([p.C_a, p.C_r, p.l_a, p.l_r, p.C_o, p.l_o, 1.0 if align else 0.0, RHO_FLOOR])
     force, pot, close = _run(
         _pair_pass,
         coords,

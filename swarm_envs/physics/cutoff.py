@@ -58,7 +58,12 @@ these dominate the error; the bounds hold with a margin of about 10.
 :func:`sparse_forces` and :func:`sparse_energy` evaluate the model's force (eq. 14 with
 eq. 20's sink) and energy (eq. 16) with the pair sums restricted to a given list of
 pairs (each unordered pair once, e.g. from
-:func:`swarm_envs.physics.neighbors.radius_pairs` at ``r_c``). With all pairs listed
+:func:`swarm_envs.physics.neighbors.radius_pairs` at ``r_c``), through
+:class:`PairAccumulator`, which applies the one pair law
+(:func:`~swarm_envs.physics.social_potential.pair_law`) to chunks of pairs; the
+compiled pass of :mod:`swarm_envs.physics.compiled_pairs` applies the same function to
+one pair at a time. Cost is ``O(P)`` in the number ``P`` of listed pairs (``O(N)`` at
+bounded density with the pairs within ``r_c``). With all pairs listed
 they equal :func:`~swarm_envs.physics.social_potential.forces` and
 :func:`~swarm_envs.physics.social_potential.energy` to rounding; with the pairs within
 ``r_c`` they differ by at most the bounds above. Coincident agents follow the dense
@@ -86,6 +91,7 @@ from swarm_envs.physics.social_potential import (
     goal_force,
     goal_potential,
     kinetic_energy,
+    pair_law,
 )
 
 #: Pairs processed per chunk by :func:`pair_sums` (bounded, cache-sized temporaries).
@@ -287,9 +293,11 @@ class PairAccumulator:
     ``dx[k] = x_j[k] − x_i[k]``, ``rho2 = Σ_k dx[k]²``; each unordered pair once) with
     :meth:`add`, as :func:`pair_sums` or
     :meth:`swarm_envs.physics.neighbors.CellList.iter_pairs` produce them; read the
-    :class:`PairSums` from :meth:`result`. Per pair (module docstring, eqs. 9–11):
-    ``f_ij u_ij`` is added to row ``i`` and subtracted from row ``j`` (antisymmetric;
-    ``u_ij = 0`` for coincident agents); ``U(ρ)`` goes to the group of ``i``.
+    :class:`PairSums` from :meth:`result`. Per pair, ``(s_ij, U(ρ_ij))`` from
+    :func:`~swarm_envs.physics.social_potential.pair_law` (``docs/models.md`` §1,
+    eqs. 9–11), on the chunk's arrays: ``s_ij r_ij`` is added to row ``i`` and
+    subtracted from row ``j`` (antisymmetric; no force between coincident agents, as
+    ``1/ρ`` is taken of ``max(ρ, RHO_FLOOR)``); ``U(ρ_ij)`` goes to the group of ``i``.
 
     Args:
         params: model parameters.
@@ -315,8 +323,8 @@ class PairAccumulator:
         self.params = _check_params("PairAccumulator", params)
         self.m = int(m)
         d = 0 if v is None else v.shape[-1]
-        self.vel = (  # C_o v, per component
-            None if v is None or params.C_o == 0 else [params.C_o * v[:, k] for k in range(d)]
+        self.vel = (  # v per component, for (v_i − v_j)·r_ij
+            None if v is None or params.C_o == 0 else [v[:, k] for k in range(d)]
         )
         self.groups = groups
         self.n_groups = int(n_groups)
@@ -341,37 +349,24 @@ class PairAccumulator:
             else:
                 self._close += np.bincount(groups[i[hit]], minlength=n_groups)
         rho = np.sqrt(rho2)
-        gi = None if groups is None else groups[i]
-        scalar = np.zeros_like(rho)
-        for amp, length, sign in ((p.C_a, p.l_a, 1.0), (p.C_r, p.l_r, -1.0)):
-            if amp == 0:
-                continue
-            e = np.multiply(rho, -1.0 / length)
-            np.exp(e, out=e)
-            if self.potential:  # U = C_r e^{−ρ/l_r} − C_a e^{−ρ/l_a} (eq. 9)
-                if gi is None:
-                    self._pot[0] -= sign * amp * float(e.sum())
-                else:
-                    self._pot -= sign * amp * np.bincount(gi, weights=e, minlength=n_groups)
-            e *= sign * amp / length  # ±(C/l) e^{−ρ/l} (eq. 10)
-            scalar += e
         inv = np.maximum(rho, RHO_FLOOR)
         np.reciprocal(inv, out=inv)
-        if self.vel is not None:
-            # Alignment (eq. 11): −C_o ((v_i − v_j)·u_ij) e^{−ρ/l_o}; vel holds C_o v.
+        vdot = None
+        if self.vel is not None:  # (v_i − v_j)·r_ij, not normalised
             vel = self.vel
-            proj = vel[0][i] - vel[0][j]
-            proj *= dx[0]
+            vdot = vel[0][i] - vel[0][j]
+            vdot *= dx[0]
             for k in range(1, len(dx)):
                 t = vel[k][i] - vel[k][j]
                 t *= dx[k]
-                proj += t
-            proj *= inv
-            np.multiply(rho, -1.0 / p.l_o, out=rho)
-            np.exp(rho, out=rho)
-            proj *= rho
-            scalar -= proj
-        scalar *= inv  # now the pair force on i is scalar · r_ij
+                vdot += t
+        scalar, u = pair_law(rho, inv, vdot, p.C_a, p.C_r, p.l_a, p.l_r, p.C_o, p.l_o, np.exp)
+        if self.potential:
+            if groups is None:
+                self._pot[0] += float(u.sum())
+            else:
+                self._pot += np.bincount(groups[i], weights=u, minlength=n_groups)
+        # the pair force on i is scalar · r_ij
         lo = int(min(i.min(), j.min()))
         hi = int(max(i.max(), j.max())) + 1
         il, jl = i - lo, j - lo

@@ -130,7 +130,8 @@ def pair_law(
     C_o: float,
     l_o: float,
     exp: Any,
-) -> tuple[Array, Array]:
+    potential: bool = True,
+) -> tuple[Array, Array | None]:
     """The pair law of the social potential model, per pair: ``(s_ij, U(ρ_ij))``.
 
     ``s_ij`` is the force on i from j per unit of ``r_ij`` (so ``F_i = Σ_j s_ij r_ij``):
@@ -149,17 +150,30 @@ def pair_law(
         C_a, C_r, l_a, l_r, C_o, l_o: the parameters of :class:`SocialPotentialParams`.
         exp: the exponential of the array type (``np.exp``, ``torch.exp``, a scalar
             ``exp`` in compiled loops).
+        potential: ``False`` skips ``U`` (returned as ``None``) where only forces are
+            wanted.
 
     >>> s, u = pair_law(1.0, 1.0, None, 1.0, 1.2, 1.0, 0.2, 0.1, 1.5, math.exp)
     >>> round(s, 6), round(u, 6)  # attraction at ρ = 1 (positive: toward j)
     (0.327452, -0.359794)
     """
+    # Augmented operators only on values made here: in place for arrays (fewer
+    # temporaries), plain rebinding for scalars, traced alike by torch.compile.
     e_a = exp(rho * (-1.0 / l_a))
     e_r = exp(rho * (-1.0 / l_r))
-    s = (C_a / l_a) * e_a - (C_r / l_r) * e_r
+    s = (C_a / l_a) * e_a
+    s -= (C_r / l_r) * e_r
     if vdot is not None and C_o != 0:
-        s = s - (C_o * vdot * inv_rho) * exp(rho * (-1.0 / l_o))
-    return s * inv_rho, C_r * e_r - C_a * e_a
+        align = vdot * inv_rho
+        align *= exp(rho * (-1.0 / l_o))
+        align *= C_o
+        s -= align
+    s *= inv_rho
+    if not potential:
+        return s, None
+    u = C_r * e_r
+    u -= C_a * e_a
+    return s, u
 
 
 def sink_law(dist: Array, inv_dist: Array, C_g: float, l_g: float, exp: Any) -> tuple[Array, Array]:
@@ -179,9 +193,16 @@ def sink_law(dist: Array, inv_dist: Array, C_g: float, l_g: float, exp: Any) -> 
 
 
 def _pair_law(
-    rho: Array, inv_rho: Array, vdot: Array | None, p: SocialPotentialParams, xp: ArrayNamespace
-):
-    return pair_law(rho, inv_rho, vdot, p.C_a, p.C_r, p.l_a, p.l_r, p.C_o, p.l_o, xp.exp)
+    rho: Array,
+    inv_rho: Array,
+    vdot: Array | None,
+    p: SocialPotentialParams,
+    xp: ArrayNamespace,
+    potential: bool = True,
+) -> tuple[Array, Array | None]:
+    return pair_law(
+        rho, inv_rho, vdot, p.C_a, p.C_r, p.l_a, p.l_r, p.C_o, p.l_o, xp.exp_temp, potential
+    )
 
 
 # --------------------------------------------------------------------------- geometry
@@ -215,34 +236,44 @@ def pair_geometry(x: Array) -> PairGeometry:
     dx = [c[..., None, :] - c[..., :, None] for c in xs]
     rho2 = dx[0] * dx[0]
     for k in range(1, len(dx)):
-        rho2 = rho2 + dx[k] * dx[k]
-    return PairGeometry(dx, xp.sqrt(rho2))
+        rho2 += dx[k] * dx[k]
+    return PairGeometry(dx, xp.sqrt_temp(rho2))
 
 
 def pair_terms(
-    geometry: PairGeometry, v: Array | None, params: SocialPotentialParams
-) -> tuple[list[Array], Array]:
+    geometry: PairGeometry,
+    v: Array | None,
+    params: SocialPotentialParams,
+    *,
+    energy: bool = True,
+) -> tuple[list[Array], Array | None]:
     """The pair part of eq. 14 per component and the pair energy ``Σ_{i<j} U(ρ_ij)``.
 
     Returns ``([F_0, ..., F_{d−1}] each (..., N), E (...))`` with
     ``F_i = Σ_j s_ij r_ij`` from :func:`pair_law` (``v`` its velocities ``(..., N, d)``
     or components; ``None`` skips alignment). ``E`` sums ``U`` over all ordered pairs,
-    subtracts the ``N`` diagonal terms ``U(0) = C_r − C_a`` and halves.
+    subtracts the ``N`` diagonal terms ``U(0) = C_r − C_a`` and halves (``None`` with
+    ``energy=False``).
     """
     p = params
     dx, rho = geometry.dx, geometry.rho
     xp = namespace(rho)
-    inv_rho = 1.0 / xp.clip(rho, RHO_FLOOR, None)
+    inv_rho = xp.reciprocal_temp(xp.clip(rho, RHO_FLOOR, None))
     vdot = None
     if v is not None and p.C_o != 0:
         vs = components(v)
-        vdot = (vs[0][..., :, None] - vs[0][..., None, :]) * dx[0]
+        vdot = vs[0][..., :, None] - vs[0][..., None, :]
+        vdot *= dx[0]
         for k in range(1, len(dx)):
-            vdot = vdot + (vs[k][..., :, None] - vs[k][..., None, :]) * dx[k]
-    s, u = _pair_law(rho, inv_rho, vdot, p, xp)
-    n = rho.shape[-1]
-    energy = 0.5 * (xp.sum(xp.sum(u, axis=-1), axis=-1) - n * (p.C_r - p.C_a))
-    return [xp.sum_product(s, c) for c in dx], energy
+            term = vs[k][..., :, None] - vs[k][..., None, :]
+            term *= dx[k]
+            vdot += term
+    s, u = _pair_law(rho, inv_rho, vdot, p, xp, potential=energy)
+    total = None
+    if energy:
+        n = rho.shape[-1]
+        total = 0.5 * (xp.sum(xp.sum(u, axis=-1), axis=-1) - n * (p.C_r - p.C_a))
+    return [xp.sum_product(s, c) for c in dx], total
 
 
 def goal_terms(
@@ -344,7 +375,7 @@ def forces(
     xp = namespace(x)
     p = params
     geo = pair_geometry(x) if geometry is None else geometry
-    fs, _ = pair_terms(geo, v, p)
+    fs, _ = pair_terms(geo, v, p, energy=False)
     if p.beta > 0:
         fs = [fc - p.beta * v[..., k] for k, fc in enumerate(fs)]
     if goal is not None:

@@ -18,6 +18,7 @@ large array. A reset of a few swarms re-measures those swarms only, in place.
 
 from __future__ import annotations
 
+import ctypes
 import sys
 from typing import Any
 
@@ -121,9 +122,7 @@ class NativeSwarmNavCore:
         self._stats: dict[str, np.ndarray] = {}
         self._prev: dict[str, np.ndarray] = {}
         self._start: dict[str, np.ndarray] = {}
-        self._params = step_params(cfg, self.dtype)
-        self._params.batch = B
-        self._fn = self._lib.f32 if self.dtype == np.float32 else self._lib.f64
+        self._bind()
         self._extra = tuple(s for s in STATISTICS if s.name not in self._lib.info.statistics)
         self._measure()
         self._prev, self._start = self.stats(), self.stats()
@@ -145,24 +144,39 @@ class NativeSwarmNavCore:
     ) -> None:
         """The C step on all swarms (``rows`` None) or on ``rows``, in place."""
         n = self.batch if rows is None else rows.size
-        ptr = np.ndarray.__array_interface__.__get__
+        x, v, f, goal, packed = self._state_ptrs
         code = self._fn(
-            self._params_ptr(),
+            self._params_ptr,
             0,
             n,
-            None if rows is None else ptr(rows)["data"][0],
-            *(ptr(a)["data"][0] for a in (self._x, self._v, self._f, self._goal, actions, move)),
-            *(ptr(a)["data"][0] for a in (self._x, self._v, self._f, obs, self._packed)),
+            None if rows is None else rows.ctypes.data,
+            x,
+            v,
+            f,
+            goal,
+            actions.ctypes.data,
+            move.ctypes.data,
+            x,
+            v,
+            f,
+            obs.ctypes.data,
+            packed,
         )
         if code == 3:
             raise ValueError(NON_FINITE_ACTIONS)
         if code:
             raise MemoryError("the C step could not allocate its scratch memory")
 
-    def _params_ptr(self) -> int:
-        import ctypes
-
-        return ctypes.addressof(self._params)
+    def _bind(self) -> None:
+        """The kernel, its parameters and the addresses of the state (fixed buffers)."""
+        self._lib = load_library()
+        self._params = step_params(self.cfg, self.dtype)
+        self._params.batch = self.batch
+        self._params_ptr = ctypes.addressof(self._params)
+        self._fn = self._lib.f32 if self.dtype == np.float32 else self._lib.f64
+        self._state_ptrs = tuple(
+            a.ctypes.data for a in (self._x, self._v, self._f, self._goal, self._packed)
+        )
 
     def _measure(self, rows: np.ndarray | None = None) -> None:
         """Observations and statistics of the current state (no step)."""
@@ -254,10 +268,12 @@ class NativeSwarmNavCore:
         else:
             inputs = RewardInputs(stats, prev, start, effort, self.cfg.n_agents, xp)
             r = np.asarray(reward(self.cfg.reward, inputs), dtype=np.float64)
+        # _unpack made fresh arrays: the caller gets them, the next reward a copy (a reset
+        # writes into the copy).
         self._prev = {key: value.copy() for key, value in stats.items()}
         success = stats["success"].astype(bool)
         truncated = (self.t >= self.cfg.max_steps) & ~success
-        return r, success, truncated, self.stats()
+        return r, success, truncated, stats
 
     # ------------------------------------------------------------------ views
     def stats(self) -> dict[str, np.ndarray]:
@@ -294,17 +310,13 @@ class NativeSwarmNavCore:
 
     # ------------------------------------------------------------------ pickling
     def __getstate__(self) -> dict[str, Any]:
-        state = {
-            k: v for k, v in self.__dict__.items() if k not in ("_lib", "_params", "_fn", "_pool")
-        }
+        skip = ("_lib", "_params", "_params_ptr", "_fn", "_pool", "_state_ptrs")
+        state = {k: v for k, v in self.__dict__.items() if k not in skip}
         state["_obs"] = self._obs.copy()
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
-        self._lib = load_library()
-        self._params = step_params(self.cfg, self.dtype)
-        self._params.batch = self.batch
-        self._fn = self._lib.f32 if self.dtype == np.float32 else self._lib.f64
+        self._bind()
         B, N = self.batch, self.cfg.n_agents
         self._pool = _BufferPool((B, N, self.obs_dim))
