@@ -3,7 +3,7 @@
 Usage::
 
     python benchmarks/compare.py [--sizes 32x1,32x64,32x1024] [--seconds 0.5] [--repeats 5]
-                                 [--threads T] [--json out.json] [--no-physics]
+                                 [--threads T] [--json out.json] [--no-physics] [--update-docs]
 
 Installs nothing. VMAS rows appear where ``vmas`` imports, MPE2 rows where ``mpe2``
 imports (try a separate venv: ``python3.11 -m venv /tmp/peers && /tmp/peers/bin/pip
@@ -54,8 +54,10 @@ import math
 import os
 import platform
 import statistics
+import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -116,6 +118,37 @@ def numpy_vec_env(n: int, b: int) -> Step:
     return lambda: venv.step(a)
 
 
+def swarm_state(x: np.ndarray, v: np.ndarray) -> dict[str, float]:
+    """The physical state a row timed: mean speed, expanse, nearest-neighbour distance."""
+    x, v = np.asarray(x, np.float64), np.asarray(v, np.float64)
+    n = x.shape[-2]
+    rho = np.linalg.norm(x[..., :, None, :] - x[..., None, :, :], axis=-1)
+    rho[..., np.arange(n), np.arange(n)] = np.inf
+    return {
+        "speed": float(np.linalg.norm(v, axis=-1).mean()),
+        "expanse": float(np.linalg.norm(x - x.mean(axis=-2, keepdims=True), axis=-1).mean()),
+        "nnd": float(rho.min(axis=-1).mean()) if n > 1 else 0.0,
+    }
+
+
+def parallel_env(n: int, b: int) -> Step | None:
+    """One PettingZoo ``parallel_env`` step with the dict API, default backend (B = 1)."""
+    if b != 1:
+        return None
+    env = swarm_nav_v0.parallel_env(n_agents=n, max_cycles=200)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    actions = {a: rng.uniform(-1, 1, 2).astype(np.float32) for a in env.possible_agents}
+
+    def step() -> None:
+        if not env.agents:
+            env.reset()
+        env.step(actions)
+
+    step.state = lambda: swarm_state(env.core.x, env.core.v)  # type: ignore[attr-defined]
+    return step
+
+
 def vec_env(backend: str) -> Callable[[int, int], Step | None]:
     """The SB3 VecEnv on ``backend``: ``"native"`` (the C step, the default where it
     builds) or ``"torch"`` (the torch core, compiled)."""
@@ -130,7 +163,12 @@ def vec_env(backend: str) -> Callable[[int, int], Step | None]:
         venv.seed(0)
         venv.reset()
         a = actions_for((venv.num_envs, 2))
-        return lambda: venv.step(a)
+
+        def step() -> Any:
+            return venv.step(a)
+
+        step.state = lambda: swarm_state(venv.cores[0].x, venv.cores[0].v)  # type: ignore[attr-defined]
+        return step
 
     return make
 
@@ -279,6 +317,7 @@ ROWS: list[tuple[str, Callable[[int, int], Step | None], bool]] = [
     ("native core", native_core, False),
     ("torch vec_env (compiled)", vec_env("torch"), False),
     ("native vec_env", vec_env("native"), False),
+    ("pettingzoo parallel_env", parallel_env, False),
     ("vmas navigation", vmas_navigation, False),
     ("vmas pairwise", vmas_pairwise, False),
     ("mpe2 simple_spread", mpe2_spread, False),
@@ -314,11 +353,13 @@ def compare(n: int, b: int, seconds: float, repeats: int, physics: bool) -> list
     for _ in range(repeats):
         for label, fn in steps.items():
             rates[label].append(time_window(fn, seconds))
+    states = {label: fn.state() for label, fn in steps.items() if hasattr(fn, "state")}
     return [
         {
             "row": label,
             "n_agents": n,
             "batch": b,
+            "state": states.get(label),
             "steps_per_s_median": statistics.median(r),
             "steps_per_s_best": max(r),
             "agent_steps_per_s_median": statistics.median(r) * n * b,
@@ -328,11 +369,13 @@ def compare(n: int, b: int, seconds: float, repeats: int, physics: bool) -> list
     ]
 
 
-def print_table(results: list[dict]) -> None:
-    print(
-        "| row | N | B | agent-steps/s (median) | agent-steps/s (best) | vs numpy core (median) |"
-    )
-    print("|---|---:|---:|---:|---:|---:|")
+def table(results: list[dict]) -> str:
+    """The throughput table (markdown), with each timed env's physical state."""
+    lines = [
+        "| row | N | B | agent-steps/s (median) | agent-steps/s (best) | vs numpy core "
+        "(median) | state at the end (speed, expanse, NND) |",
+        "|---|---:|---:|---:|---:|---:|---|",
+    ]
     for size in sorted({(r["n_agents"], r["batch"]) for r in results}):
         rows = [r for r in results if (r["n_agents"], r["batch"]) == size]
         base = next((r for r in rows if r["row"] == "numpy core"), None)
@@ -342,11 +385,14 @@ def print_table(results: list[dict]) -> None:
                 if base
                 else "-"
             )
-            print(
+            st = r.get("state")
+            state = f"{st['speed']:.2f}, {st['expanse']:.2f}, {st['nnd']:.3f}" if st else ""
+            lines.append(
                 f"| {r['row']} | {r['n_agents']} | {r['batch']} | "
                 f"{fmt(r['agent_steps_per_s_median'])} | {fmt(r['agent_steps_per_s_best'])} "
-                f"| {ratio} |"
+                f"| {ratio} | {state} |"
             )
+    return "\n".join(lines)
 
 
 #: (full-step row, physics-only row) pairs of the "cost of the full step" table.
@@ -356,11 +402,12 @@ FULL_VS_PHYSICS = (
     ("torch vec_env (compiled)", "physics only, torch compiled"),
     ("native vec_env", "physics only, torch compiled"),
     ("numpy core", "physics only, numpy"),
+    ("pettingzoo parallel_env", "physics only, numpy"),
 )
 
 
-def print_full_vs_physics(results: list[dict]) -> None:
-    """How many times the physics alone costs the full step (the target: ≤ 2×).
+def full_vs_physics(results: list[dict]) -> str:
+    """How many times the physics alone costs the full step (markdown).
 
     Both rows of a ratio come from the same run, their windows alternating; a ratio of
     medians and a ratio of bests (the bests are the least disturbed windows).
@@ -376,11 +423,27 @@ def print_full_vs_physics(results: list[dict]) -> None:
                 lines.append(
                     f"| {full} | {physics} | {size[0]} | {size[1]} | {median:.2f}x | {best:.2f}x |"
                 )
-    if lines:
-        print("\nCost of the full step (observations, reward, statistics) over the physics alone:")
-        print("| full step | physics alone | N | B | time ratio (medians) | time ratio (bests) |")
-        print("|---|---|---:|---:|---:|---:|")
-        print("\n".join(lines))
+    if not lines:
+        return ""
+    head = [
+        "| full step | physics alone | N | B | time ratio (medians) | time ratio (bests) |",
+        "|---|---|---:|---:|---:|---:|",
+    ]
+    return "\n".join(head + lines)
+
+
+#: The block of docs/performance.md that ``--update-docs`` rewrites.
+DOCS_BEGIN, DOCS_END = "<!-- begin compare.py -->", "<!-- end compare.py -->"
+
+
+def update_docs(path: Path, text: str) -> None:
+    """Replace the block between :data:`DOCS_BEGIN` and :data:`DOCS_END` of ``path``."""
+    doc = path.read_text()
+    if DOCS_BEGIN not in doc or DOCS_END not in doc:
+        raise SystemExit(f"{path} has no {DOCS_BEGIN} ... {DOCS_END} block")
+    head, rest = doc.split(DOCS_BEGIN, 1)
+    tail = rest.split(DOCS_END, 1)[1]
+    path.write_text(f"{head}{DOCS_BEGIN}\n{text}\n{DOCS_END}{tail}")
 
 
 def fmt(rate: float) -> str:
@@ -413,6 +476,9 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=None, help="torch.set_num_threads")
     parser.add_argument("--json", default=None, help="also write the results here")
     parser.add_argument("--no-physics", action="store_true", help="skip physics-only rows")
+    parser.add_argument(
+        "--update-docs", action="store_true", help="rewrite the tables of docs/performance.md"
+    )
     args = parser.parse_args()
     if args.threads is not None:
         torch.set_num_threads(args.threads)
@@ -428,9 +494,16 @@ def main() -> None:
     for n, b in parse_sizes(args.sizes):
         print(f"\n== N = {n}, B = {b} ==", flush=True)
         results += compare(n, b, args.seconds, args.repeats, not args.no_physics)
+    command = " ".join(["python benchmarks/compare.py", *sys.argv[1:]])
+    text = (
+        f"Measured by `{command.replace(' --update-docs', '')}` on {machine()}.\n\n"
+        f"{table(results)}\n\nCost of the full step (observations, reward, statistics; "
+        f"the dict API for PettingZoo) over the physics alone:\n\n{full_vs_physics(results)}"
+    )
     print()
-    print_table(results)
-    print_full_vs_physics(results)
+    print(text)
+    if args.update_docs:
+        update_docs(Path(__file__).resolve().parent.parent / "docs" / "performance.md", text)
     if args.json:
         with open(args.json, "w") as fh:
             json.dump({"machine": machine(), "results": results}, fh, indent=1)

@@ -364,3 +364,24 @@ def test_the_switch_turns_it_off_or_requires_it(monkeypatch):
     monkeypatch.setenv(build.NATIVE_ENV, "sometimes")
     with pytest.raises(ValueError, match="SWARM_ENVS_NATIVE must be 0, 1 or auto"):
         NativeSwarmNavCore.unsupported(SwarmConfig())
+
+
+@needs_native
+def test_a_statistic_the_kernel_does_not_write_comes_from_the_shared_definition():
+    # As if the kernel did not declare these statistics: the core computes them from its
+    # state with the definitions of swarm_envs.envs.task.statistics.
+    from swarm_envs.envs.task import STATISTICS
+
+    cfg = SwarmConfig(n_agents=7, n_neighbors=3)
+    core, ref = NativeSwarmNavCore(cfg, batch=2), SwarmNavCore(cfg, batch=2)
+    names = ("polarization", "nearest_neighbor_distance", "fraction_arrived")
+    core._extra = tuple(s for s in STATISTICS if s.name in names)
+    core._packed[:] = np.nan  # the kernel's columns for them must not be read
+    rng, ref_rng = np.random.default_rng(3), np.random.default_rng(3)
+    core.reset(rng)
+    ref.reset(ref_rng)
+    a = np.random.default_rng(4).uniform(-1, 1, (2, 7, 2))
+    for _ in range(3):
+        got, want = core.step(a)[3], ref.step(a)[3]
+        for key in names:
+            np.testing.assert_allclose(got[key], want[key], rtol=1e-12, atol=1e-12)
