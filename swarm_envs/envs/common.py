@@ -51,6 +51,17 @@ def check_batch(batch: Any) -> int:
     return int(batch)
 
 
+def check_dtype(dtype: Any) -> np.dtype:
+    """A core's state dtype: float32 or float64, else :class:`ValueError`."""
+    try:
+        out = np.dtype(dtype)
+    except TypeError:
+        out = None
+    if out not in (np.dtype(np.float32), np.dtype(np.float64)):
+        raise ValueError(f"dtype must be float32 or float64, got {dtype!r}")
+    return out
+
+
 def draw_starts(
     cfg: Any, rng: np.random.Generator, n: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -30,6 +30,7 @@ from swarm_envs.envs.common import (
     check_action_shape,
     check_actions,
     check_batch,
+    check_dtype,
     draw_starts,
     wide_dtypes,
 )
@@ -81,9 +82,7 @@ class SwarmNavCore:
     def __init__(self, cfg: SwarmConfig, batch: int = 1, dtype: Any = np.float64) -> None:
         self.cfg = cfg
         self.batch = check_batch(batch)
-        self.dtype = np.dtype(dtype)
-        if self.dtype not in (np.dtype(np.float32), np.dtype(np.float64)):
-            raise ValueError(f"dtype must be float32 or float64, got {dtype!r}")
+        self.dtype = check_dtype(dtype)
         B, N, d = self.batch, cfg.n_agents, cfg.dim
         self.obs_dim = observation_size(cfg)
         self.x = np.zeros((B, N, d), self.dtype)

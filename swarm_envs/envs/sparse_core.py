@@ -86,14 +86,13 @@ from swarm_envs.physics.integrators import euler_update
 from swarm_envs.physics.neighbors import CELL_MARGIN, REACH, CellList, knn
 
 #: Agents per swarm from which to use :class:`SparseSwarmNavCore`: above the crossover
-#: with the dense core measured by ``benchmarks/large_swarms.py`` (about 300 agents in
-#: 2-D, 300–500 in 3-D, float64, default config at the start density of N = 10), where
-#: the sparse core is already 1.4–2 times faster in 2-D and on par in 3-D or faster.
+#: with the dense cores that ``benchmarks/large_swarms.py`` measures (default config at
+#: the start density of N = 10), with a margin.
 SPARSE_MIN_AGENTS = 500
 
 #: From this many agents in a core (B·N), the k-nearest-neighbour search of a new state
 #: runs in a worker thread while the pair pass runs in the caller's (numpy releases the
-#: GIL in its array loops): 10–25 % off a step of 100,000 agents on 2 cores.
+#: GIL in its array loops), on machines with more than one core.
 KNN_AHEAD_MIN_AGENTS = 4000
 
 _KNN_WORKERS: list[ThreadPoolExecutor] = []  # one pool, made on first use

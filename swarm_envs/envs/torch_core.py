@@ -43,6 +43,7 @@ from swarm_envs.envs.common import (
     NON_FINITE_ACTIONS,
     check_actions,
     check_batch,
+    check_dtype,
     draw_starts,
     wide_dtypes,
 )
@@ -67,12 +68,7 @@ def partial_reset_batch(batch: int) -> int | None:
 
 
 def _torch_dtype(dtype: Any) -> tuple[np.dtype, torch.dtype]:
-    try:
-        np_dtype = np.dtype(dtype)
-    except TypeError:
-        np_dtype = None
-    if np_dtype not in (np.dtype(np.float32), np.dtype(np.float64)):
-        raise ValueError(f"dtype must be float32 or float64, got {dtype!r}")
+    np_dtype = check_dtype(dtype)
     return np_dtype, (torch.float32 if np_dtype == np.float32 else torch.float64)
 
 

@@ -29,6 +29,7 @@ from swarm_envs.envs.common import (
     NON_FINITE_ACTIONS,
     check_action_shape,
     check_batch,
+    check_dtype,
     draw_starts,
     wide_dtypes,
 )
@@ -101,9 +102,7 @@ class NativeSwarmNavCore:
             raise ValueError(f"NativeSwarmNavCore: {reason}")
         self.cfg = cfg
         self.batch = check_batch(batch)
-        self.dtype = np.dtype(dtype)
-        if self.dtype not in (np.dtype(np.float32), np.dtype(np.float64)):
-            raise ValueError(f"dtype must be float32 or float64, got {dtype!r}")
+        self.dtype = check_dtype(dtype)
         B, N, d = self.batch, cfg.n_agents, cfg.dim
         self.obs_dim = observation_size(cfg)
         self.t = np.zeros(B, np.int64)
