@@ -6,7 +6,7 @@ Usage: ``python benchmarks/gpu.py [--sizes 32x1,32x1024,32x4096,128x64,128x1024,
 Rows per size (N agents × B swarms, float32, compiled):
 
 - ``physics only``: one Euler step of the social potential
-  (:class:`~swarm_envs.physics.torch_backend.SocialPotentialStepper`);
+  (:class:`~swarm_envs._runtime.torch_compile.SocialPotentialStepper`);
 - ``core, on device``: :meth:`TorchSwarmNavCore.step` with the actions as a CUDA tensor,
   then :meth:`~TorchSwarmNavCore.observe_tensor` (the observations stay on the GPU, as a
   GPU learner would take them; the ``(B, 11)`` statistics and rewards come to the host
@@ -30,10 +30,10 @@ from collections.abc import Callable
 import numpy as np
 import torch
 
+from swarm_envs._runtime.torch_compile import SocialPotentialStepper
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.torch_core import TorchSwarmNavCore
 from swarm_envs.physics import SocialPotentialParams, random_swarm
-from swarm_envs.physics.torch_backend import SocialPotentialStepper
 
 
 def rates(
