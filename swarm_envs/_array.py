@@ -81,6 +81,27 @@ class ArrayNamespace:
         """``Σ_j a[..., j] b[..., j]``: the sum of products over the last axis."""
         return np.einsum("...j,...j->...", a, b)
 
+    def sum_components(self, a: Array) -> Array:
+        """The sum over a short last axis (the d = 2 or 3 components of a vector),
+        written component by component: a compiler fuses that into the surrounding
+        loops, where a reduction over an axis of length 2 or 3 would stand alone."""
+        total = a[..., 0]
+        for k in range(1, a.shape[-1]):
+            total = total + a[..., k]
+        return total
+
+    def norm(self, a: Array) -> Array:
+        """The Euclidean norm over the last axis (the vector's components)."""
+        return self.sqrt(self.sum_components(a * a))
+
+    def sum_agents(self, a: Array) -> Array:
+        """``Σ_i a[..., i, :]``: vectors ``(..., N, d)`` summed over the agents."""
+        return a.sum(axis=-2)
+
+    def mean_agents(self, a: Array) -> Array:
+        """The mean of vectors ``(..., N, d)`` over the agents, shaped ``(..., d)``."""
+        return a.mean(axis=-2)
+
     def amax(self, a: Array, axis: int | tuple[int, ...]) -> Array:
         return np.amax(a, axis=axis)
 
@@ -201,6 +222,14 @@ class TorchNamespace(ArrayNamespace):
     def gather_agents(self, table: Array, index: Array) -> Array:
         rows = self.torch.arange(table.shape[0], device=table.device)[:, None, None]
         return table[rows, index]
+
+    def sum_agents(self, a: Array) -> Array:
+        # Component by component: TorchInductor fuses a reduction over the innermost
+        # axis, not one over the agents with the components after them.
+        return self.torch.stack([a[..., k].sum(-1) for k in range(a.shape[-1])], dim=-1)
+
+    def mean_agents(self, a: Array) -> Array:
+        return self.sum_agents(a) / a.shape[-2]
 
 
 class ScalarNamespace(ArrayNamespace):

@@ -112,7 +112,7 @@ def _as_pair(x: Any, v: Any) -> tuple[Any, Any]:
 
 def _norm(a: Any, xp: ArrayNamespace) -> Any:
     """Euclidean norm over the last axis, shape ``a.shape[:-1]``."""
-    return xp.sqrt(xp.sum(a * a, axis=-1))
+    return xp.norm(a)
 
 
 def _unit(a: Any, norm: Any, keep: Any, xp: ArrayNamespace) -> Any:
@@ -129,7 +129,7 @@ def _headings(v: Any, xp: ArrayNamespace) -> Any:
 
 def _relative(x: Any, xp: ArrayNamespace) -> Any:
     """``r_ic = r_i − r_c``, shaped like ``x``."""
-    return x - xp.mean(x, axis=-2)[..., None, :]
+    return x - xp.mean_agents(x)[..., None, :]
 
 
 def _unit_relative(x: Any, xp: ArrayNamespace) -> Any:
@@ -137,7 +137,10 @@ def _unit_relative(x: Any, xp: ArrayNamespace) -> Any:
     r = _relative(x, xp)
     dist = _norm(r, xp)
     n = x.shape[-2]
-    scale = xp.amax(xp.abs(x), axis=(-2, -1))[..., None]  # (..., 1)
+    largest = xp.abs(x[..., 0])
+    for k in range(1, x.shape[-1]):
+        largest = xp.where(xp.abs(x[..., k]) > largest, xp.abs(x[..., k]), largest)
+    scale = xp.amax(largest, axis=-1)[..., None]  # (..., 1): max_i |r_i|_∞
     tol = (CENTRE_RTOL * xp.eps(x) * math.sqrt(n)) * scale
     return _unit(r, dist, dist > tol, xp)
 
@@ -182,7 +185,7 @@ def centroid(x: ArrayLike) -> np.ndarray:
     array([1., 1.])
     """
     x = _as_state("positions", x)
-    return namespace(x).mean(x, axis=-2)
+    return namespace(x).mean_agents(x)
 
 
 def polarization(v: ArrayLike) -> np.ndarray:
@@ -209,7 +212,7 @@ def polarization(v: ArrayLike) -> np.ndarray:
     v = _as_state("velocities", v)
     xp = namespace(v)
     n = v.shape[-2]
-    return _result(xp.clip(_norm(xp.sum(_headings(v, xp), axis=-2), xp) / n, None, 1.0), v)
+    return _result(xp.clip(_norm(xp.sum_agents(_headings(v, xp)), xp) / n, None, 1.0), v)
 
 
 def velocity_polarization(v: ArrayLike) -> np.ndarray:
@@ -230,7 +233,7 @@ def velocity_polarization(v: ArrayLike) -> np.ndarray:
     v = _as_state("velocities", v)
     xp = namespace(v)
     n = v.shape[-2]
-    return _result(_norm(xp.sum(v, axis=-2), xp) / n, v)
+    return _result(_norm(xp.sum_agents(v), xp) / n, v)
 
 
 def spherical_variance(v: ArrayLike) -> np.ndarray:

@@ -391,7 +391,7 @@ def kinetic_energy(v: Array, params: SocialPotentialParams) -> Array:
     if not type(v).__module__.startswith("torch"):
         v = np.asarray(v)
     xp = namespace(v)
-    return 0.5 * params.m * xp.sum(v * v, axis=(-2, -1))
+    return 0.5 * params.m * xp.sum(xp.sum_components(v * v), axis=-1)
 
 
 def potential_energy(

@@ -80,8 +80,8 @@ def _arrived_count(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
 
 
 def _centroid_distance(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
-    offset = xp.mean(f.x, axis=-2) - f.goal
-    return xp.sqrt(xp.sum(offset * offset, axis=-1))
+    offset = xp.mean_agents(f.x) - f.goal
+    return xp.norm(offset)
 
 
 def _success(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
