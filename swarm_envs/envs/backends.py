@@ -94,10 +94,13 @@ def _auto(cfg: SwarmConfig, batch: int) -> tuple[str, str | None]:
     why = unsupported(cfg, "native")
     if why is None:
         return "native", None
+    from swarm_envs.envs.native.core import UNAVAILABLE
+
+    missing = why if why.startswith(UNAVAILABLE) else None  # not built here: say so
     if cfg.dynamics == "social_potential" and cfg.integrator == "semi_implicit_euler":
         if batch * cfg.n_agents >= TORCH_MIN_SLOTS and unsupported(cfg, "torch") is None:
-            return "torch", None
-        return "numpy", why if "not available" in why else None
+            return "torch", missing
+        return "numpy", missing
     return "numpy", None
 
 

@@ -44,7 +44,11 @@ from swarm_envs.envs.task import (
     reward,
 )
 
-__all__ = ["NativeSwarmNavCore"]
+__all__ = ["UNAVAILABLE", "NativeSwarmNavCore"]
+
+#: How :meth:`NativeSwarmNavCore.unsupported` starts its reason when the C step cannot be
+#: built or loaded here (rather than refusing the config).
+UNAVAILABLE = "the C step is not available"
 
 _EFFORT = PACKED_COLUMNS.index("effort")
 
@@ -134,7 +138,7 @@ class NativeSwarmNavCore:
         if not use:
             if why == f"{NATIVE_ENV}=0":
                 return f"switched off ({NATIVE_ENV}=0)"
-            return f"the C step is not available ({why})"
+            return f"{UNAVAILABLE} ({why})"
         return unsupported(cfg, load_library().info)
 
     # ------------------------------------------------------------------ the C step
