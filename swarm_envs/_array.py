@@ -58,9 +58,6 @@ class ArrayNamespace:
     def abs(self, a: Array) -> Array:
         return np.abs(a)
 
-    def floor(self, a: Array) -> Array:
-        return np.floor(a)
-
     def where(self, cond: Array, a: Array, b: Array) -> Array:
         return np.where(cond, a, b)
 
@@ -117,9 +114,6 @@ class ArrayNamespace:
     def ones(self, shape: tuple[int, ...], like: Array) -> Array:
         return np.ones(shape, dtype=like.dtype)
 
-    def arange(self, n: int, like: Array) -> Array:
-        return np.arange(n)
-
     def array(self, values: Sequence[float], like: Array) -> Array:
         """A 1-D array of ``values`` in the dtype (and on the device) of ``like``."""
         return np.asarray(values, dtype=like.dtype)
@@ -171,9 +165,6 @@ class TorchNamespace(ArrayNamespace):
     def abs(self, a: Array) -> Array:
         return self.torch.abs(a)
 
-    def floor(self, a: Array) -> Array:
-        return self.torch.floor(a)
-
     def where(self, cond: Array, a: Array, b: Array) -> Array:
         return self.torch.where(cond, a, b)
 
@@ -203,9 +194,6 @@ class TorchNamespace(ArrayNamespace):
 
     def ones(self, shape: tuple[int, ...], like: Array) -> Array:
         return self.torch.ones(shape, dtype=like.dtype, device=like.device)
-
-    def arange(self, n: int, like: Array) -> Array:
-        return self.torch.arange(n, device=like.device)
 
     def array(self, values: Sequence[float], like: Array) -> Array:
         return self.torch.tensor(values, dtype=like.dtype, device=like.device)
@@ -253,9 +241,6 @@ class ScalarNamespace(ArrayNamespace):
 
     def abs(self, a: Array) -> Array:
         return abs(a)
-
-    def floor(self, a: Array) -> Array:
-        return float(math.floor(a))
 
     def where(self, cond: Array, a: Array, b: Array) -> Array:
         return a if cond else b

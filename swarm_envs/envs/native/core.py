@@ -100,8 +100,8 @@ class NativeSwarmNavCore:
     backend = "native"
 
     def __init__(self, cfg: Any, batch: int = 1, dtype: Any = np.float64) -> None:
-        self._lib: Library = load_library()
-        reason = unsupported(cfg, self._lib.info)
+        library: Library = load_library()
+        reason = unsupported(cfg, library.info)
         if reason is not None:
             raise ValueError(f"NativeSwarmNavCore: {reason}")
         self.cfg = cfg
@@ -126,7 +126,7 @@ class NativeSwarmNavCore:
         self._prev: dict[str, np.ndarray] = {}
         self._start: dict[str, np.ndarray] = {}
         self._bind()
-        self._extra = tuple(s for s in STATISTICS if s.name not in self._lib.info.statistics)
+        self._extra = tuple(s for s in STATISTICS if s.name not in library.info.statistics)
         self._measure()
         self._prev, self._start = self.stats(), self.stats()
 
