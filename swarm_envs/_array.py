@@ -129,11 +129,16 @@ class ArrayNamespace:
         """Machine epsilon of ``a``'s floating dtype."""
         return float(np.finfo(a.dtype).eps)
 
-    def gather_agents(self, table: Array, index: Array) -> Array:
-        """``out[b, i, s] = table[b, index[b, i, s]]``: ``(B, N, c)``, ``(B, N, k)`` →
-        ``(B, N, k, c)``."""
+    def gather_agents(self, columns: Sequence[Array], index: Array) -> list[Array]:
+        """Each agent's neighbours' values: for every column ``(B, N)`` (one value per
+        agent), ``out[b, i, s] = column[b, index[b, i, s]]`` ``(B, N, k)``.
+
+        numpy reads all columns in one fancy-indexing pass over a ``(B, N, C)`` table.
+        """
+        table = np.stack(columns, axis=-1)
         rows = np.arange(table.shape[0])[:, None, None]
-        return table[rows, index]
+        gathered = table[rows, index]
+        return [gathered[..., c] for c in range(len(columns))]
 
 
 class TorchNamespace(ArrayNamespace):
@@ -207,9 +212,12 @@ class TorchNamespace(ArrayNamespace):
     def eps(self, a: Array) -> float:
         return float(self.torch.finfo(a.dtype).eps)
 
-    def gather_agents(self, table: Array, index: Array) -> Array:
-        rows = self.torch.arange(table.shape[0], device=table.device)[:, None, None]
-        return table[rows, index]
+    def gather_agents(self, columns: Sequence[Array], index: Array) -> list[Array]:
+        # Column by column, a gather along the agents of a broadcast view (no copy):
+        # TorchInductor fuses each into the loop that consumes it, where one gather of a
+        # (B, N, C) table followed by per-feature arithmetic is not vectorised.
+        B, N = index.shape[0], index.shape[1]
+        return [self.torch.gather(col[:, None, :].expand(B, N, N), 2, index) for col in columns]
 
     def sum_agents(self, a: Array) -> Array:
         # Component by component: TorchInductor fuses a reduction over the innermost

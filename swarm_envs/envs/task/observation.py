@@ -72,16 +72,19 @@ def observation(
     parts = [(goal[:, None, :] - x) / task.obs_goal_scale, v / task.obs_velocity_scale]
     if k_real > 0:
         assert near is not None
-        # Every agent's row (x, v, 1); a neighbour block is (row_j − row_i · keep) · scale:
-        # the offsets and relative velocities, scaled, and the mask 1.
-        table = xp.concat([x, v, xp.ones((B, N, 1), like=x)], axis=-1)
-        keep = xp.array([1.0] * (2 * d) + [0.0], like=x)
-        scale = xp.array(
-            [1.0 / task.obs_neighbor_scale] * d + [1.0 / task.obs_velocity_scale] * d + [1.0],
-            like=x,
-        )
-        blocks = xp.gather_agents(table, near[..., :k_real]) - (table * keep)[:, :, None, :]
-        parts.append((blocks * scale).reshape(B, N, k_real * (2 * d + 1)))
+        # One neighbour feature at a time: gather the column of every agent's values
+        # for its neighbours, subtract the agent's own value, scale; then interleave the
+        # features into blocks (offset, relative velocity, mask) per neighbour.
+        index = near[..., :k_real]
+        columns = [x[..., c] for c in range(d)] + [v[..., c] for c in range(d)]
+        scales = [1.0 / task.obs_neighbor_scale] * d + [1.0 / task.obs_velocity_scale] * d
+        gathered = xp.gather_agents(columns, index)
+        features = [
+            (g - col[..., None]) * scale
+            for g, col, scale in zip(gathered, columns, scales, strict=True)
+        ]
+        features.append(xp.ones((B, N, k_real), like=x))
+        parts.append(xp.stack(features, axis=-1).reshape(B, N, k_real * (2 * d + 1)))
     if k > k_real:
         parts.append(xp.zeros((B, N, (k - k_real) * (2 * d + 1)), like=x))
     obs = xp.concat(parts, axis=-1)
