@@ -148,17 +148,23 @@ def as_action(actions: Any, shape: tuple[int, ...], name: str = "actions") -> np
     return a
 
 
+#: Trial starts that must fit, out of ``MAX_START_DRAWS``, for :func:`check_start_fits`.
+START_FITS_NEEDED = 15
+
+
 def check_start_fits(cfg: Any) -> None:
-    """Refuse a Lagrangian config whose random starts cannot place the bins apart.
+    """Refuse a Lagrangian config whose random starts rarely place the bins apart.
 
     The Lagrangian model needs every pair of bins apart at the start (``R_ij > 0``);
-    a reset redraws a swarm's start up to ``MAX_START_DRAWS`` times. The config itself
-    refuses a start radius at which the bins can never fit
+    a reset redraws a swarm's start up to ``MAX_START_DRAWS`` (1000) times, then raises.
+    The config itself refuses a start radius at which the bins can never fit
     (:func:`swarm_envs.config.lagrangian_min_init_radius`); this check draws trial
     starts from a fixed generator and refuses the config (``ValueError`` naming
-    ``init_radius`` and ``lagrangian.r``) when none of ``MAX_START_DRAWS`` of them
-    fits, so that such a config fails when the env is built rather than at ``reset``.
-    It stops at the first start that fits: one or a few draws for a usable config.
+    ``init_radius`` and ``lagrangian.r``) when fewer than :data:`START_FITS_NEEDED` of
+    ``MAX_START_DRAWS`` fit: a start fitting with a probability of about 1.5 % or less,
+    at which a reset would fail with a probability of about ``1e-7`` or more. So such a
+    config fails when the env is built rather than at some ``reset``. A usable config
+    costs :data:`START_FITS_NEEDED` draws or a few more.
     """
     if cfg.dynamics != "lagrangian" or cfg.n_agents < 2:
         return
@@ -169,20 +175,29 @@ def check_start_fits(cfg: Any) -> None:
     n, d = cfg.n_agents, cfg.dim
     rng = np.random.default_rng(0)
     cap = max(1, 2**20 // (n * n))  # draws per batch: at most ~1M pair clearances
-    drawn, batch = 0, 1
-    while drawn < MAX_START_DRAWS:
+    drawn, fits, batch = 0, 0, START_FITS_NEEDED
+    while fits < START_FITS_NEEDED:
+        if fits + MAX_START_DRAWS - drawn < START_FITS_NEEDED:
+            raise ValueError(
+                f"SwarmConfig.init_radius={cfg.init_radius:g} is too small for {n} agents "
+                f"with dynamics='lagrangian': fewer than {START_FITS_NEEDED} of "
+                f"{MAX_START_DRAWS} random starts in a disc of that radius keep every pair "
+                f"of bins (lagrangian.r) apart, so resets would fail; allowed: a larger "
+                f"init_radius, or smaller lagrangian.r"
+            )
         k = min(batch, cap, MAX_START_DRAWS - drawn)
         x = uniform_ball(rng, (k, n, d), cfg.init_radius)
-        if (pair_clearance(x, cfg.lagrangian) > 0).all(axis=(-2, -1)).any():
-            return
+        fits += int((pair_clearance(x, cfg.lagrangian) > 0).all(axis=(-2, -1)).sum())
         drawn += k
         batch *= 4
-    raise ValueError(
-        f"SwarmConfig.init_radius={cfg.init_radius:g} is too small for {n} agents with "
-        f"dynamics='lagrangian': none of {MAX_START_DRAWS} random starts in a disc of "
-        f"that radius keeps every pair of bins (lagrangian.r) apart; allowed: a larger "
-        f"init_radius, or smaller lagrangian.r"
-    )
+
+
+def check_agent_action(action: Any, dim: int, agent: str) -> np.ndarray:
+    """One agent's action ``(dim,)`` under the action rule, finite; the error names it."""
+    a = as_action(action, (dim,), f"action of {agent}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"action of {agent}: {NON_FINITE_ACTIONS}")
+    return a
 
 
 def stack_agent_actions(actions: dict[str, Any], agents: Sequence[str], dim: int) -> np.ndarray:
@@ -204,7 +219,9 @@ __all__ = [
     "ACTION_KINDS",
     "ACTION_RULE",
     "SEED_RULE",
+    "START_FITS_NEEDED",
     "as_action",
+    "check_agent_action",
     "check_seed",
     "check_start_fits",
     "check_tensor_action",
