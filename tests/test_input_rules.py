@@ -427,3 +427,18 @@ def test_official_checkers_pass_on_every_backend(backend: str):
         sb3_check_env(SwarmNavEnv(n_agents=N, backend=backend))
         parallel_api_test(swarm_nav_v0.parallel_env(n_agents=N, backend=backend), num_cycles=20)
         api_test(swarm_nav_v0.env(n_agents=N, backend=backend), num_cycles=20)
+
+
+def test_gym_make_env_follows_the_rule_through_its_wrappers():
+    import gymnasium as gym
+
+    env = gym.make("swarm_envs/SwarmNav-v0", n_agents=N, backend="numpy")
+    twin = gym.make("swarm_envs/SwarmNav-v0", n_agents=N, backend="numpy")
+    assert np.array_equal(env.reset(seed=np.int64(3))[0], twin.reset(seed=3)[0])
+    with pytest.raises(ValueError, match=SEED_RULE):
+        env.reset(seed=-3)
+    env.reset(seed=3)
+    with pytest.raises(ValueError, match=ACTION_RULE):
+        env.step(np.zeros((N, D)))  # the (N, d) layout of the flat (N·d,) Box
+    action = torch.full((N * D,), 0.5, requires_grad=True)
+    assert np.array_equal(env.step(action)[0], twin.step(np.full(N * D, 0.5))[0])
