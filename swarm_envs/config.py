@@ -218,6 +218,38 @@ class SwarmConfig:
             )
         _check_int(owner, "max_steps", self.max_steps, low=1)
         _check_int(owner, "n_neighbors", self.n_neighbors, low=0)
+        if self.dynamics == "lagrangian" and self.n_agents > 1:
+            low = lagrangian_min_init_radius(self.lagrangian, self.n_agents, self.dim)
+            if not self.init_radius > low:
+                raise ValueError(
+                    f"{owner}.init_radius must be in ({low:g}, inf) with "
+                    f"dynamics='lagrangian': {self.n_agents} agents start in a disc of "
+                    f"this radius with non-overlapping bins (lagrangian.r), got "
+                    f"{self.init_radius!r}"
+                )
+
+
+def lagrangian_min_init_radius(params: LagrangianParams, n_agents: int, dim: int) -> float:
+    """The start radius at or below which ``n_agents`` Lagrangian bins can never fit.
+
+    The model needs every pair apart by more than its bins' radii, ``|x_i − x_j| >
+    r_i + r_j`` (``R_ij > 0``). In a ball of radius ``R`` that needs ``R > (r_i + r_j)/2``
+    for the two largest bins and, the bins being disjoint inside the ball grown by the
+    largest radius, ``Σ_i r_i^d < (R + max_i r_i)^d``; with point bins (``r = 0``) still
+    ``R > 0``. A radius above this bound can still be too tight for random starts: the
+    environments then refuse it when they are built (see ``docs/inputs.md``).
+
+    >>> lagrangian_min_init_radius(LagrangianParams(r=0.0), 10, 2)
+    0.0
+    >>> lagrangian_min_init_radius(LagrangianParams(r=1.0), 2, 2)
+    1.0
+    """
+    if n_agents < 2:
+        return 0.0
+    r = np.sort(np.diagonal(params.arrays(n_agents, dim)["r_sum"]) / 2.0)
+    pair = float(r[-1] + r[-2]) / 2.0
+    volume = float((r**dim).sum() ** (1.0 / dim) - r[-1])
+    return max(0.0, pair, volume)
 
 
 def _field_types(cls: type) -> dict[str, Any]:
@@ -348,6 +380,7 @@ __all__ = [
     "SwarmConfig",
     "as_dict",
     "config_from_mapping",
+    "lagrangian_min_init_radius",
     "load_swarm_config",
     "load_yaml",
     "resolve_config_path",

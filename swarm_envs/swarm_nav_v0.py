@@ -5,16 +5,43 @@
 >>> obs, infos = par.reset(seed=0)
 >>> sorted(obs)[:2], obs["agent_0"].dtype
 (['agent_0', 'agent_1'], dtype('float32'))
+
+Every API here follows one input rule for actions and seeds (``docs/inputs.md``).
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from pettingzoo.utils import parallel_to_aec, wrappers
+from pettingzoo.utils import wrappers
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from pettingzoo.utils.env import AECEnv
 
+from swarm_envs.envs.inputs import check_agent_action
 from swarm_envs.envs.swarm_nav import SwarmNavParallelEnv
+
+
+class _CheckedParallelToAEC(parallel_to_aec_wrapper):
+    """PettingZoo's ``parallel_to_aec`` wrapper that checks each action when it is given.
+
+    The wrapper would pass an agent's action to the parallel env only once the last
+    agent has acted; here each action is checked against the input rule
+    (``docs/inputs.md``) in its own ``step`` call, so the error comes from the call
+    that gave it (and names the agent). A terminated or truncated agent's action must
+    be ``None`` (PettingZoo's rule), else :class:`ValueError`.
+    """
+
+    def step(self, action: Any) -> None:
+        agent = self.agent_selection
+        if self.terminations[agent] or self.truncations[agent]:
+            if action is not None:
+                raise ValueError(
+                    f"action of {agent} must be None: the agent is done (terminated or "
+                    f"truncated), got {type(action).__name__}"
+                )
+        else:
+            action = check_agent_action(action, self.env.cfg.dim, agent)
+        super().step(action)
 
 
 def parallel_env(**kwargs: Any) -> SwarmNavParallelEnv:
@@ -23,8 +50,9 @@ def parallel_env(**kwargs: Any) -> SwarmNavParallelEnv:
 
 
 def raw_env(**kwargs: Any) -> AECEnv:
-    """The AEC env from :func:`parallel_env` via ``parallel_to_aec``, without wrappers."""
-    return parallel_to_aec(parallel_env(**kwargs))
+    """The AEC env from :func:`parallel_env`, as PettingZoo's ``parallel_to_aec`` makes it
+    (with its order-enforcing wrapper), checking each action as it is given."""
+    return wrappers.OrderEnforcingWrapper(_CheckedParallelToAEC(parallel_env(**kwargs)))
 
 
 def env(**kwargs: Any) -> AECEnv:

@@ -54,10 +54,10 @@ def check_batch(batch: Any) -> int:
 def check_dtype(dtype: Any) -> np.dtype:
     """A core's state dtype: float32 or float64, else :class:`ValueError`."""
     try:
-        out = np.dtype(dtype)
+        out = None if dtype is None else np.dtype(dtype)  # np.dtype(None) is float64
     except TypeError:
         out = None
-    if out not in (np.dtype(np.float32), np.dtype(np.float64)):
+    if out is None or out not in (np.dtype(np.float32), np.dtype(np.float64)):
         raise ValueError(f"dtype must be float32 or float64, got {dtype!r}")
     return out
 

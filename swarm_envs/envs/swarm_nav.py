@@ -18,7 +18,7 @@ from pettingzoo import ParallelEnv
 
 from swarm_envs.config import SwarmConfig, load_swarm_config
 from swarm_envs.envs.backends import make_core
-from swarm_envs.envs.common import check_actions
+from swarm_envs.envs.inputs import as_action, check_seed, check_start_fits, stack_agent_actions
 from swarm_envs.envs.protocol import Core as SwarmNavCore
 from swarm_envs.envs.task import OBS_BOUND
 
@@ -51,10 +51,17 @@ SWARM_NAV_DOC = """
     ## Action Space
 
     Per agent ``Box(-1, 1, (d,), float32)``; the control is ``u_i = u_max · a_i`` (a
-    force, a direction bias or a velocity, by ``dynamics``).
-    Finite actions outside the box are clipped; NaN/inf or a wrong shape raise
-    ``ValueError``. The Gymnasium env takes all agents' actions as one flat
-    ``Box(-1, 1, (N·d,))`` (agent-major).
+    force, a direction bias or a velocity, by ``dynamics``). The Gymnasium env takes
+    all agents' actions as one flat ``Box(-1, 1, (N·d,))`` (agent-major).
+
+    The input rule (docs/inputs.md, the same for every API and backend): an action is
+    a real numeric array (float or integer dtype) of exactly the declared shape, rank
+    included, or a list of numbers that converts to it, or a ``torch.Tensor`` (detached;
+    ``requires_grad`` is fine). Finite values outside the box are clipped; NaN/inf,
+    bool, complex, object or string dtypes and any other shape raise ``ValueError``
+    naming the rule and what was given; nothing is reshaped or cast silently.
+    ``reset(seed=...)`` takes ``None`` or a non-negative integer (Python or numpy:
+    ``np.int64(3)`` seeds as ``3``); anything else raises ``ValueError``.
 
     ## Observation Space
 
@@ -101,7 +108,9 @@ SWARM_NAV_DOC = """
     (``n_agents``, ``dim``, ``dt``, ``dynamics``, ``physics={...}``, ``zone={...}``,
     ``reward={...}``, ...; a partial section changes only the keys it names), and
     ``config="configs/env/paper_navigation.yaml"`` loads a YAML first (keywords then
-    override it). Unknown keywords and invalid values raise ``ValueError`` naming them.
+    override it). Unknown keywords and invalid values raise ``ValueError`` naming them,
+    when the env is built (a Lagrangian ``init_radius`` too small for its bins
+    included).
     ``render_mode`` is ``None``, ``"rgb_array"`` or ``"human"``.
 
     Info (per agent in PettingZoo, one dict in Gymnasium): ``polarization``,
@@ -120,8 +129,15 @@ SWARM_NAV_DOC = """
 def make_config(
     config: str | None = None, overrides: Mapping[str, Any] | None = None
 ) -> SwarmConfig:
-    """Merge a YAML config (optional) and keyword overrides into a validated config."""
-    return load_swarm_config(config, dict(overrides or {}))
+    """Merge a YAML config (optional) and keyword overrides into a validated config.
+
+    Beyond the config's own checks, a Lagrangian start radius at which random starts
+    cannot keep the bins apart is refused here (:func:`~swarm_envs.envs.inputs.check_start_fits`),
+    so every env refuses it when built.
+    """
+    cfg = load_swarm_config(config, dict(overrides or {}))
+    check_start_fits(cfg)
+    return cfg
 
 
 def _check_render_mode(render_mode: str | None) -> str | None:
@@ -233,6 +249,7 @@ class SwarmNavParallelEnv(_Rendering, ParallelEnv):
     def reset(
         self, seed: int | None = None, options: dict | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
+        seed = check_seed(seed)
         if seed is not None:
             self._np_random, _ = seeding.np_random(seed)
         self.core.reset(self._np_random)
@@ -257,17 +274,7 @@ class SwarmNavParallelEnv(_Rendering, ParallelEnv):
                 f"unknown {sorted(unknown)}"
             )
         n, d = self.cfg.n_agents, self.cfg.dim
-        try:
-            stacked = np.asarray([actions[a] for a in self.possible_agents], dtype=np.float64)
-        except (TypeError, ValueError):
-            stacked = None
-        if stacked is None or stacked.shape != (n, d):
-            for a in self.possible_agents:  # error path only: name the offending agent
-                try:
-                    check_actions(actions[a], (d,))
-                except ValueError as err:
-                    raise ValueError(f"action of {a}: {err}") from None
-            raise ValueError(f"each agent's action must have shape ({d},)")
+        stacked = stack_agent_actions(actions, self.possible_agents, d)  # docs/inputs.md
         reward, terminated, truncated, stats = self.core.step(stacked.reshape(1, n, d))
         obs = self.core.observe()[0]
         r, term, trunc = float(reward[0]), bool(terminated[0]), bool(truncated[0])
@@ -312,6 +319,7 @@ class SwarmNavEnv(_Rendering, gymnasium.Env):
     def reset(
         self, *, seed: int | None = None, options: dict | None = None
     ) -> tuple[np.ndarray, dict]:
+        seed = check_seed(seed)  # gymnasium itself refuses numpy integers
         super().reset(seed=seed)
         self.core.reset(self.np_random)
         self._needs_reset = False
@@ -327,7 +335,8 @@ class SwarmNavEnv(_Rendering, gymnasium.Env):
                 "truncated); call reset()"
             )
         n, d = self.cfg.n_agents, self.cfg.dim
-        a = check_actions(action, (n * d,)).reshape(1, n, d)
+        # The rule of docs/inputs.md; the core refuses NaN/inf and clips.
+        a = as_action(action, self.action_space.shape).reshape(1, n, d)
         reward, terminated, truncated, stats = self.core.step(a)
         self._needs_reset = bool(terminated[0] or truncated[0])
         obs = self.core.observe().reshape(-1)

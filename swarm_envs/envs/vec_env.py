@@ -35,6 +35,14 @@ slices run in parallel. A seed gives the same rollout for the same ``n_threads``
 
 The state is float32 by default (``dtype=np.float64`` for exact agreement with the
 float64 single-swarm envs); observations are float32 either way.
+
+Inputs follow the rule of ``docs/inputs.md``, as in the other APIs: ``step_async``
+takes a real numeric array (float or integer dtype) of exactly ``(num_envs, d)``, a
+list of numbers that converts to it, or a ``torch.Tensor`` (detached; on the torch
+backend it stays on its device); bool, complex, object or string dtypes, another
+shape (a transposed or flat array included) and NaN/inf raise ``ValueError``; finite
+values are clipped to [−1, 1]. :meth:`SwarmNavVecEnv.seed` takes ``None`` or a
+non-negative integer (Python or numpy).
 """
 
 from __future__ import annotations
@@ -53,6 +61,7 @@ from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from swarm_envs.envs.backends import make_core, resolve_backend
+from swarm_envs.envs.common import check_dtype
 from swarm_envs.envs.infos import (  # noqa: F401  (QUIET_INFO, SwarmInfo: re-exported)
     QUIET_INFO,
     SwarmInfo,
@@ -60,6 +69,7 @@ from swarm_envs.envs.infos import (  # noqa: F401  (QUIET_INFO, SwarmInfo: re-ex
     TerminalInfoPool,
     TerminalRecord,
 )
+from swarm_envs.envs.inputs import as_action, check_seed, check_tensor_action, is_tensor
 from swarm_envs.envs.protocol import Core as SwarmNavCore
 from swarm_envs.envs.swarm_nav import make_config
 from swarm_envs.envs.task import OBS_BOUND
@@ -88,8 +98,7 @@ class SwarmNavVecEnv(VecEnv):
         self.cfg = make_config(config, kwargs)
         self.n_swarms = int(n_swarms)
         self.n_agents = self.cfg.n_agents
-        if np.dtype(dtype) not in (np.dtype(np.float32), np.dtype(np.float64)):
-            raise ValueError(f"dtype must be float32 or float64, got {dtype!r}")
+        check_dtype(dtype)
         self.backend = resolve_backend(self.cfg, self.n_swarms)
         if self.backend in ("torch", "native"):  # one step for every swarm, threaded inside
             if n_threads not in (None, 1):
@@ -181,17 +190,27 @@ class SwarmNavVecEnv(VecEnv):
         self.reset_infos = [{} for _ in range(self.num_envs)]
         return self._observe().reshape(self.num_envs, -1)
 
-    def step_async(self, actions: np.ndarray) -> None:
-        self._actions = np.asarray(actions)
+    def seed(self, seed: int | None = None) -> Sequence[int | None]:
+        """Seed the next :meth:`reset`: ``None`` or a non-negative integer (Python or
+        numpy; ``np.int64(3)`` seeds as ``3``), else :class:`ValueError`."""
+        return super().seed(check_seed(seed))
+
+    def step_async(self, actions: Any) -> None:
+        """Check ``actions`` against the input rule (``(num_envs, d)``, real numeric;
+        ``docs/inputs.md``) and keep them for :meth:`step_wait`; the core refuses
+        NaN/inf there, before any swarm moves."""
+        self._actions = None
+        shape = (self.num_envs, self.cfg.dim)
+        if is_tensor(actions) and self.backend == "torch":
+            self._actions = check_tensor_action(actions, shape)  # stays on its device
+        else:
+            self._actions = as_action(actions, shape)
 
     def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict]]:
         if self._actions is None:
             raise RuntimeError("step_wait() called without step_async()")
         B, N, d = self.n_swarms, self.n_agents, self.cfg.dim
-        actions = self._actions
-        if actions.shape != (self.num_envs, d):
-            raise ValueError(f"actions must have shape {(self.num_envs, d)}, got {actions.shape}")
-        self._actions = None
+        actions, self._actions = self._actions, None
         a = actions.reshape(B, N, d)
 
         def step(core: SwarmNavCore, sl: slice) -> tuple:

@@ -1,0 +1,230 @@
+"""The one input rule of every SwarmNav API (specified in ``docs/inputs.md``).
+
+The Gymnasium env, the PettingZoo parallel and AEC envs and the SB3 ``VecEnv`` check
+what they are given with these helpers, so that each API accepts and refuses the same
+values with the same messages:
+
+* **Actions** are real numeric arrays of exactly the declared shape (rank included):
+  a float or integer dtype (integers are numbers and are cast); bool, complex, object,
+  string and other dtypes are refused, as is any other shape. Finite values outside
+  ``[-1, 1]`` are clipped; NaN or inf is refused. A Python list (or tuple) of numbers is
+  accepted when it converts to exactly the declared shape with a numeric dtype (a bool
+  anywhere in it is refused). A ``torch.Tensor`` is accepted wherever a numpy array
+  is (it is detached, so ``requires_grad`` is fine, and moved to the CPU where the
+  backend computes on the host), under the same dtype and shape rule.
+* **Seeds** are ``None`` or non-negative integers: a Python ``int`` or a numpy integer
+  (``np.int64(3)`` seeds exactly as ``3``). Bools, floats, strings, generators and
+  negative integers are refused.
+
+Every refusal is a :class:`ValueError` whose message states the rule and what was
+given; nothing is converted silently (a complex action never loses its imaginary part,
+a transposed array is never reshaped).
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from swarm_envs.envs.common import NON_FINITE_ACTIONS
+
+#: dtype kinds an action may have: floating, signed and unsigned integers.
+ACTION_KINDS = frozenset("fiu")
+
+#: What an action must be (formatted with the declared shape).
+ACTION_RULE = (
+    "must be a real numeric array (float or integer dtype; not bool, complex, object or "
+    "str) of shape {shape}"
+)
+
+#: What a seed must be.
+SEED_RULE = (
+    "seed must be None or a non-negative integer (a Python int or a numpy integer; "
+    "not a bool, float, str or Generator)"
+)
+
+
+def check_seed(seed: Any) -> int | None:
+    """``seed`` as a Python ``int`` (or ``None``) under the seed rule, else ValueError.
+
+    >>> check_seed(np.int64(3)), check_seed(None)
+    (3, None)
+    >>> check_seed(-1)
+    Traceback (most recent call last):
+    ...
+    ValueError: seed must be None or a non-negative integer ... got -1
+    """
+    if seed is None:
+        return None
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+        raise ValueError(f"{SEED_RULE}, got {_describe(seed)}")
+    if seed < 0:
+        raise ValueError(f"{SEED_RULE}, got {int(seed)}")
+    return int(seed)
+
+
+def is_tensor(value: Any) -> bool:
+    """Whether ``value`` is a ``torch.Tensor`` (without importing torch)."""
+    torch = sys.modules.get("torch")
+    return torch is not None and isinstance(value, torch.Tensor)
+
+
+def _describe(value: Any) -> str:
+    """A short account of what was given, for an error message."""
+    if value is None:
+        return "None"
+    if isinstance(value, np.ndarray):
+        return f"a {value.dtype} array of shape {value.shape}"
+    if is_tensor(value):
+        return f"a {value.dtype} tensor of shape {tuple(value.shape)}"
+    if isinstance(value, (np.generic, int, float, complex, str, bytes)):
+        return f"{type(value).__name__} {value!r}"
+    return f"a {type(value).__module__}.{type(value).__qualname__}".replace("builtins.", "")
+
+
+def _refuse(name: str, shape: tuple[int, ...], given: str) -> ValueError:
+    return ValueError(f"{name} {ACTION_RULE.format(shape=shape)}, got {given}")
+
+
+def _holds_bool(value: Any) -> bool:
+    """Whether a (nested) list or tuple holds a bool anywhere."""
+    if isinstance(value, (bool, np.bool_)):
+        return True
+    if isinstance(value, (list, tuple)):
+        return any(_holds_bool(v) for v in value)
+    return False
+
+
+def check_tensor_action(actions: Any, shape: tuple[int, ...], name: str = "actions") -> Any:
+    """A ``torch.Tensor`` of a real dtype and exactly ``shape``, detached; else ValueError.
+
+    It stays on its device (for the torch backend, which checks finiteness there).
+    """
+    import torch
+
+    dt = actions.dtype
+    if dt == torch.bool or dt.is_complex or not (dt.is_floating_point or _is_int_tensor(dt)):
+        raise _refuse(name, shape, _describe(actions))
+    if tuple(actions.shape) != shape:
+        raise _refuse(name, shape, _describe(actions))
+    return actions.detach()
+
+
+def _is_int_tensor(dt: Any) -> bool:
+    import torch
+
+    return dt in (torch.uint8, torch.int8, torch.int16, torch.int32, torch.int64)
+
+
+def as_action(actions: Any, shape: tuple[int, ...], name: str = "actions") -> np.ndarray:
+    """``actions`` as a numpy array under the action rule, else :class:`ValueError`.
+
+    A numpy array is returned as it is (no copy); a tensor is detached and copied to
+    the host; a list or tuple is converted. Values are not checked here: every core
+    refuses NaN/inf (:data:`~swarm_envs.envs.common.NON_FINITE_ACTIONS`) and clips the
+    rest. ``O(1)`` for arrays and tensors of the right type.
+    """
+    if isinstance(actions, np.ndarray):
+        a = actions
+    elif is_tensor(actions):
+        t = check_tensor_action(actions, shape, name)
+        if t.dtype.is_floating_point and t.dtype.itemsize < 4:
+            t = t.float()  # bfloat16 has no numpy dtype; float16 is exact in float32
+        return t.cpu().numpy()
+    elif isinstance(actions, (list, tuple)):
+        try:
+            a = np.asarray(actions)
+        except (TypeError, ValueError):  # ragged or not numbers
+            raise _refuse(name, shape, f"a {type(actions).__name__} that is no array") from None
+        if a.dtype.kind in ACTION_KINDS and _holds_bool(actions):
+            raise _refuse(name, shape, f"a {type(actions).__name__} holding a bool")
+    else:
+        raise _refuse(name, shape, _describe(actions))
+    if a.dtype.kind not in ACTION_KINDS or a.shape != shape:
+        raise _refuse(name, shape, _describe(a))
+    return a
+
+
+#: Trial starts that must fit, out of ``MAX_START_DRAWS``, for :func:`check_start_fits`.
+START_FITS_NEEDED = 15
+
+
+def check_start_fits(cfg: Any) -> None:
+    """Refuse a Lagrangian config whose random starts rarely place the bins apart.
+
+    The Lagrangian model needs every pair of bins apart at the start (``R_ij > 0``);
+    a reset redraws a swarm's start up to ``MAX_START_DRAWS`` (1000) times, then raises.
+    The config itself refuses a start radius at which the bins can never fit
+    (:func:`swarm_envs.config.lagrangian_min_init_radius`); this check draws trial
+    starts from a fixed generator and refuses the config (``ValueError`` naming
+    ``init_radius`` and ``lagrangian.r``) when fewer than :data:`START_FITS_NEEDED` of
+    ``MAX_START_DRAWS`` fit: a start fitting with a probability of about 1.5 % or less,
+    at which a reset would fail with a probability of about ``1e-7`` or more. So such a
+    config fails when the env is built rather than at some ``reset``. A usable config
+    costs :data:`START_FITS_NEEDED` draws or a few more.
+    """
+    if cfg.dynamics != "lagrangian" or cfg.n_agents < 2:
+        return
+    from swarm_envs.envs.dynamics import MAX_START_DRAWS
+    from swarm_envs.physics import uniform_ball
+    from swarm_envs.physics.lagrangian import pair_clearance
+
+    n, d = cfg.n_agents, cfg.dim
+    rng = np.random.default_rng(0)
+    cap = max(1, 2**20 // (n * n))  # draws per batch: at most ~1M pair clearances
+    drawn, fits, batch = 0, 0, START_FITS_NEEDED
+    while fits < START_FITS_NEEDED:
+        if fits + MAX_START_DRAWS - drawn < START_FITS_NEEDED:
+            raise ValueError(
+                f"SwarmConfig.init_radius={cfg.init_radius:g} is too small for {n} agents "
+                f"with dynamics='lagrangian': fewer than {START_FITS_NEEDED} of "
+                f"{MAX_START_DRAWS} random starts in a disc of that radius keep every pair "
+                f"of bins (lagrangian.r) apart, so resets would fail; allowed: a larger "
+                f"init_radius, or smaller lagrangian.r"
+            )
+        k = min(batch, cap, MAX_START_DRAWS - drawn)
+        x = uniform_ball(rng, (k, n, d), cfg.init_radius)
+        fits += int((pair_clearance(x, cfg.lagrangian) > 0).all(axis=(-2, -1)).sum())
+        drawn += k
+        batch *= 4
+
+
+def check_agent_action(action: Any, dim: int, agent: str) -> np.ndarray:
+    """One agent's action ``(dim,)`` under the action rule, finite; the error names it."""
+    a = as_action(action, (dim,), f"action of {agent}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"action of {agent}: {NON_FINITE_ACTIONS}")
+    return a
+
+
+def stack_agent_actions(actions: dict[str, Any], agents: Sequence[str], dim: int) -> np.ndarray:
+    """Per-agent actions of shape ``(dim,)`` (PettingZoo) stacked into ``(N, dim)`` float64.
+
+    Each agent's action follows the action rule; the error names the agent.
+    """
+    shape = (dim,)
+    rows = [as_action(actions[a], shape, f"action of {a}") for a in agents]
+    stacked = np.array(rows, dtype=np.float64)
+    finite = np.isfinite(stacked).all(axis=1)
+    if not finite.all():
+        bad = agents[int(np.flatnonzero(~finite)[0])]
+        raise ValueError(f"action of {bad}: {NON_FINITE_ACTIONS}")
+    return stacked
+
+
+__all__ = [
+    "ACTION_KINDS",
+    "ACTION_RULE",
+    "SEED_RULE",
+    "START_FITS_NEEDED",
+    "as_action",
+    "check_agent_action",
+    "check_seed",
+    "check_start_fits",
+    "check_tensor_action",
+    "is_tensor",
+    "stack_agent_actions",
+]
