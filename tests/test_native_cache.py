@@ -256,6 +256,32 @@ def test_a_hung_compiler_is_killed_after_the_timeout(monkeypatch, fresh, tmp_pat
     assert [p.name for p in fresh.iterdir()] == [p.name for p in fresh.glob(".*.lock")]
 
 
+def test_a_build_in_another_process_is_waited_for_at_most_the_timeout(monkeypatch, fresh, tmp_path):
+    pid_file = tmp_path / "cc.pid"
+    hung = script(tmp_path / "hung-cc", f"echo $$ > {pid_file}\nexec sleep 60\n")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("SWARM_ENVS_")}
+    env.update(PYTHONPATH=str(ROOT), SWARM_ENVS_CACHE=str(fresh), CC=str(hung))
+    code = "from swarm_envs.envs.native import native_support; native_support()"
+    child = subprocess.Popen([sys.executable, "-c", code], env=env)  # holds the lock
+    try:
+        for _ in range(300):
+            if pid_file.exists() and pid_file.read_text().strip():
+                break
+            time.sleep(0.1)
+        monkeypatch.setenv("CC", str(hung))
+        monkeypatch.setenv(build.CC_TIMEOUT_ENV, "1")
+        start = time.monotonic()
+        ok, why = native_support()
+        assert time.monotonic() - start < 10
+        assert not ok and "another process has been building" in why
+        assert "1 s (SWARM_ENVS_CC_TIMEOUT" in why
+    finally:
+        child.kill()
+        child.wait(timeout=30)
+        if pid_file.exists() and pid_file.read_text().strip():
+            os.killpg(int(pid_file.read_text()), signal.SIGKILL)
+
+
 @pytest.mark.parametrize("value", ["abc", "0", "-5", "inf", "nan"])
 def test_the_timeout_must_be_a_positive_number_of_seconds(monkeypatch, fresh, value):
     monkeypatch.setenv(build.CC_TIMEOUT_ENV, value)

@@ -324,17 +324,33 @@ def _build(compiler: str, flags: tuple[str, ...], key: str, target: Path, timeou
 
 
 @contextlib.contextmanager
-def _build_lock(target: Path) -> Iterator[None]:
+def _build_lock(target: Path, timeout: float) -> Iterator[None]:
     """An exclusive lock on ``target``'s build across processes (released by the kernel
-    if the holder dies); where the file system cannot lock, builds are not serialised
-    and a library that loses the race to its record is rebuilt on its next load."""
+    if the holder dies), waited for ``timeout`` seconds at most; where the file system
+    cannot lock, builds are not serialised and a library that loses the race to its
+    record is rebuilt on its next load.
+
+    Raises:
+        RuntimeError: another process held the lock for ``timeout`` seconds.
+    """
     import fcntl  # POSIX only; the C step is built on Linux only
 
     with open(target.with_name(f".{target.stem}.lock"), "a") as fh:
-        try:
-            fcntl.flock(fh, fcntl.LOCK_EX)
-        except OSError as err:
-            logger.debug("cannot lock %s: %s", fh.name, err)
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    raise RuntimeError(
+                        f"another process has been building {target} for {timeout:g} s "
+                        f"({CC_TIMEOUT_ENV} sets the limit)"
+                    ) from None
+                time.sleep(0.05)
+            except OSError as err:
+                logger.debug("cannot lock %s: %s", fh.name, err)
+                break
         yield
 
 
@@ -344,7 +360,7 @@ def _rebuilt(
     """The bytes of ``target`` after building it, unless another process did meanwhile;
     a damaged library is replaced with a warning."""
     target.parent.mkdir(parents=True, exist_ok=True)
-    with _build_lock(target):
+    with _build_lock(target, timeout):
         data, why = _verified(target, key)
         if data is not None:
             return data
