@@ -106,7 +106,11 @@ _BUILD_PREFIX = ".fused_step-build-"
 
 
 class Library:
-    """A loaded C step: its two entry points and what it declares it implements."""
+    """A loaded C step: its two entry points and what it declares it implements.
+
+    ``path`` is the cached file whose checked bytes were loaded (from an in-memory copy
+    where possible, so the file may change later without affecting this library).
+    """
 
     def __init__(self, lib: ctypes.CDLL, path: Path) -> None:
         self.lib, self.path = lib, path
@@ -482,7 +486,7 @@ def _open_any(cache: Path, key: str) -> Library:
 def _warn_once(message: str) -> None:
     if message not in _WARNED:
         _WARNED.add(message)
-        warnings.warn(message, UserWarning, stacklevel=4)
+        warnings.warn(message, UserWarning, stacklevel=5)  # load_library's caller
 
 
 def _load(flags: tuple[str, ...], timeout: float) -> Library:
