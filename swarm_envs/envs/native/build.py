@@ -19,7 +19,7 @@ library (cut-off build, disk error, edited file, no record) is rebuilt with a
 which ``auto`` reports in its warning), while an intact library built for the same
 sources and flags by any compiler is loaded. A build runs under a per-library file lock
 (concurrent processes build once) and is killed after ``$SWARM_ENVS_CC_TIMEOUT`` seconds
-(default 120). Build folders left by killed builds are removed at the next load: those
+(default 600). Build folders left by killed builds are removed at the next load: those
 of processes of this host that are gone at once, any older than an hour.
 
 Flags: ``-O3 -march=<arch> -fopenmp -fno-math-errno -fno-trapping-math -fPIC -shared``,
@@ -88,8 +88,10 @@ ARCH_ENV = "SWARM_ENVS_NATIVE_ARCH"
 CACHE_ENV = "SWARM_ENVS_CACHE"
 #: Environment variable limiting a build's time, in seconds.
 CC_TIMEOUT_ENV = "SWARM_ENVS_CC_TIMEOUT"
-#: A build's time limit where :data:`CC_TIMEOUT_ENV` is not set, in seconds.
-DEFAULT_CC_TIMEOUT = 120.0
+#: A build's time limit where :data:`CC_TIMEOUT_ENV` is not set, in seconds: generous,
+#: since a portable (``x86-64-v3``) build on a busy machine can take minutes; a hung
+#: compiler is still stopped.
+DEFAULT_CC_TIMEOUT = 600.0
 #: Seconds after which a build folder that names no live process here is removed.
 LEFTOVER_AGE = 3600.0
 _BASE_FLAGS = ("-O3", "-fopenmp", "-fno-math-errno", "-fno-trapping-math", "-fPIC", "-shared")
