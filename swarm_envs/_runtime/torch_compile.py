@@ -7,9 +7,10 @@ a function of them is executed.
 - :class:`MaybeCompiled` wraps a function of tensors, run through ``torch.compile``
   (TorchInductor: C++/OpenMP on the CPU, which needs a C++ compiler, Triton on CUDA)
   or plainly. ``compile="auto"`` (the default) compiles where :func:`compile_support`
-  finds it possible and falls back to the plain function, with a warning, if compiling
-  fails; ``True`` requires it, ``False`` never compiles. The environment variable
-  ``SWARM_ENVS_TORCH_COMPILE`` (``0``/``1``/``auto``) overrides ``"auto"``. The compile
+  finds it possible (else runs the plain function, warning once per reason) and falls
+  back to the plain function, with a warning, if compiling fails; ``True`` requires it,
+  ``False`` never compiles. The environment variable ``SWARM_ENVS_TORCH_COMPILE``
+  (``0``/``1``/``auto``; ``0`` runs plain torch without a warning) overrides ``"auto"``. The compile
   time is measured by :meth:`MaybeCompiled.warmup`, logged once, and kept out of the
   timed steps.
 - :class:`CudaGraphed` captures a function of CUDA tensors once and replays it: one
@@ -118,6 +119,23 @@ def resolve_compile(compile: bool | str, device: torch.device | str = "cpu") -> 
     return (reason is None), ("supported" if reason is None else reason)
 
 
+_WARNED: set[str] = set()
+
+
+def _warn_not_compiled(reason: str) -> None:
+    """Warn once per reason that ``compile="auto"`` runs plain torch (not where
+    :data:`COMPILE_ENV` switched compiling off on purpose)."""
+    if reason.startswith(COMPILE_ENV) or reason in _WARNED:
+        return
+    _WARNED.add(reason)
+    warnings.warn(
+        f"torch.compile unavailable ({reason}); running plain torch "
+        f"(set {COMPILE_ENV}=0 to choose that without this warning)",
+        UserWarning,
+        stacklevel=4,
+    )
+
+
 _COPIES = itertools.count()
 _CODE_FOR: dict[tuple[Any, Any], types.CodeType] = {}
 
@@ -184,6 +202,8 @@ class MaybeCompiled:
         self.name = name or getattr(fn, "__name__", "function")
         self._auto = compile == "auto"
         self.compiled, self.reason = resolve_compile(compile, device)
+        if self._auto and not self.compiled:
+            _warn_not_compiled(self.reason)
         self.device = torch.device(device)
         self._call = (
             torch.compile(_own_code(fn, key), dynamic=False, fullgraph=True, options=options)

@@ -2,9 +2,25 @@
 
 The first use compiles ``fused_step.c`` (with ``fused_step_body.h`` and the header
 :func:`~swarm_envs.envs.native.contract.header` generates) with the C compiler (``$CC``,
-else ``cc`` or ``gcc``) into ``$SWARM_ENVS_CACHE`` (default ``~/.cache/swarm_envs``),
-keyed by the sources, the generated header, the flags, the compiler and, for
-``-march=native``, the CPU; later processes load the cached library at once.
+else ``cc`` or ``gcc``) into ``$SWARM_ENVS_CACHE`` (default ``~/.cache/swarm_envs``) as
+``fused_step-<sources>-<compiler>.so``: ``<sources>`` hashes the sources, the generated
+header, the flags, the machine and, for ``-march=native``, the CPU; ``<compiler>`` the
+compiler's resolved path. Later processes load the cached library at once.
+
+The cache is checked, never trusted: beside each library a record
+(``fused_step-….json``: source key, parameter layout, size, SHA-256, compiler, flags) is
+written after the library, each synced and renamed into place atomically. A library is
+loaded only where its record matches it, from a sealed in-memory copy of the very bytes
+checked, so a cached file truncated or overwritten later cannot reach the loader (where
+in-memory files cannot be loaded, the file itself is loaded right after its check: a file
+truncated in place within that moment can still bring the process down). A damaged
+library (cut-off build, disk error, edited file, no record) is rebuilt with a
+:class:`UserWarning`; without a compiler it is refused (the C step is then unavailable,
+which ``auto`` reports in its warning), while an intact library built for the same
+sources and flags by any compiler is loaded. A build runs under a per-library file lock
+(concurrent processes build once) and is killed after ``$SWARM_ENVS_CC_TIMEOUT`` seconds
+(default 600). Build folders left by killed builds are removed at the next load: those
+of processes of this host that are gone at once, any older than an hour.
 
 Flags: ``-O3 -march=<arch> -fopenmp -fno-math-errno -fno-trapping-math -fPIC -shared``,
 then the words of ``$CFLAGS``. ``<arch>`` is ``$SWARM_ENVS_NATIVE_ARCH`` (default
@@ -24,18 +40,24 @@ never; ``1``: required, an error where it cannot be built). Where no compiler wo
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import hashlib
+import json
 import logging
+import math
 import os
 import platform
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
 import threading
 import time
+import warnings
+from collections.abc import Iterator
 from importlib import resources
 from pathlib import Path
 
@@ -43,9 +65,14 @@ from swarm_envs.envs.native.contract import KernelInfo, header, layout_hash
 
 __all__ = [
     "ARCH_ENV",
+    "CACHE_ENV",
+    "CC_TIMEOUT_ENV",
+    "DEFAULT_CC_TIMEOUT",
+    "LEFTOVER_AGE",
     "NATIVE_ENV",
     "Library",
     "build_flags",
+    "compiler_timeout",
     "load_library",
     "native_support",
     "resolve_native",
@@ -57,16 +84,35 @@ logger = logging.getLogger(__name__)
 NATIVE_ENV = "SWARM_ENVS_NATIVE"
 #: Environment variable naming the ``-march`` target (default ``native``).
 ARCH_ENV = "SWARM_ENVS_NATIVE_ARCH"
+#: Environment variable naming the cache folder (default ``~/.cache/swarm_envs``).
+CACHE_ENV = "SWARM_ENVS_CACHE"
+#: Environment variable limiting a build's time, in seconds.
+CC_TIMEOUT_ENV = "SWARM_ENVS_CC_TIMEOUT"
+#: A build's time limit where :data:`CC_TIMEOUT_ENV` is not set, in seconds: generous,
+#: since a portable (``x86-64-v3``) build on a busy machine can take minutes; a hung
+#: compiler is still stopped.
+DEFAULT_CC_TIMEOUT = 600.0
+#: Seconds after which a build folder that names no live process here is removed.
+LEFTOVER_AGE = 3600.0
 _BASE_FLAGS = ("-O3", "-fopenmp", "-fno-math-errno", "-fno-trapping-math", "-fPIC", "-shared")
 _SOURCES = ("fused_step.c", "fused_step_body.h")
 
 _LOCK = threading.Lock()
 _LIBRARIES: dict[tuple[str, ...], Library] = {}
 _FAILURES: dict[tuple[str, ...], str] = {}
+_WARNED: set[str] = set()
+_PRIVATE_FDS: list[int] = []  # in-memory copies of the loaded libraries (kept open)
+_RECORD_FORMAT = 1
+_MISSING = "missing"
+_BUILD_PREFIX = ".fused_step-build-"
 
 
 class Library:
-    """A loaded C step: its two entry points and what it declares it implements."""
+    """A loaded C step: its two entry points and what it declares it implements.
+
+    ``path`` is the cached file whose checked bytes were loaded (from an in-memory copy
+    where possible, so the file may change later without affecting this library).
+    """
 
     def __init__(self, lib: ctypes.CDLL, path: Path) -> None:
         self.lib, self.path = lib, path
@@ -104,22 +150,55 @@ def _compiler() -> str | None:
 
 
 def _cache_dir() -> Path:
-    root = os.environ.get("SWARM_ENVS_CACHE")
+    root = os.environ.get(CACHE_ENV)
     return Path(root) if root else Path.home() / ".cache" / "swarm_envs"
 
 
-def _library_path(compiler: str, flags: tuple[str, ...]) -> Path:
+def compiler_timeout() -> float:
+    """The seconds a build may take: :data:`CC_TIMEOUT_ENV`, default
+    :data:`DEFAULT_CC_TIMEOUT`.
+
+    Raises:
+        ValueError: the variable is set to anything but a finite number of seconds > 0.
+    """
+    raw = os.environ.get(CC_TIMEOUT_ENV, "").strip()
+    if not raw:
+        return DEFAULT_CC_TIMEOUT
+    try:
+        seconds = float(raw)
+    except ValueError:
+        seconds = math.nan
+    if not (math.isfinite(seconds) and seconds > 0):
+        raise ValueError(f"{CC_TIMEOUT_ENV} must be a number of seconds > 0, got {raw!r}")
+    return seconds
+
+
+# --------------------------------------------------------------------------- cache key
+
+
+def _source_key(flags: tuple[str, ...]) -> str:
+    """What a library is built from, without the compiler: the sources, the generated
+    header, the flags, the machine and, for ``-march=native``, the CPU (hex SHA-256)."""
     src = _source_dir()
     h = hashlib.sha256()
     for name in _SOURCES:
         h.update((src / name).read_bytes())
     h.update(header().encode())
     h.update(" ".join(flags).encode())
-    h.update(compiler.encode())
     h.update(platform.machine().encode())
     if "-march=native" in flags:
         h.update(_cpu_flags().encode())
-    return _cache_dir() / f"fused_step-{h.hexdigest()[:16]}.so"
+    return h.hexdigest()
+
+
+def _library_path(cache: Path, key: str, compiler: str) -> Path:
+    """``fused_step-<sources>-<compiler>.so``: one library per source key and compiler."""
+    tag = hashlib.sha256(os.path.realpath(compiler).encode()).hexdigest()[:8]
+    return cache / f"fused_step-{key[:16]}-{tag}.so"
+
+
+def _record_path(library: Path) -> Path:
+    return library.with_suffix(".json")
 
 
 def _cpu_flags() -> str:
@@ -132,44 +211,324 @@ def _cpu_flags() -> str:
         return platform.processor()
 
 
-def _build(compiler: str, flags: tuple[str, ...], target: Path) -> None:
-    target.parent.mkdir(parents=True, exist_ok=True)
-    src = _source_dir()
-    with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
+# --------------------------------------------------------------------------- checking
+
+
+def _verified(library: Path, key: str) -> tuple[bytes | None, str]:
+    """``(bytes, "intact")`` where ``library`` is a complete build for ``key`` (its record
+    names ``key`` and the parameter layout, and its size and SHA-256 match the file),
+    else ``(None, why)``; ``why`` is :data:`_MISSING` where there is no library at all.
+    Reads the file once: the bytes returned are the bytes checked."""
+    if not library.exists():
+        return None, _MISSING
+    try:
+        record = json.loads(_record_path(library).read_text())
+    except FileNotFoundError:
+        return None, "no record of a completed build beside it"
+    except (OSError, ValueError) as err:
+        return None, f"unreadable record ({err})"
+    if not isinstance(record, dict) or record.get("format") != _RECORD_FORMAT:
+        return None, "a record in an unknown format"
+    if record.get("key") != key or record.get("layout") != layout_hash():
+        return None, "recorded for other sources, flags or parameter layout"
+    try:
+        data = library.read_bytes()
+    except OSError as err:
+        return None, f"unreadable ({err})"
+    if len(data) != record.get("size"):
+        return None, f"{len(data)} bytes where {record.get('size')} were written"
+    if hashlib.sha256(data).hexdigest() != record.get("sha256"):
+        return None, "its SHA-256 differs from the one recorded when it was written"
+    return data, "intact"
+
+
+def _mtime(path: Path) -> float:
+    try:
+        return path.stat().st_mtime
+    except OSError:
+        return 0.0
+
+
+# --------------------------------------------------------------------------- building
+
+
+def _host_tag() -> str:
+    return hashlib.sha256(platform.node().encode()).hexdigest()[:8]
+
+
+def _compile(cmd: list[str], timeout: float) -> None:
+    """Run the compiler, killing it (and whatever it started) after ``timeout`` seconds.
+
+    Raises:
+        RuntimeError: it failed (its error output, cut to 2000 characters) or timed out.
+    """
+    pipe = subprocess.PIPE
+    with subprocess.Popen(
+        [*cmd, "-lm"], stdout=pipe, stderr=pipe, text=True, start_new_session=True
+    ) as proc:
+        try:
+            _, err = proc.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            try:
+                os.killpg(proc.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            raise RuntimeError(
+                f"the C compiler {cmd[0]} did not finish within {timeout:g} s "
+                f"({CC_TIMEOUT_ENV} sets the limit)"
+            ) from None
+    if proc.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed: {err.strip()[:2000]}")
+
+
+def _fsync(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _write_durably(path: Path, data: bytes) -> None:
+    with open(path, "wb") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+def _build(compiler: str, flags: tuple[str, ...], key: str, target: Path, timeout: float) -> None:
+    """Compile into a private folder of the cache, then move the library into place and
+    write its record last, each file synced and renamed atomically: a library without a
+    matching record is never trusted, so a build cut off at any point is rebuilt."""
+    cache, src = target.parent, _source_dir()
+    prefix = f"{_BUILD_PREFIX}{os.getpid()}-{_host_tag()}-"
+    with tempfile.TemporaryDirectory(prefix=prefix, dir=cache) as tmp:
         (Path(tmp) / "step_params.h").write_text(header())
         out = Path(tmp) / target.name
-        cmd = [compiler, *flags, "-I", tmp, "-I", str(src), "-o", str(out), str(src / _SOURCES[0])]
-        result = subprocess.run([*cmd, "-lm"], capture_output=True, text=True, check=False)
-        if result.returncode != 0:
-            raise RuntimeError(f"{' '.join(cmd)} failed: {result.stderr.strip()[:2000]}")
-        os.replace(out, target)  # atomic: concurrent builders never load half a file
+        _compile(
+            [compiler, *flags, "-I", tmp, "-I", str(src), "-o", str(out), str(src / _SOURCES[0])],
+            timeout,
+        )
+        data = out.read_bytes()
+        _fsync(out)
+        record = {
+            "format": _RECORD_FORMAT,
+            "key": key,
+            "layout": layout_hash(),
+            "size": len(data),
+            "sha256": hashlib.sha256(data).hexdigest(),
+            "compiler": os.path.realpath(compiler),
+            "flags": list(flags),
+        }
+        record_tmp = Path(tmp) / "record.json"
+        _write_durably(record_tmp, json.dumps(record, indent=1).encode())
+        _record_path(target).unlink(missing_ok=True)  # it described the file replaced now
+        os.replace(out, target)
+        _fsync(cache)
+        os.replace(record_tmp, _record_path(target))
+        _fsync(cache)
+
+
+@contextlib.contextmanager
+def _build_lock(target: Path, timeout: float) -> Iterator[None]:
+    """An exclusive lock on ``target``'s build across processes (released by the kernel
+    if the holder dies), waited for ``timeout`` seconds at most; where the file system
+    cannot lock, builds are not serialised and a library that loses the race to its
+    record is rebuilt on its next load.
+
+    Raises:
+        RuntimeError: another process held the lock for ``timeout`` seconds.
+    """
+    import fcntl  # POSIX only; the C step is built on Linux only
+
+    with open(target.with_name(f".{target.stem}.lock"), "a") as fh:
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    raise RuntimeError(
+                        f"another process has been building {target} for {timeout:g} s "
+                        f"({CC_TIMEOUT_ENV} sets the limit)"
+                    ) from None
+                time.sleep(0.05)
+            except OSError as err:
+                logger.debug("cannot lock %s: %s", fh.name, err)
+                break
+        yield
+
+
+def _rebuilt(
+    compiler: str, flags: tuple[str, ...], key: str, target: Path, timeout: float
+) -> bytes:
+    """The bytes of ``target`` after building it, unless another process did meanwhile;
+    a damaged library is replaced with a warning."""
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with _build_lock(target, timeout):
+        data, why = _verified(target, key)
+        if data is not None:
+            return data
+        if why != _MISSING:
+            _warn_once(f"the cached C step {target} was damaged ({why}); rebuilding it")
+        start = time.perf_counter()
+        _build(compiler, flags, key, target, timeout)
+        logger.info("built %s in %.1f s", target, time.perf_counter() - start)
+        data, why = _verified(target, key)
+    if data is None:
+        raise RuntimeError(f"the C step just built at {target} fails its check ({why})")
+    return data
+
+
+# --------------------------------------------------------------------------- leftovers
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _only_build_files(folder: str) -> bool:
+    names = os.listdir(folder)
+    allowed = ("step_params.h", "record.json")
+    return "step_params.h" in names and all(
+        n in allowed or (n.startswith("fused_step-") and n.endswith(".so")) for n in names
+    )
+
+
+def _is_leftover(entry: os.DirEntry[str], now: float) -> bool:
+    """Whether ``entry`` is a build folder that no build will finish: one named by a
+    process of this host that is gone, or one older than :data:`LEFTOVER_AGE` (named by
+    another host, or an unnamed ``tmp*`` folder holding nothing but build files)."""
+    if not entry.is_dir(follow_symlinks=False):
+        return False
+    old = now - entry.stat(follow_symlinks=False).st_mtime > LEFTOVER_AGE
+    if entry.name.startswith(_BUILD_PREFIX):
+        pid, _, rest = entry.name[len(_BUILD_PREFIX) :].partition("-")
+        same_host = rest.startswith(_host_tag() + "-")
+        return old or (same_host and pid.isdigit() and not _alive(int(pid)))
+    return entry.name.startswith("tmp") and old and _only_build_files(entry.path)
+
+
+def _clean_leftovers(cache: Path) -> None:
+    """Remove the folders of builds that were killed (never raises)."""
+    try:
+        entries = list(os.scandir(cache))
+    except OSError:
+        return
+    now = time.time()
+    for entry in entries:
+        try:
+            if _is_leftover(entry, now):
+                shutil.rmtree(entry.path)
+                logger.info("removed the leftover build folder %s", entry.path)
+        except OSError as err:
+            logger.debug("cannot clean %s: %s", entry.path, err)
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def _dlopen_private(data: bytes, path: Path) -> ctypes.CDLL:
+    """Load ``data`` (the checked bytes of ``path``) from a sealed in-memory copy, so that
+    whatever happens to the cached file now cannot reach the loader; where in-memory
+    files cannot be loaded, load ``path`` itself (checked a moment before)."""
+    import fcntl  # POSIX only; the C step is built on Linux only
+
+    try:
+        fd = os.memfd_create("swarm_envs-fused_step", os.MFD_CLOEXEC | os.MFD_ALLOW_SEALING)
+    except (AttributeError, OSError) as err:
+        logger.debug("no in-memory copy (%s); loading %s", err, path)
+        return ctypes.CDLL(str(path))
+    try:
+        view = memoryview(data)
+        while view:
+            view = view[os.write(fd, view) :]
+        seals = fcntl.F_SEAL_SHRINK | fcntl.F_SEAL_GROW | fcntl.F_SEAL_WRITE | fcntl.F_SEAL_SEAL
+        fcntl.fcntl(fd, fcntl.F_ADD_SEALS, seals)
+        lib = ctypes.CDLL(f"/proc/self/fd/{fd}")
+    except OSError as err:
+        os.close(fd)
+        logger.debug("cannot load an in-memory copy (%s); loading %s", err, path)
+        return ctypes.CDLL(str(path))
+    # Kept open: the loader knows the library by this path, which must not name another.
+    _PRIVATE_FDS.append(fd)
+    return lib
+
+
+def _open(data: bytes, path: Path) -> Library:
+    lib = _dlopen_private(data, path)
+    lib.fused_step_layout.restype = ctypes.c_longlong
+    if lib.fused_step_layout() != layout_hash():
+        raise RuntimeError(f"{path} was built for another parameter layout; delete it")
+    return Library(lib, path)
+
+
+def _open_any(cache: Path, key: str) -> Library:
+    """Without a compiler: the newest intact library built for ``key`` by any compiler."""
+    damaged = []
+    found = sorted(cache.glob(f"fused_step-{key[:16]}-*.so"), key=_mtime, reverse=True)
+    for path in found:
+        data, why = _verified(path, key)
+        if data is not None:
+            return _open(data, path)
+        damaged.append(f"{path}: {why}")
+    why = "no C compiler found ($CC, cc, gcc)"
+    raise RuntimeError(
+        f"{why}; the cached C step is damaged ({'; '.join(damaged)})" if damaged else why
+    )
+
+
+def _warn_once(message: str) -> None:
+    if message not in _WARNED:
+        _WARNED.add(message)
+        warnings.warn(message, UserWarning, stacklevel=5)  # load_library's caller
+
+
+def _load(flags: tuple[str, ...], timeout: float) -> Library:
+    if sys.platform != "linux":
+        raise RuntimeError(f"the C step is built on Linux only (this is {sys.platform})")
+    cache, key = _cache_dir(), _source_key(flags)
+    _clean_leftovers(cache)
+    compiler = _compiler()
+    if compiler is None:
+        return _open_any(cache, key)
+    target = _library_path(cache, key, compiler)
+    data, _ = _verified(target, key)
+    if data is None:
+        data = _rebuilt(compiler, flags, key, target, timeout)
+    return _open(data, target)
 
 
 def load_library() -> Library:
     """The C step for the current flags, built on first use; ``RuntimeError`` with the
-    reason where it cannot be built or loaded."""
+    reason where it cannot be built or loaded.
+
+    A cached library is loaded only where its record vouches for it (same sources, flags
+    and layout; same size and SHA-256), from a private in-memory copy of the bytes
+    checked; a damaged one is rebuilt (with a warning) or, without a compiler, refused.
+    Without a compiler, an intact library built by any compiler for the same sources
+    and flags is loaded. Outcomes, failures included, are kept for the process.
+
+    Raises:
+        RuntimeError: no intact library and none can be built here, with the reason.
+        ValueError: :data:`CC_TIMEOUT_ENV` is not a number of seconds > 0.
+    """
     flags = build_flags()
+    timeout = compiler_timeout()
     with _LOCK:
         if flags in _LIBRARIES:
             return _LIBRARIES[flags]
         if flags in _FAILURES:
             raise RuntimeError(_FAILURES[flags])
         try:
-            if sys.platform != "linux":
-                raise RuntimeError(f"the C step is built on Linux only (this is {sys.platform})")
-            compiler = _compiler()
-            if compiler is None:
-                raise RuntimeError("no C compiler found ($CC, cc, gcc)")
-            path = _library_path(compiler, flags)
-            if not path.exists():
-                start = time.perf_counter()
-                _build(compiler, flags, path)
-                logger.info("built %s in %.1f s", path, time.perf_counter() - start)
-            lib = ctypes.CDLL(str(path))
-            lib.fused_step_layout.restype = ctypes.c_longlong
-            if lib.fused_step_layout() != layout_hash():
-                raise RuntimeError(f"{path} was built for another parameter layout; delete it")
-            library = Library(lib, path)
+            library = _load(flags, timeout)
         except (OSError, RuntimeError, AttributeError) as err:
             _FAILURES[flags] = str(err)
             raise RuntimeError(_FAILURES[flags]) from err
