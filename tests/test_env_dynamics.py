@@ -100,7 +100,11 @@ def test_lagrangian_per_agent_parameters_must_match_n_agents():
 
 
 def test_lagrangian_start_that_cannot_fit_is_a_clear_error():
-    cfg = cfg_of("lagrangian", n_agents=20, init_radius=0.1)
+    # Below the radius at which the bins can never fit, the config itself refuses it.
+    with pytest.raises(ValueError, match=r"init_radius must be in"):
+        cfg_of("lagrangian", n_agents=20, init_radius=0.1)
+    # Above it but too tight for random starts: the core (no env-level trial) says why.
+    cfg = cfg_of("lagrangian", n_agents=20, init_radius=0.2)
     core = SwarmNavCore(cfg)
     with pytest.raises(ValueError, match="non-overlapping bins"):
         core.reset(np.random.default_rng(0))
