@@ -29,6 +29,9 @@ TRAIN_FILES = (
 )
 #: What ``swarm-eval`` writes (and ``report.md``, the demo's verdict on those results).
 EVAL_FILES = ("results.json", "summary.md", "curves.png", "episode0_*.gif", "report.md")
+#: What ``--overwrite`` clears before a training run (``swarm-train``, ``swarm-demo``):
+#: an earlier run's training and evaluation outputs.
+RUN_FILES = TRAIN_FILES + EVAL_FILES
 #: What ``swarm-sweep`` writes.
 SWEEP_FILES = (
     "trials.csv",
@@ -55,7 +58,11 @@ def check_out_dir(out: str | Path, *, overwrite: bool, flag: str = "--out") -> P
         if p.exists() and not p.is_dir():
             what = "is a file" if p == path else f"is below {p}, which is a file"
             raise OutDirError(f"{flag} {path} {what}; give a folder")
-    if path.is_dir() and not overwrite and any(path.iterdir()):
+    try:
+        occupied = path.is_dir() and any(path.iterdir())
+    except OSError as err:
+        raise OutDirError(f"{flag} {path} cannot be read: {err.strerror or err}") from None
+    if occupied and not overwrite:
         raise OutDirError(
             f"{flag} {path} already holds files; choose a new folder, or add --overwrite "
             "to replace the earlier run there"
@@ -93,10 +100,13 @@ def prepare_out_dir(
     validated. Prints one line when files are removed.
     """
     path = check_out_dir(out, overwrite=overwrite)
-    if not overwrite or not path.is_dir():
-        path.mkdir(parents=True, exist_ok=True)
-        return path
-    removed, kept = clear_previous_run(path, patterns)
+    try:
+        if not overwrite or not path.is_dir():
+            path.mkdir(parents=True, exist_ok=True)
+            return path
+        removed, kept = clear_previous_run(path, patterns)
+    except OSError as err:
+        raise OutDirError(f"cannot prepare --out {path}: {err.strerror or err}") from None
     if removed:
         note = f"; kept {len(kept)} other(s): {', '.join(kept[:5])}" if kept else ""
         more = ", ..." if len(kept) > 5 else ""

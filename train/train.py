@@ -8,11 +8,35 @@ Two modes:
 * ``central``: one policy sees the whole swarm (flat observation, flat action) through
   ``gymnasium.make(env_id)``, ``n_swarms`` copies in a ``DummyVecEnv``.
 
-What a run writes into its output folder: ``model.zip`` (final), ``best_model.zip`` (best
-periodic evaluation, if enabled), ``checkpoints/`` (if enabled), ``train_config.yaml``,
-``env_config.yaml`` (the resolved env configuration), ``meta.json`` (package versions,
-seed, timings) and ``tensorboard/``. ``swarm-eval --config <out>/env_config.yaml
---policies potential <out>/model.zip`` evaluates it.
+What a run writes into its output folder: ``model.zip`` (the latest saved model: final
+once ``meta.json`` says ``completed``), ``best_model.zip`` (best periodic evaluation, if
+enabled), ``checkpoints/step_<timesteps>/`` (the latest ``checkpoint_keep``; see
+:mod:`train.checkpoints`), ``train_config.yaml``, ``env_config.yaml`` (the resolved env
+configuration), ``meta.json`` (package versions, seed, ``status``: ``running``,
+``interrupted`` or ``completed``, the timesteps ``model.zip`` holds, timings) and
+``tensorboard/``. ``swarm-eval --config <out>/env_config.yaml --policies potential
+<out>/model.zip`` evaluates it.
+
+Checkpoints are taken between updates (the start of a rollout): every
+``checkpoint_seconds`` of wall time (default 120: a killed run loses at most that, plus
+one rollout and update, whatever the config's speed) and/or every ``checkpoint_freq``
+timesteps, when a stop is requested (SIGINT, SIGTERM: :mod:`train.interrupt`) and at
+the end. A stop is honoured at the next boundary, so after at most one rollout and one
+update (and a periodic evaluation, if one is running).
+
+Resuming (``resume=True``) loads the latest checkpoint: networks, optimizer, step count,
+last observations, the replay buffer (SAC), the pickled training env (swarm states
+mid-episode, its generator) and the generators SB3 draws from, then continues with
+``reset_num_timesteps=False`` up to ``total_timesteps``. On the same machine and
+software a resumed run gives the same model as an uninterrupted one, bit for bit (the
+tests check PPO and SAC). What does not carry over: a stop discards the rollout in
+progress (PPO) or the vector step in progress (SAC), which the resumed run collects
+again from the same state; the logged timings (fps) restart, and SB3's logging
+interval counts iterations from the resume; with ``use_sde``
+the exploration noise drawn at the stopped rollout's start is drawn again, so that
+run differs from then on; an env that cannot be pickled restarts its episodes (a
+warning says so); a resumed run with a larger ``total_timesteps`` equals an
+uninterrupted run of that total (the configs' schedules are constant).
 
 Reproducibility: the same config and seed give the same model on the same machine and
 software versions (CPU). Limits: results differ across torch/numpy versions and CPU
@@ -48,11 +72,14 @@ from train.checkpoints import (
 )
 from train.config import TrainConfig, algorithm_class
 from train.interrupt import StopRequest, TrainingInterrupted, stop_on_signals
-from train.outdir import EVAL_FILES, TRAIN_FILES, check_out_dir, prepare_out_dir
+from train.outdir import RUN_FILES, check_out_dir, prepare_out_dir
 
-#: What ``--overwrite`` clears before a training run: an earlier run's training and
-#: evaluation outputs.
-RUN_FILES = TRAIN_FILES + EVAL_FILES
+
+class TrainSetupError(ValueError):
+    """A run that cannot start: SB3 rejects the config, or there is nothing to resume.
+
+    Raised before anything is written.
+    """
 
 
 def make_training_env(tc: TrainConfig):
@@ -152,8 +179,9 @@ def train(
             SIGINT and SIGTERM set it while training runs (main thread only).
 
     Raises:
-        ValueError: SB3 rejects the config, or ``resume`` finds nothing to continue;
-            raised before anything is written.
+        TrainSetupError: SB3 rejects the config, or ``resume`` finds nothing to
+            continue; raised before anything is written.
+        OutDirError: ``out_dir`` is a file, or holds files and ``overwrite`` is false.
         TrainingInterrupted: the run stopped on request after saving a checkpoint,
             ``model.zip`` and ``meta.json``.
     """
@@ -230,17 +258,19 @@ def _new_model(tc: TrainConfig, tensorboard_log: str | None) -> Any:
         return build_model(tc, venv, tensorboard_log=tensorboard_log)
     except (AssertionError, ValueError, TypeError) as err:
         venv.close()
-        raise ValueError(f"{tc.algo} rejects the config: {err}") from None
+        raise TrainSetupError(f"{tc.algo} rejects the config: {err}") from None
 
 
 def _resume_model(tc: TrainConfig, out: Path, tensorboard_log: str | None) -> tuple[Any, dict]:
     """The model of the latest checkpoint in ``out`` and its saved state."""
     ckpt = latest_checkpoint(out)
     if ckpt is None:
-        raise ValueError(f"--resume {out}: no checkpoint in {out / CHECKPOINTS} to continue from")
+        raise TrainSetupError(
+            f"--resume {out}: no checkpoint in {out / CHECKPOINTS} to continue from"
+        )
     done = checkpoint_timesteps(ckpt)
     if done >= tc.total_timesteps:
-        raise ValueError(
+        raise TrainSetupError(
             f"--resume {out}: the run has {done:,} timesteps, total_timesteps is "
             f"{tc.total_timesteps:,}; give a larger total_timesteps=... to extend it"
         )
