@@ -115,6 +115,19 @@ def test_stopped_and_resumed_run_equals_an_uninterrupted_one(tmp_path, algo, mod
     assert_same_model(tmp_path / "cut" / "model.zip", tmp_path / "whole" / "model.zip")
 
 
+def test_resume_continues_the_periodic_evaluation(tmp_path):
+    tc = train_config_from_mapping(tiny(eval_freq=384, eval_episodes=1))
+    with pytest.raises(TrainingInterrupted):
+        run(tc, tmp_path, stop=StopAfter(3))  # after two evaluations
+    first = json.loads((tmp_path / "meta.json").read_text())["evaluations"]
+    run(tc, tmp_path, resume=True)
+    evaluations = json.loads((tmp_path / "meta.json").read_text())["evaluations"]
+    steps = [e["timesteps"] for e in evaluations]
+    assert evaluations[: len(first)] == first and len(first) >= 1
+    assert steps == sorted(set(steps)) and steps[-1] >= 1152  # none repeated, none skipped
+    assert len(steps) == len(range(384, steps[-1] + 1, 384))
+
+
 def test_periodic_checkpoints_by_time_keep_the_latest_few(tmp_path):
     # A cadence shorter than a rollout: a checkpoint at every rollout start.
     tc = train_config_from_mapping(tiny(checkpoint_seconds=1e-6, checkpoint_keep=2))
