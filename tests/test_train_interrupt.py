@@ -183,6 +183,15 @@ def test_resume_without_checkpoint_is_an_error(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["train_config.yaml"]
 
 
+def test_resume_names_a_damaged_checkpoint(tmp_path, capsys):
+    run(train_config_from_mapping(tiny(total_timesteps=400)), tmp_path)
+    ckpt = latest_checkpoint(tmp_path)
+    (ckpt / "model.zip").write_text("garbage")
+    assert cli_train.main(["--resume", str(tmp_path), "total_timesteps=2000"]) == 2
+    err = capsys.readouterr().err
+    assert f"cannot load checkpoint {ckpt}" in err and err.count("\n") == 1
+
+
 def test_first_signal_requests_a_stop_and_a_second_aborts():
     before = signal.getsignal(signal.SIGINT)
     with stop_on_signals() as stop:

@@ -275,14 +275,19 @@ def _resume_model(tc: TrainConfig, out: Path, tensorboard_log: str | None) -> tu
             f"{tc.total_timesteps:,}; give a larger total_timesteps=... to extend it"
         )
     cls = done_slots_only(algorithm_class(tc.algo))
-    model, state = load_checkpoint(
-        ckpt,
-        cls,
-        device=tc.device,
-        make_env=lambda: make_training_env(tc),
-        tensorboard_log=tensorboard_log,
-    )
-    return model, state
+    try:
+        return load_checkpoint(
+            ckpt,
+            cls,
+            device=tc.device,
+            make_env=lambda: make_training_env(tc),
+            tensorboard_log=tensorboard_log,
+        )
+    except Exception as err:  # a damaged or foreign checkpoint: say which, not a traceback
+        raise TrainSetupError(
+            f"--resume {out}: cannot load checkpoint {ckpt} ({type(err).__name__}: {err}); "
+            "move it away to resume from the one before"
+        ) from err
 
 
 class _Run:
