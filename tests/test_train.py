@@ -140,6 +140,8 @@ def test_smoke_training_writes_a_reloadable_model(tmp_path: Path, algo, mode, hy
         assert (tmp_path / name).is_file()
     meta = json.loads((tmp_path / "meta.json").read_text())
     assert meta["algo"] == algo and meta["mode"] == mode and meta["swarm_envs"]
+    assert meta["status"] == "completed" and meta["timesteps"] >= 400
+    assert (tmp_path / meta["checkpoint"] / "model.zip").is_file()  # the final state
     # The saved config reloads into the same run description.
     assert load_train_config(tmp_path / "train_config.yaml") == tc
 

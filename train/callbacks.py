@@ -1,13 +1,17 @@
 """SB3 callbacks: swarm statistics in TensorBoard, periodic evaluation against the analytic
-controller (with the best model kept)."""
+controller (with the best model kept), and the run guard that checkpoints between updates
+and stops on request."""
 
 from __future__ import annotations
 
+import math
+import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.vec_env import VecEnvWrapper
 
 from swarm_envs.config import SwarmConfig
@@ -125,3 +129,89 @@ class AnalyticBaselineEvalCallback(BaseCallback):
             self._next_eval += self.eval_freq
             self._evaluate()
         return True
+
+    def state(self) -> dict[str, Any]:
+        """What a resumed run needs to continue the evaluations (JSON-ready)."""
+        best = self.best_return if math.isfinite(self.best_return) else None
+        return {"history": self.history, "best_return": best, "next_eval": self._next_eval}
+
+    def load_state(self, state: dict[str, Any]) -> None:
+        """Continue from :meth:`state` of an earlier run."""
+        self.history = list(state["history"])
+        best = state["best_return"]
+        self.best_return = -np.inf if best is None else float(best)
+        self._next_eval = int(state["next_eval"])
+
+
+class RunGuard(BaseCallback):
+    """Checkpoints between updates, and the stop on request, around the other callbacks.
+
+    At the start of each rollout, where the training state is complete (see
+    :mod:`train.checkpoints`), it calls ``save()`` when a checkpoint is due: every
+    ``every_seconds`` of wall time and/or every ``every_steps`` timesteps (0 turns
+    either off). When ``should_stop()`` is true there, it saves and ends training: the
+    rollout's first step returns False, and the children do not see that step (it is
+    not part of the saved state). :attr:`last_checkpoint` is the folder of the latest
+    save and :attr:`stopped` tells whether training ended on request.
+    """
+
+    def __init__(
+        self,
+        save: Callable[[], Path],
+        should_stop: Callable[[], bool],
+        children: list[BaseCallback],
+        every_seconds: float = 0.0,
+        every_steps: int = 0,
+    ) -> None:
+        super().__init__()
+        self.save = save
+        self.should_stop = should_stop
+        self.children = CallbackList(children)
+        self.every_seconds = every_seconds
+        self.every_steps = every_steps
+        self.stopped = False
+        self.last_checkpoint: Path | None = None
+        self._saved_at = (0.0, 0)
+
+    def _init_callback(self) -> None:
+        self.children.init_callback(self.model)
+
+    def _on_training_start(self) -> None:
+        self._saved_at = (time.monotonic(), self.model.num_timesteps)
+        self.children.on_training_start(self.locals, self.globals)
+
+    def _due(self) -> bool:
+        clock, steps = self._saved_at
+        by_time = self.every_seconds > 0 and time.monotonic() - clock >= self.every_seconds
+        by_steps = self.every_steps > 0 and self.model.num_timesteps - steps >= self.every_steps
+        return by_time or by_steps
+
+    def checkpoint(self) -> Path:
+        """Save now (call between updates only)."""
+        self.last_checkpoint = self.save()
+        self._saved_at = (time.monotonic(), self.model.num_timesteps)
+        return self.last_checkpoint
+
+    def _on_rollout_start(self) -> None:
+        if self.should_stop():
+            self.checkpoint()
+            self.stopped = True
+            return
+        if self._due():
+            self.checkpoint()
+        self.children.on_rollout_start()
+
+    def _on_step(self) -> bool:
+        if self.stopped:
+            return False
+        return self.children.on_step()
+
+    def update_child_locals(self, locals_: dict[str, Any]) -> None:
+        self.children.update_locals(locals_)
+
+    def _on_rollout_end(self) -> None:
+        if not self.stopped:
+            self.children.on_rollout_end()
+
+    def _on_training_end(self) -> None:
+        self.children.on_training_end()

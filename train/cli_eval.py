@@ -16,9 +16,15 @@ policy runs on the same seeded episodes; the output folder receives ``results.js
 ``summary.md``, ``curves.png`` and one ``episode0_<policy>.gif`` per policy (see
 :mod:`train.evaluate` and ``docs/evaluation.md``).
 
-Exit status: 0 on success; 2 with a message on stderr for an unknown policy name, a
-missing or unreadable model file, a model whose spaces do not fit the env, an unknown
-env id or a bad config.
+``--out`` must be new or empty; ``--overwrite`` removes an earlier evaluation's files
+there first (``results.json``, ``summary.md``, ``curves.png``, the GIFs, a demo's
+``report.md``) and keeps anything else, such as a run's ``model.zip``.
+
+Exit status: 0 on success; 2 with one line on stderr for a bad flag (``--seed`` outside
+[0, 2**32 - 1], ``--episodes`` < 1, an unavailable ``--device``, ...), an unknown
+policy name, a missing or unreadable model file, a model whose spaces do not fit the
+env, an unknown env id, a bad config (YAML syntax included) or an ``--out`` that is a
+file or holds files (without ``--overwrite``); 130 on Ctrl-C.
 """
 
 from __future__ import annotations
@@ -30,13 +36,14 @@ from pathlib import Path
 from typing import Any
 
 from swarm_envs import ENV_ID, tune_allocator
+from train.cli_common import CliError, OneLineParser, check_device, check_seed, fail
 
 PROG = "swarm-eval"
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The command-line parser of ``swarm-eval``."""
-    p = argparse.ArgumentParser(
+    p = OneLineParser(
         prog=PROG,
         description="Evaluate policies (analytic controllers, SB3 models) on the same seeded "
         "SwarmNav episodes; write results.json, summary.md, curves.png and GIFs.",
@@ -69,6 +76,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--episodes", type=int, default=20, help="episodes per policy (default 20)")
     p.add_argument("--seed", type=int, default=0, help="seed of the episodes (default 0)")
     p.add_argument("--out", default="runs/eval", help="output folder (default runs/eval)")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="--out may hold an earlier evaluation: remove its files first",
+    )
     p.add_argument("--device", default="cpu", help="torch device for SB3 models (default cpu)")
     p.add_argument(
         "--stochastic", action="store_true", help="sample SB3 actions (default deterministic)"
@@ -80,19 +92,20 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-class CliError(Exception):
-    """A user error: reported as one line on stderr, exit status 2."""
-
-
 def _parse_overrides(items: Sequence[str], max_steps: int | None) -> dict[str, Any]:
     import yaml
+
+    from train.cli_common import yaml_message
 
     out: dict[str, Any] = {}
     for item in items:
         key, sep, raw = item.partition("=")
-        if not sep or not key:
+        if not sep or not key or any(not part for part in key.split(".")):
             raise CliError(f"--set expects KEY=VALUE, got {item!r}")
-        value = yaml.safe_load(raw)
+        try:
+            value = yaml.safe_load(raw)
+        except yaml.YAMLError as err:
+            raise CliError(f"--set {item!r}: {yaml_message(err)}") from None
         *sections, leaf = key.split(".")
         node = out
         for s in sections:
@@ -107,9 +120,11 @@ def _parse_overrides(items: Sequence[str], max_steps: int | None) -> dict[str, A
 
 def _make_config(env_id: str, config: str | None, overrides: dict[str, Any]) -> Any:
     import gymnasium
+    import yaml
 
     import swarm_envs  # noqa: F401  (registers the env ids)
     from agents.base import swarm_config_of
+    from train.cli_common import yaml_message
 
     kwargs = dict(overrides)
     if config is not None:
@@ -120,6 +135,10 @@ def _make_config(env_id: str, config: str | None, overrides: dict[str, Any]) -> 
         raise CliError(f"cannot make env {env_id!r}: {err}") from None
     except (ValueError, TypeError) as err:
         raise CliError(f"bad config for {env_id}: {err}") from None
+    except yaml.YAMLError as err:
+        raise CliError(f"bad config for {env_id}: {yaml_message(err)}") from None
+    except OSError as err:
+        raise CliError(f"cannot read the config of {env_id}: {err}") from None
     try:
         return swarm_config_of(env)
     except ValueError:
@@ -193,23 +212,36 @@ def _load_rllib(path: Path, seed: int) -> Any:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``swarm-eval``; returns the exit status (0 ok, 2 user error)."""
+    """Run ``swarm-eval``; returns the exit status (0 ok, 2 user error, 130 Ctrl-C)."""
     args = build_parser().parse_args(argv)
+    try:
+        return _main(args)
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted by SIGINT", file=sys.stderr)
+        return 130
+
+
+def _main(args: Any) -> int:
+    from train.outdir import EVAL_FILES, OutDirError, check_out_dir, prepare_out_dir
+
     tune_allocator()  # a long-running tool: keep freed heap for reuse
+    out = Path(args.out)
     try:
         if args.episodes < 1:
             raise CliError(f"--episodes must be >= 1, got {args.episodes}")
-        if args.gif_size < 32:
-            raise CliError(f"--gif-size must be >= 32, got {args.gif_size}")
+        if not 32 <= args.gif_size <= 4096:
+            raise CliError(f"--gif-size must be in [32, 4096] pixels, got {args.gif_size}")
+        check_seed("--seed", args.seed)
+        check_device("--device", args.device)
+        check_out_dir(out, overwrite=args.overwrite)
         cfg = _make_config(args.env, args.config, _parse_overrides(args.overrides, args.max_steps))
         policies = _load_policies(args.policies, cfg, args.seed, args.device)
-    except CliError as err:
-        print(f"{PROG}: error: {err}", file=sys.stderr)
-        return 2
+        prepare_out_dir(out, overwrite=args.overwrite, patterns=EVAL_FILES, prog=PROG)
+    except (CliError, OutDirError) as err:
+        return fail(PROG, err)
 
     from train.evaluate import evaluate_policies, format_table
 
-    out = Path(args.out)
     results = evaluate_policies(
         policies,
         cfg,

@@ -12,7 +12,9 @@ the same trials in this process without Ray, with the same numbers. Overrides us
 dotted keys and YAML values, as in ``swarm-train``. The output folder (default
 ``runs/sweeps/<config name>``) receives ``trials.csv``, ``summary.csv``,
 ``results.json``, ``sweep.png`` and ``sweep_config.yaml`` (see :mod:`train.sweep`).
-Exit status 2 with a message on a bad config, or when Ray is needed but absent.
+``--out`` must be new or empty; ``--overwrite`` removes an earlier sweep's files there
+first. Exit status 2 with one line on stderr on a bad flag, config or output folder, or
+when Ray is needed but absent; 130 on Ctrl-C.
 """
 
 from __future__ import annotations
@@ -23,7 +25,9 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from swarm_envs import tune_allocator
+from train.cli_common import OneLineParser, fail
 from train.config import parse_overrides
+from train.outdir import SWEEP_FILES, check_out_dir, prepare_out_dir
 from train.sweep import ENGINES, load_sweep_config, run_sweep, write_outputs
 
 PROG = "swarm-sweep"
@@ -31,7 +35,7 @@ PROG = "swarm-sweep"
 
 def build_parser() -> argparse.ArgumentParser:
     """The command-line parser of ``swarm-sweep``."""
-    p = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
+    p = OneLineParser(prog=PROG, description=__doc__.splitlines()[0])
     p.add_argument("--config", required=True, help="configs/sweeps/<name>.yaml")
     p.add_argument(
         "--engine",
@@ -53,6 +57,11 @@ def build_parser() -> argparse.ArgumentParser:
         "multi-machine cluster use a shared folder or a cloud URI)",
     )
     p.add_argument("--out", default=None, help="output folder (default runs/sweeps/<name>)")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="--out may hold an earlier sweep: remove its files first",
+    )
     p.add_argument("--no-plot", action="store_true", help="do not write sweep.png")
     p.add_argument("--no-progress", action="store_true", help="no progress output")
     p.add_argument("overrides", nargs="*", help="key=value overrides (dotted keys)")
@@ -60,8 +69,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``swarm-sweep``; returns the exit status (0 ok, 2 user error)."""
+    """Run ``swarm-sweep``; returns the exit status (0 ok, 2 user error, 130 Ctrl-C)."""
     args = build_parser().parse_args(argv)
+    try:
+        return _main(args)
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted by SIGINT", file=sys.stderr)
+        return 130
+
+
+def _main(args: argparse.Namespace) -> int:
     tune_allocator()  # a long-running tool: keep freed heap for reuse
     name = Path(args.config).stem
     out = Path(args.out) if args.out else Path("runs") / "sweeps" / name
@@ -75,10 +92,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             check_address(args.address)
             check_num_cpus(args.num_cpus)
             require_ray()
-    except (ValueError, ImportError) as err:
+        check_out_dir(out, overwrite=args.overwrite)
+        prepare_out_dir(out, overwrite=args.overwrite, patterns=SWEEP_FILES, prog=PROG)
+    except (ValueError, ImportError, OSError) as err:
         hint = " (or run without Ray: --engine local)" if isinstance(err, ImportError) else ""
-        print(f"{PROG}: error: {err}{hint}", file=sys.stderr)
-        return 2
+        return fail(PROG, f"{err}{hint}" if hint else err)
     n_trials = len(sc.points()) * len(sc.seeds)
     print(
         f"{sc.task} sweep over {', '.join(sc.grid)}: {len(sc.points())} grid point(s) × "

@@ -15,6 +15,7 @@ ValueError: hyperparams.learning_rat is not a PPO argument; allowed: ...
 from __future__ import annotations
 
 import inspect
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -29,8 +30,14 @@ from swarm_envs.config import (
     load_swarm_config,
     resolve_config_path,
 )
+from train.hyperparams import check_hyperparams
 
 ALGOS = ("PPO", "SAC")
+#: Keys a resumed run may change (``swarm-train --resume DIR key=value``): the total
+#: (to extend a run) and the checkpoint cadence; none of them changes what is learned.
+RESUME_KEYS = ("total_timesteps", "checkpoint_freq", "checkpoint_seconds", "checkpoint_keep")
+#: Largest seed numpy's seeding accepts.
+MAX_SEED = 2**32 - 1
 MODES = ("shared", "central")
 #: SB3 constructor arguments that the trainer sets itself (not allowed in ``hyperparams``).
 RESERVED = {"policy", "env", "seed", "device", "policy_kwargs", "tensorboard_log", "verbose"}
@@ -66,6 +73,10 @@ class RunConfig:
             self.swarm_config()
         except ValueError as err:
             raise ValueError(f"env: {err}") from None
+        except yaml.YAMLError as err:
+            raise ValueError(f"env_config: {yaml_text_error(err)}") from None
+        except OSError as err:
+            raise ValueError(f"env_config: cannot read {err.filename}: {err.strerror}") from None
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data for YAML (saved beside the model or checkpoint)."""
@@ -110,7 +121,13 @@ class TrainConfig(RunConfig):
     eval_seed: int = 1_000_000
     """Seed of the evaluation episodes (kept apart from the training seed)."""
     checkpoint_freq: int = 0
-    """Save a checkpoint every this many timesteps (0 = only the final model)."""
+    """Also save a checkpoint every this many timesteps (0 = by wall time only)."""
+    checkpoint_seconds: float = 120.0
+    """Save a checkpoint every this many seconds of wall time (0 = by timesteps only).
+    Checkpoints are taken between updates; a run killed outright loses at most this much
+    wall time plus one rollout and update."""
+    checkpoint_keep: int = 3
+    """How many of the latest checkpoints ``checkpoints/`` keeps (older ones are removed)."""
     device: str = "cpu"
     """Torch device for the networks."""
     torch_threads: int | None = None
@@ -128,10 +145,30 @@ class TrainConfig(RunConfig):
             ("eval_episodes", 1),
             ("eval_seed", 0),
             ("checkpoint_freq", 0),
+            ("checkpoint_keep", 1),
         ):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+        for name in ("seed", "eval_seed"):
+            if getattr(self, name) > MAX_SEED:
+                raise ValueError(
+                    f"{name} must be an integer in [0, {MAX_SEED}], got {getattr(self, name)!r}"
+                )
+        seconds = self.checkpoint_seconds
+        if (
+            isinstance(seconds, bool)
+            or not isinstance(seconds, (int, float))
+            or not math.isfinite(seconds)
+            or seconds < 0
+        ):
+            raise ValueError(
+                f"checkpoint_seconds must be a number >= 0 (0 = by timesteps only), got {seconds!r}"
+            )
+        object.__setattr__(self, "checkpoint_seconds", float(seconds))
+        problem = device_problem(self.device)
+        if problem is not None:
+            raise ValueError(f"device {problem}")
         if self.torch_threads is not None and (
             not isinstance(self.torch_threads, int) or self.torch_threads < 1
         ):
@@ -157,6 +194,43 @@ class TrainConfig(RunConfig):
                     f"allowed: {', '.join(sorted(allowed))}"
                 )
         self._check_env()  # a typo in the env part fails before any training starts
+        n_envs = self.n_swarms * (self.swarm_config().n_agents if self.mode == "shared" else 1)
+        hyper = check_hyperparams(self.algo, self.hyperparams, n_envs)
+        object.__setattr__(self, "hyperparams", hyper)
+
+    @property
+    def n_slots(self) -> int:
+        """Env slots SB3 sees: ``n_swarms × n_agents`` (shared) or ``n_swarms`` (central)."""
+        return self.n_swarms * (self.swarm_config().n_agents if self.mode == "shared" else 1)
+
+
+def device_problem(device: Any) -> str | None:
+    """Why ``device`` cannot run the networks here, or None when it can.
+
+    Allowed: ``auto``, ``cpu``, and ``cuda``/``cuda:<index>`` or ``mps`` where present.
+    """
+    import torch
+
+    if not isinstance(device, str):
+        return f"must be a torch device name ('cpu', 'cuda', 'cuda:0', 'auto'), got {device!r}"
+    if device == "auto":
+        return None
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, ValueError):
+        return f"must be a torch device name ('cpu', 'cuda', 'cuda:0', 'auto'), got {device!r}"
+    if dev.type == "cpu":
+        return None
+    if dev.type == "cuda":
+        count = torch.cuda.device_count() if torch.cuda.is_available() else 0
+        if count == 0:
+            return f"{device!r} is not available: this machine has no CUDA device (use cpu)"
+        if dev.index is not None and dev.index >= count:
+            return f"{device!r} is not available: this machine has {count} CUDA device(s)"
+        return None
+    if dev.type == "mps" and torch.backends.mps.is_available():
+        return None
+    return f"{device!r} is not available here (use cpu, auto or cuda)"
 
 
 def train_config_from_mapping(data: Mapping[str, Any]) -> TrainConfig:
@@ -164,14 +238,48 @@ def train_config_from_mapping(data: Mapping[str, Any]) -> TrainConfig:
     return config_from_mapping(TrainConfig, data)
 
 
+def yaml_text_error(err: yaml.YAMLError, source: str | Path | None = None) -> str:
+    """A YAML syntax error in one line: ``<file>: invalid YAML at line L, column C: ...``."""
+    from train.cli_common import yaml_message
+
+    return yaml_message(err, None if source is None else str(source))
+
+
+def read_yaml_mapping(path: str | Path, kind: str = "config") -> dict[str, Any]:
+    """The mapping at the top of the YAML file ``path`` (empty file: ``{}``).
+
+    Unreadable files, YAML syntax errors and non-mappings raise ``ValueError`` naming
+    the file (and the line and column of a syntax error).
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise ValueError(f"{kind} {p} is not UTF-8 text") from None
+    except OSError as err:
+        raise ValueError(f"cannot read {kind} {p}: {err.strerror}") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        raise ValueError(f"{kind} {yaml_text_error(err, p)}") from None
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise ValueError(f"{kind} {p} must hold a mapping, got {type(data).__name__}")
+    return data
+
+
 def parse_overrides(items: list[str]) -> dict[str, Any]:
     """``["total_timesteps=5000", "env.n_agents=4"]`` → nested dict; values parsed as YAML."""
     out: dict[str, Any] = {}
     for item in items:
-        if "=" not in item:
+        key, sep, raw = item.partition("=")
+        if not sep or not key or any(not part for part in key.split(".")):
             raise ValueError(f"override {item!r} must look like key=value (e.g. seed=3)")
-        key, raw = item.split("=", 1)
-        value = yaml.safe_load(raw)
+        try:
+            value = yaml.safe_load(raw)
+        except yaml.YAMLError as err:
+            raise ValueError(f"override {item!r}: {yaml_text_error(err)}") from None
         parts = key.split(".")
         node = out
         for part in parts[:-1]:
@@ -188,13 +296,36 @@ def load_train_config(
     """Load ``configs/train/<name>.yaml`` and merge ``overrides`` (nested dicts merge)."""
     data: dict[str, Any] = {}
     if path is not None:
-        p = resolve_config_path(path, "train", "train config")
-        data = yaml.safe_load(p.read_text()) or {}
-        if not isinstance(data, dict):
-            raise ValueError(f"train config {p} must hold a mapping")
+        data = read_yaml_mapping(resolve_config_path(path, "train", "train config"), "train config")
+    return train_config_from_mapping(merge_overrides(data, overrides))
+
+
+def merge_overrides(data: Mapping[str, Any], overrides: Mapping[str, Any] | None) -> dict:
+    """``data`` with ``overrides`` on top (a mapping merges into a mapping section)."""
+    out = dict(data)
     for key, value in (overrides or {}).items():
-        if isinstance(value, Mapping) and isinstance(data.get(key), Mapping):
-            data[key] = {**data[key], **value}
+        if isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
+            out[key] = {**out[key], **value}
         else:
-            data[key] = value
-    return train_config_from_mapping(data)
+            out[key] = value
+    return out
+
+
+def resume_config(saved: TrainConfig, overrides: Mapping[str, Any] | None) -> TrainConfig:
+    """The config of a resumed run: ``saved`` with only :data:`RESUME_KEYS` overridden.
+
+    An override that changes any other key raises ``ValueError`` naming it; one that
+    repeats the saved value is accepted.
+    """
+    tc = train_config_from_mapping(merge_overrides(saved.to_dict(), overrides))
+    changed = [
+        f"{key} ({getattr(saved, key)!r} -> {getattr(tc, key)!r})"
+        for key in (f.name for f in fields(TrainConfig))
+        if key not in RESUME_KEYS and getattr(tc, key) != getattr(saved, key)
+    ]
+    if changed:
+        raise ValueError(
+            "--resume continues the run with its saved config; cannot change "
+            f"{', '.join(changed)}; only {', '.join(RESUME_KEYS)} may be given"
+        )
+    return tc

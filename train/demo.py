@@ -9,8 +9,13 @@
    controller on the task's own measures (higher mean return, success rate at least as
    high, shorter mean time to goal, no more collisions)?
 
+``OUT`` must be new or empty; ``--overwrite`` removes an earlier run's files there
+first. Ctrl-C or SIGTERM during training saves a checkpoint and ``model.zip`` (see
+``swarm-train``); ``swarm-train --resume OUT`` continues that training.
+
 Exit status 0 when it does, 1 when it does not (the report says which measure failed),
-2 on a bad config.
+2 with one line on stderr on a bad flag, config or output folder, 130/143 when stopped
+by SIGINT/SIGTERM.
 """
 
 from __future__ import annotations
@@ -22,7 +27,10 @@ from typing import Any
 
 from swarm_envs import tune_allocator
 from swarm_envs.config import CONFIG_ROOT
+from train.cli_common import CliError, OneLineParser, check_seed, fail, one_line
 from train.config import load_train_config, parse_overrides
+
+PROG = "swarm-demo"
 
 DEFAULT_CONFIG = CONFIG_ROOT / "train" / "demo.yaml"
 LEARNED = "learned"
@@ -91,32 +99,59 @@ def write_report(results: dict[str, Any], out: Path, train_seconds: float | None
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="swarm-demo", description=__doc__.splitlines()[0])
+    """Run ``swarm-demo``; returns the exit status (see the module docstring)."""
+    parser = OneLineParser(prog=PROG, description=__doc__.splitlines()[0])
     parser.add_argument("--config", default=str(DEFAULT_CONFIG), help="train config YAML")
     parser.add_argument("--out", default="runs/demo", help="output folder (default runs/demo)")
+    parser.add_argument(
+        "--overwrite", action="store_true", help="OUT may hold an earlier run: remove it first"
+    )
     parser.add_argument("--episodes", type=int, default=100, help="evaluation episodes")
     parser.add_argument("--seed", type=int, default=2026, help="evaluation seed")
     parser.add_argument("--no-progress", action="store_true")
     parser.add_argument("overrides", nargs="*", help="key=value overrides of the train config")
     args = parser.parse_args(argv)
+    try:
+        return _main(args)
+    except KeyboardInterrupt:  # outside training, which saves and stops on its own
+        print(f"{PROG}: interrupted by SIGINT", file=sys.stderr)
+        return 130
+
+
+def _main(args: argparse.Namespace) -> int:
+    from train.outdir import OutDirError, check_out_dir
+
     tune_allocator()  # a long-running tool: keep freed heap for reuse
+    out = Path(args.out)
     try:
         tc = load_train_config(args.config, parse_overrides(args.overrides))
-    except ValueError as err:
-        print(f"swarm-demo: error: {err}", file=sys.stderr)
-        return 2
-    if args.seed in (tc.seed, tc.eval_seed):
-        print("swarm-demo: error: --seed must differ from the training seeds", file=sys.stderr)
-        return 2
+        if args.episodes < 1:
+            raise CliError(f"--episodes must be >= 1, got {args.episodes}")
+        check_seed("--seed", args.seed)
+        if args.seed in (tc.seed, tc.eval_seed):
+            raise CliError(
+                f"--seed must differ from the training seeds ({tc.seed}, {tc.eval_seed})"
+            )
+        check_out_dir(out, overwrite=args.overwrite)
+    except (CliError, ValueError, OSError) as err:
+        return fail(PROG, err)
 
     import json
 
     from agents import make_controller
     from train.evaluate import evaluate_policies, load_sb3_model
-    from train.train import train
+    from train.interrupt import TrainingAborted, TrainingInterrupted, exit_status
+    from train.train import TrainSetupError, train
 
-    out = Path(args.out)
-    model_path = train(tc, out, progress_bar=not args.no_progress)
+    try:
+        model_path = train(
+            tc, out, progress_bar=not args.no_progress, overwrite=args.overwrite, prog=PROG
+        )
+    except (TrainSetupError, OutDirError) as err:
+        return fail(PROG, err)
+    except (TrainingInterrupted, TrainingAborted) as err:
+        print(f"{PROG}: {one_line(str(err))}", file=sys.stderr)
+        return exit_status(err.signum)
     cfg = tc.swarm_config()
     policies = {
         "potential": make_controller("potential", cfg),

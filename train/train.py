@@ -8,11 +8,35 @@ Two modes:
 * ``central``: one policy sees the whole swarm (flat observation, flat action) through
   ``gymnasium.make(env_id)``, ``n_swarms`` copies in a ``DummyVecEnv``.
 
-What a run writes into its output folder: ``model.zip`` (final), ``best_model.zip`` (best
-periodic evaluation, if enabled), ``checkpoints/`` (if enabled), ``train_config.yaml``,
-``env_config.yaml`` (the resolved env configuration), ``meta.json`` (package versions,
-seed, timings) and ``tensorboard/``. ``swarm-eval --config <out>/env_config.yaml
---policies potential <out>/model.zip`` evaluates it.
+What a run writes into its output folder: ``model.zip`` (the latest saved model: final
+once ``meta.json`` says ``completed``), ``best_model.zip`` (best periodic evaluation, if
+enabled), ``checkpoints/step_<timesteps>/`` (the latest ``checkpoint_keep``; see
+:mod:`train.checkpoints`), ``train_config.yaml``, ``env_config.yaml`` (the resolved env
+configuration), ``meta.json`` (package versions, seed, ``status``: ``running``,
+``interrupted`` or ``completed``, the timesteps ``model.zip`` holds, timings) and
+``tensorboard/``. ``swarm-eval --config <out>/env_config.yaml --policies potential
+<out>/model.zip`` evaluates it.
+
+Checkpoints are taken between updates (the start of a rollout): every
+``checkpoint_seconds`` of wall time (default 120: a killed run loses at most that, plus
+one rollout and update, whatever the config's speed) and/or every ``checkpoint_freq``
+timesteps, when a stop is requested (SIGINT, SIGTERM: :mod:`train.interrupt`) and at
+the end. A stop is honoured at the next boundary, so after at most one rollout and one
+update (and a periodic evaluation, if one is running).
+
+Resuming (``resume=True``) loads the latest checkpoint: networks, optimizer, step count,
+last observations, the replay buffer (SAC), the pickled training env (swarm states
+mid-episode, its generator) and the generators SB3 draws from, then continues with
+``reset_num_timesteps=False`` up to ``total_timesteps``. On the same machine and
+software a resumed run gives the same model as an uninterrupted one, bit for bit (the
+tests check PPO and SAC). What does not carry over: a stop discards the rollout in
+progress (PPO) or the vector step in progress (SAC), which the resumed run collects
+again from the same state; the logged timings (fps) restart, and SB3's logging
+interval counts iterations from the resume; with ``use_sde``
+the exploration noise drawn at the stopped rollout's start is drawn again, so that
+run differs from then on; an env that cannot be pickled restarts its episodes (a
+warning says so); a resumed run with a larger ``total_timesteps`` equals an
+uninterrupted run of that total (the configs' schedules are constant).
 
 Reproducibility: the same config and seed give the same model on the same machine and
 software versions (CPU). Limits: results differ across torch/numpy versions and CPU
@@ -23,6 +47,7 @@ torch's CPU kernels may otherwise choose per machine.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import platform
@@ -35,7 +60,26 @@ import yaml
 
 import swarm_envs
 from swarm_envs.config import as_dict
+from train.callbacks import AnalyticBaselineEvalCallback, RunGuard, SwarmStatsCallback
+from train.checkpoints import (
+    CHECKPOINTS,
+    checkpoint_timesteps,
+    copy_atomic,
+    latest_checkpoint,
+    load_checkpoint,
+    save_checkpoint,
+    write_atomic,
+)
 from train.config import TrainConfig, algorithm_class
+from train.interrupt import StopRequest, TrainingInterrupted, stop_on_signals
+from train.outdir import RUN_FILES, check_out_dir, prepare_out_dir
+
+
+class TrainSetupError(ValueError):
+    """A run that cannot start: SB3 rejects the config, or there is nothing to resume.
+
+    Raised before anything is written.
+    """
 
 
 def make_training_env(tc: TrainConfig):
@@ -115,77 +159,203 @@ def train(
     progress_bar: bool = True,
     tensorboard: bool = True,
     verbose: int = 1,
+    overwrite: bool = False,
+    resume: bool = False,
+    stop: StopRequest | None = None,
+    handle_signals: bool = True,
+    prog: str = "swarm-train",
 ) -> Path:
     """Train according to ``tc``; write the model and its metadata into ``out_dir``.
 
     Returns the path of the final ``model.zip``.
-    """
-    import stable_baselines3
-    import torch
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
 
-    from train.callbacks import AnalyticBaselineEvalCallback, SwarmStatsCallback
+    Args:
+        overwrite: ``out_dir`` may hold an earlier run: its files are removed first
+            (:func:`train.outdir.prepare_out_dir`). Without it a non-empty ``out_dir``
+            raises :class:`train.outdir.OutDirError`.
+        resume: continue the run in ``out_dir`` from its latest checkpoint (``tc`` is
+            its config, :func:`train.config.resume_config`), up to ``tc.total_timesteps``.
+        stop: asks the run to stop (see :mod:`train.interrupt`); with ``handle_signals``
+            SIGINT and SIGTERM set it while training runs (main thread only).
+
+    Raises:
+        TrainSetupError: SB3 rejects the config, or ``resume`` finds nothing to
+            continue; raised before anything is written.
+        OutDirError: ``out_dir`` is a file, or holds files and ``overwrite`` is false.
+        TrainingInterrupted: the run stopped on request after saving a checkpoint,
+            ``model.zip`` and ``meta.json``.
+    """
+    import torch
 
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    cfg = tc.swarm_config()
+    stop = stop if stop is not None else StopRequest()
+    if not resume:
+        check_out_dir(out, overwrite=overwrite)
     if tc.torch_threads is not None:
         torch.set_num_threads(tc.torch_threads)
+    tb = str(out / "tensorboard") if tensorboard and _has_tensorboard() else None
+    if resume:
+        model, state = _resume_model(tc, out, tb)
+    else:
+        model, state = _new_model(tc, tb), {"train_seconds": 0.0, "evaluator": None}
+        prepare_out_dir(out, overwrite=overwrite, patterns=RUN_FILES, prog=prog)
+    cfg = tc.swarm_config()
     (out / "train_config.yaml").write_text(yaml.safe_dump(tc.to_dict(), sort_keys=False))
     (out / "env_config.yaml").write_text(yaml.safe_dump(as_dict(cfg), sort_keys=False))
-
-    venv = make_training_env(tc)
-    tb = str(out / "tensorboard") if tensorboard and _has_tensorboard() else None
-    model = build_model(tc, venv, tensorboard_log=tb)
+    run = _Run(tc, out, model, float(state["train_seconds"]))
     callbacks: list[Any] = [SwarmStatsCallback(cfg)]
-    evaluator = None
     if tc.eval_freq > 0:
-        evaluator = AnalyticBaselineEvalCallback(
+        run.evaluator = AnalyticBaselineEvalCallback(
             cfg, tc.eval_freq, tc.eval_episodes, tc.eval_seed, out, verbose=verbose
         )
-        callbacks.append(evaluator)
-    if tc.checkpoint_freq > 0:
-        callbacks.append(
-            CheckpointCallback(
-                save_freq=max(tc.checkpoint_freq // venv.num_envs, 1),
-                save_path=str(out / "checkpoints"),
-                name_prefix="model",
-            )
-        )
-    if verbose:
-        print(
-            f"training {tc.algo} ({tc.mode}) for {tc.total_timesteps:,} timesteps on "
-            f"{venv.num_envs} slots; N = {cfg.n_agents}; out = {out}"
-        )
-    start = time.perf_counter()
-    model.learn(
-        total_timesteps=tc.total_timesteps,
-        callback=CallbackList(callbacks),
-        progress_bar=progress_bar and _has_progress_bar(),
-        tb_log_name=tc.algo,
+        if state["evaluator"] is not None:
+            run.evaluator.load_state(state["evaluator"])
+        callbacks.append(run.evaluator)
+    guard = RunGuard(
+        run.checkpoint,
+        lambda: stop.requested,
+        callbacks,
+        every_seconds=tc.checkpoint_seconds,
+        every_steps=tc.checkpoint_freq,
     )
-    elapsed = time.perf_counter() - start
-    model_path = out / "model.zip"
-    model.save(model_path)
-    venv.close()
-    meta = {
-        "swarm_envs": swarm_envs.__version__,
-        "stable_baselines3": stable_baselines3.__version__,
-        "torch": torch.__version__,
-        "numpy": np.__version__,
-        "python": platform.python_version(),
-        "machine": platform.machine(),
-        "algo": tc.algo,
-        "mode": tc.mode,
-        "seed": tc.seed,
-        "total_timesteps": tc.total_timesteps,
-        "train_seconds": round(elapsed, 2),
-        "evaluations": evaluator.history if evaluator is not None else [],
-    }
-    (out / "meta.json").write_text(json.dumps(meta, indent=2) + "\n")
+    start_steps = model.num_timesteps
+    run.write_meta("running")
     if verbose:
-        print(f"saved {model_path} after {elapsed:.0f} s")
-    return model_path
+        what = f"resuming at {start_steps:,} timesteps" if resume else "training"
+        print(
+            f"{what} {tc.algo} ({tc.mode}) for {tc.total_timesteps:,} timesteps on "
+            f"{model.n_envs} slots; N = {cfg.n_agents}; out = {out}"
+        )
+    guards = stop_on_signals(stop) if handle_signals else contextlib.nullcontext(stop)
+    with guards:
+        run.start_clock()
+        model.learn(
+            total_timesteps=tc.total_timesteps - start_steps,
+            callback=guard,
+            progress_bar=progress_bar and _has_progress_bar(),
+            tb_log_name=tc.algo,
+            reset_num_timesteps=not resume,
+        )
+        if guard.stopped:
+            assert guard.last_checkpoint is not None and stop.signum is not None
+            run.publish(guard.last_checkpoint, "interrupted")
+            model.get_env().close()
+            raise TrainingInterrupted(
+                stop.signum, checkpoint_timesteps(guard.last_checkpoint), out, guard.last_checkpoint
+            )
+        final = guard.checkpoint()  # after the last update: a boundary, as ever
+        run.publish(final, "completed")
+    model.get_env().close()
+    if verbose:
+        print(f"saved {out / 'model.zip'} after {run.train_seconds():.0f} s")
+    return out / "model.zip"
+
+
+def _new_model(tc: TrainConfig, tensorboard_log: str | None) -> Any:
+    """A fresh model of ``tc`` on its training env; SB3's own refusals as ValueError."""
+    venv = make_training_env(tc)
+    try:
+        return build_model(tc, venv, tensorboard_log=tensorboard_log)
+    except (AssertionError, ValueError, TypeError) as err:
+        venv.close()
+        raise TrainSetupError(f"{tc.algo} rejects the config: {err}") from None
+
+
+def _resume_model(tc: TrainConfig, out: Path, tensorboard_log: str | None) -> tuple[Any, dict]:
+    """The model of the latest checkpoint in ``out`` and its saved state."""
+    ckpt = latest_checkpoint(out)
+    if ckpt is None:
+        raise TrainSetupError(
+            f"--resume {out}: no checkpoint in {out / CHECKPOINTS} to continue from"
+        )
+    done = checkpoint_timesteps(ckpt)
+    if done >= tc.total_timesteps:
+        raise TrainSetupError(
+            f"--resume {out}: the run has {done:,} timesteps, total_timesteps is "
+            f"{tc.total_timesteps:,}; give a larger total_timesteps=... to extend it"
+        )
+    cls = done_slots_only(algorithm_class(tc.algo))
+    try:
+        return load_checkpoint(
+            ckpt,
+            cls,
+            device=tc.device,
+            make_env=lambda: make_training_env(tc),
+            tensorboard_log=tensorboard_log,
+        )
+    except Exception as err:  # a damaged or foreign checkpoint: say which, not a traceback
+        raise TrainSetupError(
+            f"--resume {out}: cannot load checkpoint {ckpt} ({type(err).__name__}: {err}); "
+            "move it away to resume from the one before"
+        ) from err
+
+
+class _Run:
+    """The bookkeeping of one run: checkpoints, ``model.zip``, ``meta.json``, timings."""
+
+    def __init__(self, tc: TrainConfig, out: Path, model: Any, seconds_before: float) -> None:
+        self.tc = tc
+        self.out = out
+        self.model = model
+        self.seconds_before = seconds_before
+        self.evaluator: AnalyticBaselineEvalCallback | None = None
+        self._clock = time.perf_counter()
+        self.checkpoint_path: Path | None = None
+
+    def start_clock(self) -> None:
+        self._clock = time.perf_counter()
+
+    def train_seconds(self) -> float:
+        """Wall time spent training, earlier runs of a resumed run included."""
+        return self.seconds_before + time.perf_counter() - self._clock
+
+    def checkpoint(self) -> Path:
+        """Save a checkpoint, then point ``model.zip`` and ``meta.json`` at it."""
+        extra = {
+            "train_seconds": round(self.train_seconds(), 3),
+            "evaluator": self.evaluator.state() if self.evaluator is not None else None,
+        }
+        path = save_checkpoint(self.model, self.out, extra, keep=self.tc.checkpoint_keep)
+        self.publish(path, "running")
+        return path
+
+    def publish(self, checkpoint: Path, status: str) -> None:
+        """``model.zip`` ← the checkpoint's model; ``meta.json`` with ``status``."""
+        copy_atomic(checkpoint / "model.zip", self.out / "model.zip")
+        self.checkpoint_path = checkpoint
+        self.write_meta(status)
+
+    def write_meta(self, status: str) -> None:
+        """``meta.json``: versions, run description, progress and ``status``.
+
+        ``status`` is ``running`` (also what a killed run leaves), ``interrupted`` or
+        ``completed``; ``timesteps`` and ``checkpoint`` describe what ``model.zip`` holds.
+        """
+        import stable_baselines3
+        import torch
+
+        tc = self.tc
+        timesteps = checkpoint_timesteps(self.checkpoint_path) if self.checkpoint_path else 0
+        meta = {
+            "swarm_envs": swarm_envs.__version__,
+            "stable_baselines3": stable_baselines3.__version__,
+            "torch": torch.__version__,
+            "numpy": np.__version__,
+            "python": platform.python_version(),
+            "machine": platform.machine(),
+            "algo": tc.algo,
+            "mode": tc.mode,
+            "seed": tc.seed,
+            "total_timesteps": tc.total_timesteps,
+            "status": status,
+            "timesteps": timesteps,
+            "checkpoint": (
+                str(self.checkpoint_path.relative_to(self.out)) if self.checkpoint_path else None
+            ),
+            "train_seconds": round(self.train_seconds(), 2),
+            "evaluations": self.evaluator.history if self.evaluator is not None else [],
+        }
+        write_atomic(self.out / "meta.json", json.dumps(meta, indent=2) + "\n")
 
 
 def _has_tensorboard() -> bool:

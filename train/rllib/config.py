@@ -25,10 +25,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from swarm_envs.config import config_from_mapping, resolve_config_path
-from train.config import RunConfig
+from train.config import RunConfig, read_yaml_mapping
 
 __all__ = [
     "ALGOS",
@@ -181,10 +179,7 @@ def load_rllib_config(
     """Load ``configs/train/<name>_rllib.yaml`` and merge ``overrides`` (sections merge)."""
     data: dict[str, Any] = {}
     if path is not None:
-        p = resolve_config_path(path, "train", "train config")
-        data = yaml.safe_load(p.read_text()) or {}
-        if not isinstance(data, dict):
-            raise ValueError(f"train config {p} must hold a mapping")
+        data = read_yaml_mapping(resolve_config_path(path, "train", "train config"), "train config")
     for key, value in (overrides or {}).items():
         if isinstance(value, Mapping) and isinstance(data.get(key), Mapping):
             data[key] = {**data[key], **value}

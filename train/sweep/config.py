@@ -23,8 +23,6 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from swarm_envs.config import (
     SwarmConfig,
     as_dict,
@@ -33,6 +31,7 @@ from swarm_envs.config import (
     resolve_config_path,
 )
 from swarm_envs.physics import INTEGRATORS, SocialPotentialParams
+from train.config import read_yaml_mapping
 from train.sweep.measures import DEFAULT_PLOT, TASKS, measure_columns
 
 __all__ = [
@@ -325,10 +324,9 @@ def load_sweep_config(
     """Load ``configs/sweeps/<name>.yaml`` and merge ``overrides`` (sections merge)."""
     data: dict[str, Any] = {}
     if path is not None:
-        p = resolve_config_path(path, "sweeps", "sweep config")
-        data = yaml.safe_load(p.read_text()) or {}
-        if not isinstance(data, dict):
-            raise ValueError(f"sweep config {p} must hold a mapping")
+        data = read_yaml_mapping(
+            resolve_config_path(path, "sweeps", "sweep config"), "sweep config"
+        )
     for key, value in (overrides or {}).items():
         if isinstance(value, Mapping) and isinstance(data.get(key), Mapping):
             data[key] = {**data[key], **value}
