@@ -41,7 +41,7 @@ test-slow: lint
 	$(BIN)/python -m pytest --runslow $(PYTEST_ARGS)
 
 demo: $(STAMP)
-	$(BIN)/swarm-demo --out runs/demo
+	$(BIN)/swarm-demo --out runs/demo --overwrite
 
 reproduce: $(STAMP)
 	$(BIN)/swarm-reproduce --out $(OUT)
