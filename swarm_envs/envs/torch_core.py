@@ -57,6 +57,11 @@ __all__ = ["PARTIAL_RESET_MIN_BATCH", "TorchSwarmNavCore", "partial_reset_batch"
 PARTIAL_RESET_MIN_BATCH = 64
 
 
+#: Pair evaluations per step (``B·N²``) up to which the compiled CPU step runs on one
+#: thread: below it the threads' synchronisation costs more than they share.
+SINGLE_THREAD_PAIRS = 8192
+
+
 def partial_reset_batch(batch: int) -> int | None:
     """Sub-batch size ``R = batch // 16`` for resets of at most R swarms, or ``None``.
 
@@ -185,15 +190,21 @@ class TorchSwarmNavCore:
         return None
 
     def _build(self, batch: int, compile: bool | str, name: str) -> MaybeCompiled:
-        """The fused function for ``batch`` swarms, compiled or plain."""
+        """The fused function for ``batch`` swarms, compiled or plain.
+
+        The neighbour indices come from ``nearest_neighbors``, always in range: no bound
+        checks on the gathers. On the CPU a small step (at most
+        :data:`SINGLE_THREAD_PAIRS` pair evaluations) is generated for one thread.
+        """
+        options: dict[str, Any] = {"assert_indirect_indexing": False}
+        if self.device.type == "cpu" and batch * self.cfg.n_agents**2 <= SINGLE_THREAD_PAIRS:
+            options["cpp.threads"] = 1
         return MaybeCompiled(
             build_advance(self.cfg),
             compile=compile,
             device=self.device,
             name=name,
-            # The neighbour indices come from nearest_neighbors, always in range: no
-            # bound checks on the gathers.
-            options={"assert_indirect_indexing": False},
+            options=options,
             key=("TorchSwarmNavCore", repr(self.cfg), batch, str(self.dtype), str(self.device)),
         )
 

@@ -61,7 +61,7 @@ def nearest_neighbors(rho: torch.Tensor, k: int) -> tuple[torch.Tensor, torch.Te
                 best = torch.where(key > best[:, None, :], key, largest).amin(-2)
             dists.append((best >> 32).to(torch.int32).view(torch.float32))
             indices.append(best & 0xFFFFFFFF)
-        return torch.stack(dists, dim=-1), torch.stack(indices, dim=-1)
+        return _by_rank(dists), _by_rank(indices)
     columns = rows.to(rho.dtype)
     cand = rho
     for s in range(k):
@@ -71,7 +71,14 @@ def nearest_neighbors(rho: torch.Tensor, k: int) -> tuple[torch.Tensor, torch.Te
         dist = cand.amin(-2)
         dists.append(dist)
         indices.append(torch.where(cand == dist[:, None, :], columns, math.inf).amin(-2))
-    return torch.stack(dists, dim=-1), torch.stack(indices, dim=-1).to(torch.int64)
+    return _by_rank(dists), _by_rank(indices).to(torch.int64)
+
+
+def _by_rank(planes: list[torch.Tensor]) -> torch.Tensor:
+    """``(B, N)`` planes as ``(B, N, k)``: stacked as contiguous planes ``(k, B, N)`` and
+    seen through a permuted view (a compiler writes planes with vector stores; stacking
+    on the last axis would write every element with a stride of k)."""
+    return torch.stack(planes, dim=0).permute(1, 2, 0)
 
 
 def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
@@ -128,7 +135,10 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
         sink, potential, goal_distance = goal_terms(xs, p, goal)
         if physics_goal:
             fs = [fc + gc for fc, gc in zip(fs, sink, strict=True)]
-        xn, vn = torch.stack(xs, dim=-1), torch.stack(vs, dim=-1)  # (B, N, d)
+        # The new state component first (d, B, N), as returned; the shared definitions
+        # read it through (B, N, d) views (contiguous planes, no interleaved copy).
+        x_new, v_new = torch.stack(xs), torch.stack(vs)
+        xn, vn = x_new.permute(1, 2, 0), v_new.permute(1, 2, 0)
         energy = kinetic_energy(vn, p) + pairs
         if p.C_g > 0:  # the energy statistic includes the sink whenever it exists
             energy = energy + potential.sum(-1)
@@ -151,6 +161,6 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
         r = reward(cfg.reward, inputs) + torch.zeros(B, dtype=x.dtype, device=x.device)
         # rho is returned (and dropped by the caller) so that the compiler stores it once,
         # in the pair loop, instead of recomputing it in every pass of the ranking.
-        return torch.stack(xs), torch.stack(vs), torch.stack(fs), obs, packed, r, rho
+        return x_new, v_new, torch.stack(fs), obs, packed, r, rho
 
     return advance
