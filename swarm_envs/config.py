@@ -2,7 +2,11 @@
 
 Unknown keys, missing sections of the wrong type, and out-of-range values raise
 :class:`ValueError` naming the key (with its dotted path) and what is allowed. VMAS
-only warns on unknown keys, so typos there go unnoticed; here they stop the run.
+only warns on unknown keys, so typos there go unnoticed; here they stop the run. An
+unknown *keyword argument* of an environment raises :class:`UnknownKeyError`, which is
+both a :class:`TypeError` (what Python raises for an unexpected keyword, and what
+wrappers such as TorchRL's ``GymEnv`` catch when they probe optional keywords) and a
+:class:`ValueError` (so ``except ValueError`` keeps catching every config error).
 
 >>> cfg = config_from_mapping(SwarmConfig, {"n_agents": 31, "physics": {"C_o": 0.7}})
 >>> cfg.n_agents, cfg.physics.C_o
@@ -18,7 +22,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import typing
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, TypeVar
@@ -48,6 +52,20 @@ BACKENDS = ("auto", "numpy", "sparse", "native", "torch")
 #: package holds as ``swarm_envs/configs`` (a symbolic link in the repository, the files
 #: themselves in an installed wheel), so named configs resolve after any install.
 CONFIG_ROOT = Path(__file__).resolve().parent / "configs"
+
+
+class UnknownKeyError(TypeError, ValueError):
+    """An unknown keyword argument: a :class:`TypeError` and a :class:`ValueError`.
+
+    Raised by :func:`check_keywords` (every environment's constructor) with Python's
+    wording, ``... got an unexpected keyword argument 'name'``, followed by the known
+    keywords. Unknown keys inside a YAML file or a config section remain plain
+    :class:`ValueError` (``unknown config key 'physics.C_x'``): they are data, not
+    keyword arguments.
+
+    >>> issubclass(UnknownKeyError, TypeError) and issubclass(UnknownKeyError, ValueError)
+    True
+    """
 
 
 def _check_int(owner: str, name: str, value: Any, *, low: int, high: int | None = None) -> int:
@@ -252,6 +270,28 @@ def lagrangian_min_init_radius(params: LagrangianParams, n_agents: int, dim: int
     return max(0.0, pair, volume)
 
 
+def check_keywords(given: Iterable[str], owner: str, keywords: Sequence[str] = ("config",)) -> None:
+    """Refuse a keyword that is neither one of ``keywords`` nor a :class:`SwarmConfig` field.
+
+    ``owner`` names the callable in the message; ``keywords`` are its own keyword
+    arguments besides the config fields.
+
+    >>> check_keywords(["n_agents", "config"], "SwarmNavEnv()")
+    >>> try:
+    ...     check_keywords(["frameskip"], "SwarmNavEnv()")
+    ... except TypeError as err:
+    ...     print(str(err)[:69])
+    SwarmNavEnv() got an unexpected keyword argument 'frameskip'; allowed
+    """
+    names = {f.name for f in fields(SwarmConfig)}
+    for key in given:
+        if key not in names and key not in keywords:
+            raise UnknownKeyError(
+                f"{owner} got an unexpected keyword argument {key!r}; allowed keys: "
+                f"{', '.join(keywords)}, and the config keys {', '.join(sorted(names))}"
+            )
+
+
 def _field_types(cls: type) -> dict[str, Any]:
     return typing.get_type_hints(cls)
 
@@ -378,7 +418,9 @@ __all__ = [
     "DYNAMICS",
     "RewardWeights",
     "SwarmConfig",
+    "UnknownKeyError",
     "as_dict",
+    "check_keywords",
     "config_from_mapping",
     "lagrangian_min_init_radius",
     "load_swarm_config",

@@ -15,6 +15,9 @@ values with the same messages:
 * **Seeds** are ``None`` or non-negative integers: a Python ``int`` or a numpy integer
   (``np.int64(3)`` seeds exactly as ``3``). Bools, floats, strings, generators and
   negative integers are refused.
+* **Reset options** are ``None`` or a mapping whose entries are not read (the envs
+  have no reset options; PettingZoo's API tests pass arbitrary entries); any other
+  type is refused.
 
 Every refusal is a :class:`ValueError` whose message states the rule and what was
 given; nothing is converted silently (a complex action never loses its imaginary part,
@@ -24,7 +27,7 @@ a transposed array is never reshaped).
 from __future__ import annotations
 
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -64,6 +67,23 @@ def check_seed(seed: Any) -> int | None:
     if seed < 0:
         raise ValueError(f"{SEED_RULE}, got {int(seed)}")
     return int(seed)
+
+
+def check_reset_options(options: Any) -> None:
+    """``reset(options=...)``: ``None`` or a mapping, whose entries are not read; else
+    :class:`ValueError`.
+
+    >>> check_reset_options({"options": 1})
+    >>> check_reset_options(3)
+    Traceback (most recent call last):
+    ...
+    ValueError: options must be None or a dict (its entries are not read: ...), got int
+    """
+    if options is not None and not isinstance(options, Mapping):
+        raise ValueError(
+            f"options must be None or a dict (its entries are not read: SwarmNav has no "
+            f"reset options), got {type(options).__name__}"
+        )
 
 
 def is_tensor(value: Any) -> bool:
@@ -222,6 +242,7 @@ __all__ = [
     "START_FITS_NEEDED",
     "as_action",
     "check_agent_action",
+    "check_reset_options",
     "check_seed",
     "check_start_fits",
     "check_tensor_action",

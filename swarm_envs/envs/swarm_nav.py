@@ -7,7 +7,7 @@ swarm (B = 1). The shared docstring below follows Gymnasium's sections.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
 
 import gymnasium
@@ -16,9 +16,15 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
-from swarm_envs.config import SwarmConfig, load_swarm_config
+from swarm_envs.config import SwarmConfig, check_keywords, load_swarm_config
 from swarm_envs.envs.backends import make_core
-from swarm_envs.envs.inputs import as_action, check_seed, check_start_fits, stack_agent_actions
+from swarm_envs.envs.inputs import (
+    as_action,
+    check_reset_options,
+    check_seed,
+    check_start_fits,
+    stack_agent_actions,
+)
 from swarm_envs.envs.protocol import Core as SwarmNavCore
 from swarm_envs.envs.task import OBS_BOUND
 
@@ -67,6 +73,9 @@ SWARM_NAV_DOC = """
 
     Per agent ``Box(-10, 10, (2d + k(2d + 1),), float32)``; every entry is clipped to
     [−10, 10]. The Gymnasium env concatenates all agents' observations (agent-major).
+    The PettingZoo env's global ``state()`` is the same concatenation, in
+    ``state_space = Box(-10, 10, (N(2d + k(2d + 1)),), float32)`` (for a centralised
+    critic).
 
     | index (d = 2, k neighbours)   | observation                                        |
     |-------------------------------|----------------------------------------------------|
@@ -108,16 +117,38 @@ SWARM_NAV_DOC = """
     (``n_agents``, ``dim``, ``dt``, ``dynamics``, ``physics={...}``, ``zone={...}``,
     ``reward={...}``, ...; a partial section changes only the keys it names), and
     ``config="configs/env/paper_navigation.yaml"`` loads a YAML first (keywords then
-    override it). Unknown keywords and invalid values raise ``ValueError`` naming them,
-    when the env is built (a Lagrangian ``init_radius`` too small for its bins
+    override it). An unknown keyword raises ``swarm_envs.config.UnknownKeyError`` — a
+    ``TypeError``, as Python raises for an unexpected keyword argument, and also a
+    ``ValueError`` — naming it and the allowed keys. An invalid value (an unknown key
+    inside a section such as ``physics={...}`` included) raises ``ValueError`` naming
+    it, when the env is built (a Lagrangian ``init_radius`` too small for its bins
     included).
     ``render_mode`` is ``None``, ``"rgb_array"`` or ``"human"``.
+    ``info_kinematics`` (``False`` by default; ``True`` or ``False``, else
+    ``ValueError``) adds each agent's kinematics to the info (below).
+    ``reset(seed=..., options=...)``: ``options`` is ``None`` or a dict, whose entries
+    are not read (SwarmNav has no reset options; PettingZoo's API tests pass arbitrary
+    entries); anything else raises ``ValueError``.
 
-    Info (per agent in PettingZoo, one dict in Gymnasium): ``polarization``,
+    ## Info
+
+    Per agent in PettingZoo, one dict in Gymnasium: ``polarization``,
     ``angular_momentum`` (unit-heading forms), ``expanse``,
     ``nearest_neighbor_distance``, ``energy`` (eq. 16 with the sink; ``L`` for the
     Lagrangian model, kinetic energy for the zone and piecewise models), ``fraction_arrived``,
-    ``collisions`` (this step), ``centroid_distance``, ``mean_goal_distance``, ``success``.
+    ``collisions`` (this step), ``centroid_distance``, ``mean_goal_distance``, ``success``
+    (Python floats). With ``info_kinematics=True`` also ``pos`` (``r_i``), ``vel``
+    (``v_i``) and ``goal_offset`` (``r_g − r_i``), float32 in world units (unscaled,
+    unclipped): ``(d,)`` in each agent's info in PettingZoo, ``(N, d)`` in Gymnasium —
+    the node positions and velocities a graph policy builds its edges from.
+
+    ## State accessors
+
+    ``positions`` ``(N, d)``, ``velocities`` ``(N, d)``, ``goal`` ``(d,)`` (float64
+    copies) and ``active`` ``(N,)`` bool (every agent: none leaves an episode early),
+    on both envs (``gym.make(...).unwrapped.positions``; the AEC env's
+    ``.unwrapped`` is the parallel env); defined after the first ``reset()``, else
+    ``RuntimeError``.
 
     ## Version History
 
@@ -127,23 +158,93 @@ SWARM_NAV_DOC = """
 
 
 def make_config(
-    config: str | None = None, overrides: Mapping[str, Any] | None = None
+    config: str | None = None,
+    overrides: Mapping[str, Any] | None = None,
+    *,
+    owner: str = "the SwarmNav env",
+    keywords: Sequence[str] = ("config",),
 ) -> SwarmConfig:
     """Merge a YAML config (optional) and keyword overrides into a validated config.
 
+    An override that is neither a :class:`SwarmConfig` field nor one of ``keywords``
+    (the caller's own keyword arguments, named in the message with ``owner``) raises
+    :class:`~swarm_envs.config.UnknownKeyError` (a ``TypeError`` and a ``ValueError``).
     Beyond the config's own checks, a Lagrangian start radius at which random starts
     cannot keep the bins apart is refused here (:func:`~swarm_envs.envs.inputs.check_start_fits`),
     so every env refuses it when built.
     """
-    cfg = load_swarm_config(config, dict(overrides or {}))
+    overrides = dict(overrides or {})
+    check_keywords(overrides, owner, keywords)
+    cfg = load_swarm_config(config, overrides)
     check_start_fits(cfg)
     return cfg
+
+
+#: The info keys that ``info_kinematics=True`` adds (float32, in world units).
+KINEMATICS_INFO_KEYS = ("pos", "vel", "goal_offset")
+
+
+def _check_info_kinematics(value: Any) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"info_kinematics must be True or False, got {value!r}")
+    return bool(value)
 
 
 def _check_render_mode(render_mode: str | None) -> str | None:
     if render_mode is not None and render_mode not in RENDER_MODES:
         raise ValueError(f"render_mode must be None or one of {RENDER_MODES}, got {render_mode!r}")
     return render_mode
+
+
+class _SwarmState:
+    """Read-only views of the one swarm's state, shared by both adapters.
+
+    Each accessor returns a fresh float64 array without the batch dimension; changing
+    it does not change the env. They are defined once ``reset()`` has been called, and
+    keep the last state after an episode ends, until the next ``reset()``.
+    """
+
+    core: SwarmNavCore
+    cfg: SwarmConfig
+    _has_state: bool = False
+
+    def _require_state(self, name: str) -> None:
+        if not self._has_state:
+            raise RuntimeError(f"{name} is defined after reset(); call reset() first")
+
+    @property
+    def positions(self) -> np.ndarray:
+        """Every agent's position ``r_i``, ``(N, d)`` float64, world units."""
+        self._require_state("positions")
+        return np.array(self.core.x[0], dtype=np.float64)
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """Every agent's velocity ``v_i``, ``(N, d)`` float64."""
+        self._require_state("velocities")
+        return np.array(self.core.v[0], dtype=np.float64)
+
+    @property
+    def goal(self) -> np.ndarray:
+        """The goal ``r_g``, ``(d,)`` float64."""
+        self._require_state("goal")
+        return np.array(self.core.goal[0], dtype=np.float64)
+
+    @property
+    def active(self) -> np.ndarray:
+        """Which agents take part in the episode, ``(N,)`` bool, in agent order.
+
+        All of them: no agent leaves an episode early (PettingZoo's ``agents`` empties
+        only when the whole episode ends)."""
+        self._require_state("active")
+        return np.ones(self.cfg.n_agents, dtype=bool)
+
+    def _kinematics(self) -> dict[str, np.ndarray]:
+        """``pos``, ``vel``, ``goal_offset`` (``r_g − r_i``), each ``(N, d)`` float32."""
+        x = np.asarray(self.core.x[0], dtype=np.float32)
+        v = np.asarray(self.core.v[0], dtype=np.float32)
+        goal = np.asarray(self.core.goal[0], dtype=np.float32)
+        return {"pos": x, "vel": v, "goal_offset": goal[None, :] - x}
 
 
 class _Rendering:
@@ -197,7 +298,7 @@ class _Rendering:
             self._renderer = None
 
 
-class SwarmNavParallelEnv(_Rendering, ParallelEnv):
+class SwarmNavParallelEnv(_SwarmState, _Rendering, ParallelEnv):
     __doc__ = "PettingZoo ParallelEnv of SwarmNav (the source of truth).\n" + SWARM_NAV_DOC
 
     metadata: ClassVar[dict[str, Any]] = {
@@ -207,17 +308,29 @@ class SwarmNavParallelEnv(_Rendering, ParallelEnv):
         "is_parallelizable": True,
     }
 
+    #: The constructor's own keyword arguments, besides the config fields.
+    KEYWORDS: ClassVar[tuple[str, ...]] = (
+        "config",
+        "render_mode",
+        "max_cycles",
+        "info_kinematics",
+    )
+
     def __init__(
         self,
         config: str | None = None,
         render_mode: str | None = None,
         max_cycles: int | None = None,
+        info_kinematics: bool = False,
         **kwargs: Any,
     ) -> None:
         if max_cycles is not None:
             kwargs["max_steps"] = max_cycles
-        self.cfg = make_config(config, kwargs)
+        self.cfg = make_config(
+            config, kwargs, owner="SwarmNavParallelEnv()", keywords=self.KEYWORDS
+        )
         self.render_mode = _check_render_mode(render_mode)
+        self.info_kinematics = _check_info_kinematics(info_kinematics)
         self.core = make_core(self.cfg, batch=1)
         n, d = self.cfg.n_agents, self.cfg.dim
         self.possible_agents = [f"agent_{i}" for i in range(n)]
@@ -227,6 +340,8 @@ class SwarmNavParallelEnv(_Rendering, ParallelEnv):
         act_space = spaces.Box(-1.0, 1.0, (d,), np.float32)
         self.observation_spaces = dict.fromkeys(self.possible_agents, obs_space)
         self.action_spaces = dict.fromkeys(self.possible_agents, act_space)
+        #: The space of :meth:`state`: every agent's observation, concatenated.
+        self.state_space = spaces.Box(-OBS_BOUND, OBS_BOUND, (n * self.core.obs_dim,), np.float32)
         self._np_random, _ = seeding.np_random(None)
         self._needs_reset = True
 
@@ -249,10 +364,13 @@ class SwarmNavParallelEnv(_Rendering, ParallelEnv):
     def reset(
         self, seed: int | None = None, options: dict | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
+        """Start an episode; ``options`` is ``None`` or a dict, whose entries are not read."""
         seed = check_seed(seed)
+        check_reset_options(options)
         if seed is not None:
             self._np_random, _ = seeding.np_random(seed)
         self.core.reset(self._np_random)
+        self._has_state = True
         self.agents = list(self.possible_agents)
         self._needs_reset = False
         obs = self.core.observe()[0]
@@ -260,8 +378,19 @@ class SwarmNavParallelEnv(_Rendering, ParallelEnv):
         self._after_reset_render()
         return (
             {a: obs[i] for i, a in enumerate(self.agents)},
-            {a: dict(stats) for a in self.agents},
+            self._agent_infos(self.agents, stats),
         )
+
+    def _agent_infos(self, agents: list[str], stats: dict[str, float]) -> dict[str, dict]:
+        """Each agent's info: the statistics, plus its kinematics if ``info_kinematics``."""
+        if not self.info_kinematics:
+            return {a: dict(stats) for a in agents}
+        kin = self._kinematics()
+        infos = {}
+        for a in agents:
+            i = self._agent_index[a]
+            infos[a] = {**stats, **{k: value[i] for k, value in kin.items()}}
+        return infos
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         if self._needs_reset or not self.agents:
@@ -285,7 +414,7 @@ class SwarmNavParallelEnv(_Rendering, ParallelEnv):
             dict.fromkeys(agents, r),
             dict.fromkeys(agents, term),
             dict.fromkeys(agents, trunc),
-            {a: dict(info) for a in agents},
+            self._agent_infos(agents, info),
         )
         if term or trunc:
             self.agents = []
@@ -294,20 +423,31 @@ class SwarmNavParallelEnv(_Rendering, ParallelEnv):
         return result
 
     def state(self) -> np.ndarray:
-        """Global state: every agent's observation, concatenated (float32)."""
+        """Global state for a centralised critic: every agent's observation, concatenated
+        in agent order, ``(N · obs_dim,)`` float32 in :attr:`state_space`."""
         return self.core.observe()[0].reshape(-1)
 
 
-class SwarmNavEnv(_Rendering, gymnasium.Env):
+class SwarmNavEnv(_SwarmState, _Rendering, gymnasium.Env):
     __doc__ = "Gymnasium SwarmNav with one central controller for the whole swarm.\n" + (
         SWARM_NAV_DOC
     )
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": list(RENDER_MODES), "render_fps": 20}
 
-    def __init__(self, config: str | None = None, render_mode: str | None = None, **kwargs: Any):
-        self.cfg = make_config(config, kwargs)
+    #: The constructor's own keyword arguments, besides the config fields.
+    KEYWORDS: ClassVar[tuple[str, ...]] = ("config", "render_mode", "info_kinematics")
+
+    def __init__(
+        self,
+        config: str | None = None,
+        render_mode: str | None = None,
+        info_kinematics: bool = False,
+        **kwargs: Any,
+    ) -> None:
+        self.cfg = make_config(config, kwargs, owner="SwarmNavEnv()", keywords=self.KEYWORDS)
         self.render_mode = _check_render_mode(render_mode)
+        self.info_kinematics = _check_info_kinematics(info_kinematics)
         self.core = make_core(self.cfg, batch=1)
         n, d = self.cfg.n_agents, self.cfg.dim
         self.observation_space = spaces.Box(
@@ -319,14 +459,22 @@ class SwarmNavEnv(_Rendering, gymnasium.Env):
     def reset(
         self, *, seed: int | None = None, options: dict | None = None
     ) -> tuple[np.ndarray, dict]:
+        """Start an episode; ``options`` is ``None`` or a dict, whose entries are not read."""
         seed = check_seed(seed)  # gymnasium itself refuses numpy integers
+        check_reset_options(options)
         super().reset(seed=seed)
         self.core.reset(self.np_random)
+        self._has_state = True
         self._needs_reset = False
         self._after_reset_render()
-        return self.core.observe().reshape(-1), {
-            k: float(v[0]) for k, v in self.core.stats().items()
-        }
+        return self.core.observe().reshape(-1), self._info(self.core.stats())
+
+    def _info(self, stats: Mapping[str, np.ndarray]) -> dict[str, Any]:
+        """The statistics, plus every agent's kinematics ``(N, d)`` if ``info_kinematics``."""
+        info: dict[str, Any] = {k: float(v[0]) for k, v in stats.items()}
+        if self.info_kinematics:
+            info.update(self._kinematics())
+        return info
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
         if self._needs_reset:
@@ -346,5 +494,5 @@ class SwarmNavEnv(_Rendering, gymnasium.Env):
             float(reward[0]),
             bool(terminated[0]),
             bool(truncated[0]),
-            {k: float(v[0]) for k, v in stats.items()},
+            self._info(stats),
         )
