@@ -276,3 +276,19 @@ def test_docs_example_runs():
     namespace: dict[str, Any] = {}
     for block in blocks:
         exec(compile(block, str(DOC), "exec"), namespace)
+
+
+# --------------------------------------------------------------------------- SuperSuit
+
+
+def test_supersuit_vector_env_steps_and_truncates():
+    ss = pytest.importorskip("supersuit")
+    par = swarm_nav_v0.parallel_env(n_agents=3, max_cycles=5, info_kinematics=True)
+    venv = ss.pettingzoo_env_to_vec_env_v1(par)
+    obs, infos = venv.reset(seed=0)
+    assert obs.shape == (3, par.observation_space("agent_0").shape[0])
+    np.testing.assert_allclose(np.stack([i["pos"] for i in infos]), par.positions, rtol=1e-6)
+    for step in range(1, 6):
+        obs, rewards, terminated, truncated, infos = venv.step(np.zeros((3, 2), np.float32))
+        assert rewards.shape == (3,) and not terminated.any()
+        assert truncated.all() == (step == 5)
