@@ -1,6 +1,11 @@
 """swarm_envs: Gymnasium and PettingZoo environments for learned swarm control.
 
-``import swarm_envs`` registers ``swarm_envs/SwarmNav-v0`` with Gymnasium.
+``import swarm_envs`` registers ``swarm_envs/SwarmNav-v0`` with Gymnasium: ``gym.make``
+builds :class:`~swarm_envs.envs.swarm_nav.SwarmNavEnv`, ``gym.make_vec`` the batched
+:class:`~swarm_envs.envs.gym_vector.SwarmNavVectorEnv` (its ``vector_entry_point``). The
+episode length is the config's ``max_steps`` alone: the env truncates itself there, and
+no ``max_episode_steps`` (``TimeLimit``) is registered. The import also makes the envs'
+OpenMP users safe in processes forked afterwards (:mod:`swarm_envs._runtime.fork`).
 :func:`tune_allocator` is an explicit, process-wide speed-up of glibc's heap for long
 runs (the command-line tools call it; ``SWARM_ENVS_TUNE_ALLOCATOR=1`` applies it at
 import).
@@ -11,6 +16,7 @@ import os
 from gymnasium.envs.registration import register, registry
 
 from swarm_envs._runtime.allocator import tune_allocator
+from swarm_envs._runtime.fork import install_fork_handlers
 
 __version__ = "0.1.0"
 
@@ -20,8 +26,10 @@ if ENV_ID not in registry:
     register(
         id=ENV_ID,
         entry_point="swarm_envs.envs.swarm_nav:SwarmNavEnv",
-        max_episode_steps=400,
+        vector_entry_point="swarm_envs.envs.gym_vector:SwarmNavVectorEnv",
     )
+
+install_fork_handlers()
 
 if os.environ.get("SWARM_ENVS_TUNE_ALLOCATOR", "").strip() == "1":
     tune_allocator()

@@ -78,23 +78,32 @@ def test_gym_make_passive_checker_is_silent():
     assert type(terminated) is bool and type(truncated) is bool
 
 
-def test_registered_spec_matches_default_config():
+def test_registered_spec_has_no_time_limit():
+    # The episode length is the config's max_steps alone: no TimeLimit is registered.
     spec = gym.spec(ENV_ID)
-    assert spec.max_episode_steps == SwarmConfig().max_steps == 400
+    assert spec.max_episode_steps is None
+    assert spec.vector_entry_point == "swarm_envs.envs.gym_vector:SwarmNavVectorEnv"
 
 
-@pytest.mark.parametrize("max_episode_steps", [7, None])
-def test_time_limit_truncates_at_exactly_max_episode_steps(max_episode_steps: int | None):
-    kwargs = {} if max_episode_steps is None else {"max_episode_steps": max_episode_steps}
+@pytest.mark.parametrize("max_steps", [7, None, 1000])
+def test_gym_make_truncates_at_exactly_max_steps(max_steps: int | None):
+    kwargs = {} if max_steps is None else {"max_steps": max_steps}
     env = gym.make(ENV_ID, **kwargs)
-    limit = env.spec.max_episode_steps
-    assert limit == (max_episode_steps or 400)
+    limit = max_steps or SwarmConfig().max_steps
+    assert limit == (max_steps or 400)
     env.reset(seed=3)
     zero = np.zeros(env.action_space.shape, np.float32)
     for t in range(1, limit + 1):
         _, _, terminated, truncated, _ = env.step(zero)
         assert terminated is False  # zero action: the swarm does not reach a far goal
         assert truncated is (t == limit), f"step {t}: truncated={truncated}"
+
+
+def test_gym_make_max_episode_steps_still_adds_a_time_limit():
+    env = gym.make(ENV_ID, max_episode_steps=5)
+    env.reset(seed=0)
+    zero = np.zeros(env.action_space.shape, np.float32)
+    assert [env.step(zero)[3] for _ in range(5)] == [False] * 4 + [True]
 
 
 def test_env_max_steps_truncates_without_time_limit():

@@ -1,4 +1,4 @@
-"""The infos of :class:`~swarm_envs.envs.vec_env.SwarmNavVecEnv`: read-only views, recycled.
+"""The infos of :class:`~swarm_envs.envs.vec_env.SwarmNavVecEnv`: views, recycled.
 
 At 1,024 swarms × 32 agents a step has 32,768 slots, and SB3 wants an info mapping per
 slot. Fresh dicts would cost more than the step itself, and not only to build: every
@@ -6,66 +6,158 @@ tracked object a step leaves alive feeds the garbage collector, whose full passe
 process that imported torch take tens of milliseconds. So:
 
 - :data:`QUIET_INFO`: one shared read-only empty mapping, the info of every slot with
-  nothing to report;
+  nothing to report (a write raises ``TypeError``: copy it first, ``dict(info)``);
 - :class:`SwarmInfo`: the statistics of a swarm, in the info of its first slot, read on
-  access from the step's ``(B,)`` arrays;
+  access from the step's ``(B,)`` arrays; writable;
 - :class:`TerminalInfo`: the info of a slot whose swarm just ended (the terminal
   observation, ``TimeLimit.truncated``, ``episode``), read on access from one record of
   that step; writable (SB3's ``VecNormalize`` rewrites ``terminal_observation``).
 
 Both kinds are recycled by pools (:class:`SwarmInfoPool`, :class:`TerminalInfoPool`): a
 step reuses a set of objects that nothing outside the pool still references, so an info
-kept by the caller keeps its own step's values.
+kept by the caller keeps its own step's values. A write to either copies the info into a
+dict of its own first (the step's arrays are never written).
+
+Copies are plain dicts: ``dict(info)``, ``info.copy()``, ``copy.copy`` and
+``copy.deepcopy`` of an info give a ``dict``, and an info pickles as one. The step's list
+of infos is an :class:`InfoList`, a ``list`` whose ``copy.deepcopy`` and pickle give a
+plain list with a dict of its own per slot (the slots that share :data:`QUIET_INFO` get
+separate empty dicts).
 """
 
 from __future__ import annotations
 
+import copy
 import sys
 from collections.abc import Iterator, Mapping, MutableMapping
 from dataclasses import dataclass
-from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 
-__all__ = ["QUIET_INFO", "SwarmInfo", "SwarmInfoPool", "TerminalInfo", "TerminalInfoPool"]
+__all__ = [
+    "QUIET_INFO",
+    "InfoList",
+    "SwarmInfo",
+    "SwarmInfoPool",
+    "TerminalInfo",
+    "TerminalInfoPool",
+]
 
 #: What ``sys.getrefcount`` says of an object that one list alone holds, measured as the
 #: pools measure (interpreters differ in what the count includes).
 _FREE_REFCOUNT = max(map(sys.getrefcount, [object()]))
 
+
+class _PlainCopies:
+    """Copies of an info mapping are plain dicts: ``copy``, ``copy.copy``,
+    ``copy.deepcopy`` and pickling (which never carries the step's arrays or pools)."""
+
+    __slots__ = ()
+
+    def copy(self) -> dict[str, Any]:
+        return dict(self)  # type: ignore[call-overload]
+
+    def __copy__(self) -> dict[str, Any]:
+        return dict(self)  # type: ignore[call-overload]
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> dict[str, Any]:
+        return copy.deepcopy(dict(self), memo)  # type: ignore[call-overload]
+
+    def __reduce__(self) -> tuple[type, tuple[dict[str, Any]]]:
+        return dict, (dict(self),)  # type: ignore[call-overload]
+
+
+class _QuietInfo(_PlainCopies, Mapping[str, Any]):
+    """The type of :data:`QUIET_INFO`: an empty mapping that refuses writes."""
+
+    __slots__ = ()
+
+    def __getitem__(self, key: str) -> Any:
+        raise KeyError(key)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(())
+
+    def __len__(self) -> int:
+        return 0
+
+    def __setitem__(self, key: str, value: Any) -> None:
+        raise TypeError(
+            "the info of a slot with nothing to report is one shared read-only empty "
+            "mapping; copy it first (dict(info)) to write to it"
+        )
+
+    __delitem__ = __setitem__  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        return "QUIET_INFO"
+
+
 #: The info of every slot with nothing to report (not the first slot of a swarm, and
 #: its swarm did not just end): one shared, read-only empty mapping. Writing to it
 #: raises ``TypeError``; copy it first (``dict(info)``), as SB3's ``VecMonitor`` does.
-QUIET_INFO: Mapping[str, Any] = MappingProxyType({})
+QUIET_INFO: Mapping[str, Any] = _QuietInfo()
 
 
-class SwarmInfo(Mapping[str, float]):
-    """The statistics of swarm ``b`` as a read-only mapping ``{key: float}``.
+def _plain(info: Any) -> Any:
+    """A slot's info as a dict of its own (a fresh dict for every mapping)."""
+    return dict(info) if isinstance(info, Mapping) else info
+
+
+class InfoList(list):
+    """The list of a step's infos: a ``list`` whose deep copy and pickle are a plain list
+    with a plain dict of its own per slot (see the module docstring)."""
+
+    __slots__ = ()
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> list[Any]:
+        return [copy.deepcopy(_plain(info), memo) for info in self]
+
+    def __reduce__(self) -> tuple[type, tuple[list[Any]]]:
+        return list, ([_plain(info) for info in self],)
+
+
+class SwarmInfo(_PlainCopies, MutableMapping[str, Any]):
+    """The statistics of swarm ``b`` as a mapping ``{key: float}``.
 
     The info of each swarm's first slot: values are read from one step's ``(B,)``
     arrays on access (``holder[0]``, the step's statistics), so a step builds no dicts.
-    ``dict(info)`` or :meth:`copy` gives a plain dict. The VecEnv reuses these objects
-    from step to step while nothing outside it holds them (:class:`SwarmInfoPool`).
+    Writing or deleting a key first copies the info into a dict of its own;
+    ``dict(info)``, :meth:`copy` and (deep) copies give a plain dict. The VecEnv reuses
+    these objects from step to step while nothing outside it holds them
+    (:class:`SwarmInfoPool`).
     """
 
-    __slots__ = ("_b", "_holder")
+    __slots__ = ("_b", "_holder", "_own")
 
-    def __init__(self, holder: list[Mapping[str, np.ndarray]], b: int) -> None:
-        self._holder = holder
+    def __init__(self, holder: list[Any], b: int) -> None:
+        self._holder = holder  # [the step's statistics, dirty list of the set]
         self._b = b
+        self._own: dict[str, Any] | None = None
 
-    def __getitem__(self, key: str) -> float:
+    def __getitem__(self, key: str) -> Any:
+        if self._own is not None:
+            return self._own[key]
         return float(self._holder[0][key][self._b])
 
     def __iter__(self) -> Iterator[str]:
-        return iter(self._holder[0])
+        return iter(self._own if self._own is not None else self._holder[0])
 
     def __len__(self) -> int:
-        return len(self._holder[0])
+        return len(self._own if self._own is not None else self._holder[0])
 
-    def copy(self) -> dict[str, float]:
-        return dict(self)
+    def _mine(self) -> dict[str, Any]:
+        if self._own is None:
+            self._own = {key: self[key] for key in self._holder[0]}
+            self._holder[1].append(self._b)  # back to reading the arrays when reused
+        return self._own
+
+    def __setitem__(self, key: str, value: Any) -> None:
+        self._mine()[key] = value
+
+    def __delitem__(self, key: str) -> None:
+        del self._mine()[key]
 
     def __repr__(self) -> str:
         return f"SwarmInfo({dict(self)!r})"
@@ -98,10 +190,12 @@ class SwarmInfoPool:
         """
         for n, (holder, objects) in enumerate(self._sets):
             if max(map(sys.getrefcount, objects)) <= _FREE_REFCOUNT:  # the pool's list only
-                holder[0] = stats
+                for b in holder[1]:  # written to since: back to reading the arrays
+                    objects[b]._own = None
+                holder[:] = [stats, []]
                 self._sets.append(self._sets.pop(n))  # now the newest
                 return objects
-        holder = [stats]
+        holder = [stats, []]
         objects = [SwarmInfo(holder, b) for b in range(self.n_swarms)]
         if len(self._sets) < _MAX_INFO_SETS:
             self._sets.append((holder, objects))
@@ -130,7 +224,7 @@ class TerminalRecord:
     episodes: dict[int, dict[str, float]]
 
 
-class TerminalInfo(MutableMapping[str, Any]):
+class TerminalInfo(_PlainCopies, MutableMapping[str, Any]):
     """The info of slot ``i`` (agent i) of swarm ``b`` at the step the swarm's episode ended.
 
     Keys: the swarm's statistics (first slot, ``i == 0``, only), then
@@ -138,7 +232,7 @@ class TerminalInfo(MutableMapping[str, Any]):
     ``TimeLimit.truncated``, ``episode`` and ``swarm_episode`` (one dict per swarm),
     read on access from the step's :class:`TerminalRecord`. Writing or deleting a key
     first copies the info into a dict of its own (as ``VecNormalize`` does to
-    ``terminal_observation``); :meth:`copy` gives a plain dict.
+    ``terminal_observation``); :meth:`copy` and (deep) copies give a plain dict.
     """
 
     __slots__ = ("_b", "_holder", "_i", "_own")
@@ -188,9 +282,6 @@ class TerminalInfo(MutableMapping[str, Any]):
 
     def __delitem__(self, key: str) -> None:
         del self._mine()[key]
-
-    def copy(self) -> dict[str, Any]:
-        return dict(self)
 
     def __repr__(self) -> str:
         return f"TerminalInfo(swarm={self._b}, agent={self._i}, keys={list(self)!r})"

@@ -12,8 +12,10 @@ slots' infos carry ``terminal_observation`` (the last observation of that episod
 SB3 uses to bootstrap the value of truncated episodes, and ``episode``: ``{"r": return,
 "l": length, "t": seconds since the VecEnv was made}``, what SB3's ``VecMonitor`` would
 add (so none is needed: its Python loop over the infos of every slot would cost more
-than the batched step; wrapping one anyway gives the same values). ``swarm_episode`` is
-the same dict under its older name.
+than the batched step; wrapping one anyway gives the same values). So
+``env_is_wrapped(Monitor)`` is true: SB3's ``evaluate_policy`` and ``EvalCallback`` read
+the ``episode`` infos without a Monitor warning. ``swarm_episode`` is the same dict
+under its older name.
 
 Infos: the swarm's statistics (:data:`swarm_envs.envs.task.STAT_KEYS`) are in the info
 of the swarm's first slot (``b·N``) only, as a read-only :class:`SwarmInfo` mapping; the
@@ -21,7 +23,10 @@ slots of a swarm that just ended get :class:`~swarm_envs.envs.infos.TerminalInfo
 mappings (with the statistics in the first; writable, a write copies the info into a
 dict of its own); every other slot's info is :data:`QUIET_INFO`, one shared read-only
 empty mapping. None of them is built per step: fresh dicts for 32k slots would cost
-more than the fused step (see :mod:`swarm_envs.envs.infos`).
+more than the fused step (see :mod:`swarm_envs.envs.infos`). Copies of them
+(``copy.copy``, ``copy.deepcopy``, pickling) are plain dicts, and the list
+(:class:`~swarm_envs.envs.infos.InfoList`) deep-copies and pickles as a plain list with
+a dict of its own per slot.
 :attr:`SwarmNavVecEnv.last_stats` holds the statistics as ``(B,)`` arrays.
 
 The step runs on the backend ``auto`` picks (``backend=`` overrides; see
@@ -58,12 +63,14 @@ from typing import Any
 import gymnasium
 import numpy as np
 from gymnasium import spaces
+from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from swarm_envs.envs.backends import make_core, resolve_backend
 from swarm_envs.envs.common import check_dtype
 from swarm_envs.envs.infos import (  # noqa: F401  (QUIET_INFO, SwarmInfo: re-exported)
     QUIET_INFO,
+    InfoList,
     SwarmInfo,
     SwarmInfoPool,
     TerminalInfoPool,
@@ -124,6 +131,7 @@ class SwarmNavVecEnv(VecEnv):
         self.episode_lengths = np.zeros(self.n_swarms, np.int64)
         self._swarm_infos = SwarmInfoPool(self.n_swarms)
         self._terminal_infos = TerminalInfoPool(self.n_swarms, self.n_agents)
+        self._quiet_infos = [QUIET_INFO] * self.num_envs  # copied into each step's list
         self._t_start = time.time()  # the "t" of the episode infos, as VecMonitor's
 
     def _check_threads(self, n_threads: int | None) -> int:
@@ -169,7 +177,12 @@ class SwarmNavVecEnv(VecEnv):
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state["_pool"] = None  # threads do not pickle; recreated on first use
+        del state["_quiet_infos"]  # the shared QUIET_INFO would pickle as plain dicts
         return state  # the info pools pickle as their sizes (see infos.py)
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._quiet_infos = [QUIET_INFO] * self.num_envs
 
     # ------------------------------------------------------------------ VecEnv API
     def reset(self) -> np.ndarray:
@@ -233,7 +246,7 @@ class SwarmNavVecEnv(VecEnv):
         done = terminated | truncated
         # Slots with nothing to report share one read-only empty mapping: building 32k
         # fresh dicts per step would cost more than the fused step itself.
-        infos: list[Any] = [QUIET_INFO] * self.num_envs
+        infos = InfoList(self._quiet_infos)
         infos[::N] = self._swarm_infos.infos(stats)  # read on access; see the pool
         if done.any():
             self._end_episodes(done, truncated & ~terminated, stats, infos)
@@ -333,4 +346,9 @@ class SwarmNavVecEnv(VecEnv):
     def env_is_wrapped(
         self, wrapper_class: type[gymnasium.Wrapper], indices: VecEnvIndices = None
     ) -> list[bool]:
-        return [False for _ in self._indices(indices)]
+        """Whether each slot is wrapped in ``wrapper_class``: true for SB3's ``Monitor``
+        alone, whose ``episode`` info every slot reports (``{"r", "l", "t"}`` at the end
+        of its episode, as ``Monitor`` would), so that SB3's ``evaluate_policy`` and
+        ``EvalCallback`` read it instead of warning; false for any other wrapper."""
+        wrapped = wrapper_class is Monitor
+        return [wrapped for _ in self._indices(indices)]
