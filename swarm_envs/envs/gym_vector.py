@@ -83,7 +83,12 @@ class SwarmNavVectorEnv(VectorEnv):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         check_dtype(dtype)
-        self.cfg = make_config(config, kwargs)
+        self.cfg = make_config(
+            config,
+            kwargs,
+            owner="SwarmNavVectorEnv",
+            keywords=("num_envs", "config", "render_mode", "dtype"),
+        )
         self.num_envs = int(num_envs)
         self.render_mode = render_mode
         self.core = make_core(self.cfg, batch=self.num_envs, dtype=dtype)

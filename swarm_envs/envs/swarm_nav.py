@@ -107,9 +107,8 @@ SWARM_NAV_DOC = """
 
     Terminated (success) when at least ``success_fraction`` of the agents are within
     ``goal_radius`` of the goal at once; truncated after ``max_steps`` steps
-    (``max_cycles`` in PettingZoo; ``gym.make`` also adds ``TimeLimit`` at the registered
-    ``max_episode_steps`` = 400: pass ``max_episode_steps`` to ``gym.make`` with a
-    different ``max_steps``).
+    (``max_cycles`` in PettingZoo). ``gym.make`` adds no ``TimeLimit``: ``max_steps`` is
+    the only episode length (a ``max_episode_steps`` given to ``gym.make`` adds one).
 
     ## Arguments
 

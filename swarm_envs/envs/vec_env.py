@@ -102,7 +102,12 @@ class SwarmNavVecEnv(VecEnv):
             raise ValueError(
                 f"vec_env render_mode must be None or 'rgb_array', got {render_mode!r}"
             )
-        self.cfg = make_config(config, kwargs)
+        self.cfg = make_config(
+            config,
+            kwargs,
+            owner="vec_env",
+            keywords=("n_swarms", "config", "render_mode", "dtype", "n_threads"),
+        )
         self.n_swarms = int(n_swarms)
         self.n_agents = self.cfg.n_agents
         check_dtype(dtype)
