@@ -242,6 +242,8 @@ def test_cli_with_config_file_and_overrides(tmp_path):
         (["--set", "n_agent=3"], "n_agent"),
         (["--set", "novalue"], "KEY=VALUE"),
         (["--episodes", "0"], "--episodes"),
+        (["--torch-threads", "-1"], "--torch-threads must be >= 0"),
+        (["--set", "backend=numpy", "--set", "device=cuda:99"], "device"),
     ],
 )
 def test_cli_errors(tmp_path, capsys, argv, message):
@@ -341,9 +343,18 @@ def test_episodes_run_on_the_configs_backend(backend):
 
 
 def test_cli_records_and_refuses_the_env_device(tmp_path, capsys):
+    import torch
+
     out = tmp_path / "o"
     argv = ["--policies", "zero", "--episodes", "1", "--max-steps", "3", "--no-gif"]
-    assert main([*argv, "--set", "backend=numpy", "--out", str(out), "--no-progress"]) == 0
+    before = torch.get_num_threads()
+    try:
+        assert (
+            main([*argv, "--set", "backend=numpy", "--torch-threads", "1", "--out", str(out)]) == 0
+        )
+        assert torch.get_num_threads() == 1
+    finally:
+        torch.set_num_threads(before)
     assert json.loads((out / "results.json").read_text())["backend"] == "numpy"
     capsys.readouterr()
     bad = ["--set", "device=cuda:99", "--set", "backend=numpy", "--out", str(tmp_path / "b")]

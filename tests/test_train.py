@@ -221,6 +221,39 @@ def test_training_is_deterministic_for_a_seed(tmp_path: Path):
         np.testing.assert_array_equal(p, q)
 
 
+@pytest.mark.parametrize(("threads", "expected"), [("default", 1), (2, 2)])
+def test_training_runs_on_the_configs_torch_threads(tmp_path: Path, threads, expected):
+    import torch
+
+    before = torch.get_num_threads()
+    seen = []
+    kw = {} if threads == "default" else {"torch_threads": threads}
+    tc = smoke_config(total_timesteps=64, **kw)
+    assert tc.torch_threads == expected
+    callback = pytest.importorskip("stable_baselines3.common.callbacks")
+
+    class Probe(callback.BaseCallback):
+        def _on_step(self) -> bool:
+            seen.append(torch.get_num_threads())
+            return True
+
+    import train.train as trainer
+
+    real = trainer.SwarmStatsCallback
+
+    def with_probe(cfg):
+        return callback.CallbackList([real(cfg), Probe()])
+
+    try:
+        trainer.SwarmStatsCallback = with_probe
+        train(tc, tmp_path, progress_bar=False, tensorboard=False, verbose=0)
+    finally:
+        trainer.SwarmStatsCallback = real
+        torch.set_num_threads(before)
+    assert seen and set(seen) == {expected}
+    assert json.loads((tmp_path / "meta.json").read_text())["torch_threads"] == expected
+
+
 def test_shared_mode_uses_one_slot_per_agent():
     tc = smoke_config(n_swarms=3)
     venv = make_training_env(tc)
@@ -377,10 +410,12 @@ def test_demo_pipeline_smoke(tmp_path: Path):
 
 @pytest.mark.slow
 def test_full_demo_learned_policy_beats_the_analytic_controller(tmp_path: Path):
-    """The main job, as `make demo` runs it (about 3-4 minutes on 2 cores)."""
+    """The main job, as `make demo` runs it: the verdict on 100 held-out episodes."""
     code = demo.main(["--out", str(tmp_path / "demo"), "--no-progress"])
     report = (tmp_path / "demo" / "report.md").read_text()
     assert code == 0, report
+    meta = json.loads((tmp_path / "demo" / "meta.json").read_text())
+    assert meta["torch_threads"] == 1 and meta["status"] == "completed"
 
 
 @pytest.mark.parametrize("dynamics", ["zone", "piecewise", "lagrangian"])

@@ -43,6 +43,7 @@ from typing import Any
 
 from swarm_envs import ENV_ID, tune_allocator
 from train.cli_common import CliError, OneLineParser, check_device, check_seed, fail, one_line
+from train.config import DEFAULT_TORCH_THREADS
 
 PROG = "swarm-eval"
 
@@ -88,6 +89,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="--out may hold an earlier evaluation: remove its files first",
     )
     p.add_argument("--device", default="cpu", help="torch device for SB3 models (default cpu)")
+    p.add_argument(
+        "--torch-threads",
+        type=int,
+        default=DEFAULT_TORCH_THREADS,
+        metavar="N",
+        help=f"torch CPU threads for the models (default {DEFAULT_TORCH_THREADS}; 0: torch's own)",
+    )
     p.add_argument(
         "--stochastic", action="store_true", help="sample SB3 actions (default deterministic)"
     )
@@ -257,6 +265,8 @@ def _main(args: Any) -> int:
             raise CliError(f"--gif-size must be in [32, 4096] pixels, got {args.gif_size}")
         check_seed("--seed", args.seed)
         check_device("--device", args.device)
+        if args.torch_threads < 0:
+            raise CliError(f"--torch-threads must be >= 0, got {args.torch_threads}")
         check_out_dir(out, overwrite=args.overwrite)
         cfg = _make_config(args.env, args.config, _parse_overrides(args.overrides, args.max_steps))
         check_backend(cfg, args.episodes)
@@ -266,6 +276,11 @@ def _main(args: Any) -> int:
         return fail(PROG, err)
 
     from train.evaluate import TrainedEnvWarning, evaluate_policies, format_table
+
+    if args.torch_threads > 0:
+        import torch
+
+        torch.set_num_threads(args.torch_threads)
 
     with warnings.catch_warnings():
         warnings.simplefilter("always", TrainedEnvWarning)
