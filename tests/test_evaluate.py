@@ -21,6 +21,7 @@ from train.evaluate import (
     SpaceMismatchError,
     evaluate_policies,
     format_table,
+    load_sb3_model,
     policy_mode,
     run_episodes,
 )
@@ -241,6 +242,8 @@ def test_cli_with_config_file_and_overrides(tmp_path):
         (["--set", "n_agent=3"], "n_agent"),
         (["--set", "novalue"], "KEY=VALUE"),
         (["--episodes", "0"], "--episodes"),
+        (["--torch-threads", "-1"], "--torch-threads must be >= 0"),
+        (["--set", "backend=numpy", "--set", "device=cuda:99"], "device"),
     ],
 )
 def test_cli_errors(tmp_path, capsys, argv, message):
@@ -313,3 +316,119 @@ def test_console_script_exits_nonzero_on_a_bad_policy():
     )
     assert proc.returncode == 2
     assert "unknown policy 'nope'" in proc.stderr
+
+
+def _native_available(cfg: SwarmConfig) -> bool:
+    from swarm_envs.envs.backends import unsupported
+
+    return unsupported(cfg, "native") is None
+
+
+@pytest.mark.parametrize("backend", ["numpy", "native"])
+def test_episodes_run_on_the_configs_backend(backend):
+    cfg = SwarmConfig(n_agents=4, max_steps=20, backend=backend)
+    if backend == "native" and not _native_available(cfg):
+        pytest.skip("the C step cannot be built here")
+    res = evaluate_policies({"potential": PotentialFieldController(cfg)}, cfg, 3, 0, progress=False)
+    assert res["backend"] == backend
+    reference = evaluate_policies(
+        {"potential": PotentialFieldController(cfg)},
+        SwarmConfig(n_agents=4, max_steps=20, backend="numpy"),
+        3,
+        0,
+        progress=False,
+    )
+    got, want = res["policies"]["potential"], reference["policies"]["potential"]
+    assert got["mean_return"] == pytest.approx(want["mean_return"], rel=1e-9)
+
+
+def test_cli_records_and_refuses_the_env_device(tmp_path, capsys):
+    import torch
+
+    out = tmp_path / "o"
+    argv = ["--policies", "zero", "--episodes", "1", "--max-steps", "3", "--no-gif"]
+    before = torch.get_num_threads()
+    try:
+        assert (
+            main([*argv, "--set", "backend=numpy", "--torch-threads", "1", "--out", str(out)]) == 0
+        )
+        assert torch.get_num_threads() == 1
+    finally:
+        torch.set_num_threads(before)
+    assert json.loads((out / "results.json").read_text())["backend"] == "numpy"
+    capsys.readouterr()
+    bad = ["--set", "device=cuda:99", "--set", "backend=numpy", "--out", str(tmp_path / "b")]
+    assert main([*argv, *bad]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "device" in err and err.startswith("swarm-eval: ")
+    assert not (tmp_path / "b").exists()
+
+
+@pytest.fixture(scope="module")
+def trained_run(tmp_path_factory) -> Path:
+    from train.config import train_config_from_mapping
+    from train.train import train
+
+    tc = train_config_from_mapping(
+        {
+            "env": {"n_agents": 3, "max_steps": 10, "n_neighbors": 2},
+            "n_swarms": 1,
+            "total_timesteps": 1,
+            "hyperparams": {"n_steps": 8, "batch_size": 8, "n_epochs": 1},
+            "checkpoint_seconds": 0,
+        }
+    )
+    out = tmp_path_factory.mktemp("run")
+    train(tc, out, progress_bar=False, tensorboard=False, verbose=0, handle_signals=False)
+    return out
+
+
+def test_a_trained_model_records_its_env(trained_run: Path):
+    from train.evaluate import TRAINED_ENV, trained_env_record
+
+    cfg = SwarmConfig(n_agents=3, max_steps=10, n_neighbors=2)
+    record = getattr(load_sb3_model(trained_run / "model.zip"), TRAINED_ENV)
+    assert record == trained_env_record(cfg, "swarm_envs/SwarmNav-v0")
+    assert record["observation_size"] == observation_size(cfg) == 14
+    assert record["dynamics"] == "social_potential"
+    meta = json.loads((trained_run / "meta.json").read_text())
+    assert meta["env"]["observation_size"] == 14 and meta["env"]["n_neighbors"] == 2
+    for ckpt in (trained_run / "checkpoints").iterdir():
+        assert getattr(load_sb3_model(ckpt / "model.zip"), TRAINED_ENV) == record
+
+
+def test_evaluating_on_other_dynamics_warns(trained_run: Path, capsys):
+    from train.evaluate import TrainedEnvWarning
+
+    model = load_sb3_model(trained_run / "model.zip")
+    zone = SwarmConfig(n_agents=5, max_steps=3, n_neighbors=2, dynamics="zone")
+    with pytest.warns(TrainedEnvWarning, match="dynamics: trained 'social_potential', here 'zone'"):
+        evaluate_policies({"m": model}, zone, 1, 0, progress=False)
+    # Another swarm size alone is what a shared policy is for: no warning.
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", TrainedEnvWarning)
+        evaluate_policies({"m": model}, SwarmConfig(n_agents=5, max_steps=3, n_neighbors=2), 1, 0)
+    argv = ["--policies", str(trained_run / "model.zip"), "--episodes", "1", "--no-gif"]
+    argv += ["--set", "dynamics=zone", "--set", "n_neighbors=2", "--max-steps", "3"]
+    assert main([*argv, "--out", str(trained_run / "eval_zone"), "--no-progress"]) == 0
+    warning = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
+    assert warning == [
+        "swarm-eval: warning: policy 'model' is evaluated on another env than it was "
+        "trained on: dynamics: trained 'social_potential', here 'zone'"
+    ]
+
+
+def test_evaluating_on_other_spaces_is_refused_with_what_it_was_trained_on(
+    trained_run: Path, capsys
+):
+    argv = ["--policies", str(trained_run / "model.zip"), "--set", "n_neighbors=3"]
+    assert main([*argv, "--out", str(trained_run / "eval_k3")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "does not fit the env" in err
+    assert "trained on dynamics='social_potential', N=3, d=2, k=2 (observation size 14" in err
+    assert not (trained_run / "eval_k3").exists()
+    model = load_sb3_model(trained_run / "model.zip")
+    with pytest.raises(SpaceMismatchError, match="the model was trained on"):
+        evaluate_policies({"m": model}, SwarmConfig(n_neighbors=3), 1, 0)

@@ -105,6 +105,57 @@ def test_bad_train_configs_name_the_key(data, fragment):
     assert fragment in str(info.value)
 
 
+@pytest.mark.parametrize("text", ["2e6", "2.0e6", "2_000_000", "2000000.0", "2000000", "2E+6"])
+def test_integer_keys_accept_integral_numbers_in_any_spelling(text):
+    tc = load_train_config(
+        CONFIG_ROOT / "train" / "demo.yaml",
+        parse_overrides(
+            [
+                f"total_timesteps={text}",
+                f"eval_freq={text}",
+                f"checkpoint_freq={text}",
+                f"hyperparams.batch_size={text}",
+                "env.n_agents=6e0",
+                "env.max_steps=1e3",
+                "net_arch=[6.4e1, 64.0]",
+                "torch_threads=1.0",
+            ]
+        ),
+    )
+    for key in ("total_timesteps", "eval_freq", "checkpoint_freq"):
+        value = getattr(tc, key)
+        assert value == 2_000_000 and type(value) is int, key
+    assert tc.hyperparams["batch_size"] == 2_000_000 and type(tc.hyperparams["batch_size"]) is int
+    assert tc.env == {"n_agents": 6, "max_steps": 1000}
+    assert all(type(v) is int for v in tc.env.values())
+    assert tc.swarm_config().n_agents == 6 and tc.swarm_config().max_steps == 1000
+    assert tc.net_arch == (64, 64) and tc.torch_threads == 1
+    # The saved config holds plain integers, and loads back to the same config.
+    assert yaml.safe_load(yaml.safe_dump(tc.to_dict()))["total_timesteps"] == 2_000_000
+    assert train_config_from_mapping(tc.to_dict()) == tc
+
+
+@pytest.mark.parametrize(
+    ("override", "key"),
+    [
+        ("total_timesteps=2.5", "total_timesteps"),
+        ("total_timesteps=2.5e0", "total_timesteps"),
+        ("eval_freq=1e-3", "eval_freq"),
+        ("n_swarms=inf", "n_swarms"),
+        ("seed=.nan", "seed"),
+        ("checkpoint_keep=true", "checkpoint_keep"),
+        ("torch_threads=1.5", "torch_threads"),
+        ("net_arch=[64.5, 64]", "net_arch"),
+        ("hyperparams.n_steps=2.5", "hyperparams.n_steps"),
+        ("env.max_steps=2.5", "max_steps"),
+        ("env.n_agents=six", "n_agents"),
+    ],
+)
+def test_integer_keys_refuse_fractions_naming_the_key(override, key):
+    with pytest.raises(ValueError, match=rf"{key} must be"):
+        load_train_config(CONFIG_ROOT / "train" / "demo.yaml", parse_overrides([override]))
+
+
 def test_overrides_parse_dotted_keys_and_yaml_values():
     got = parse_overrides(["total_timesteps=5000", "env.n_agents=4", "hyperparams.gamma=0.9"])
     assert got == {"total_timesteps": 5000, "env": {"n_agents": 4}, "hyperparams": {"gamma": 0.9}}
@@ -168,6 +219,39 @@ def test_training_is_deterministic_for_a_seed(tmp_path: Path):
         params.append([p.detach().numpy().copy() for p in model.policy.parameters()])
     for p, q in zip(params[0], params[1], strict=True):
         np.testing.assert_array_equal(p, q)
+
+
+@pytest.mark.parametrize(("threads", "expected"), [("default", 1), (2, 2)])
+def test_training_runs_on_the_configs_torch_threads(tmp_path: Path, threads, expected):
+    import torch
+
+    before = torch.get_num_threads()
+    seen = []
+    kw = {} if threads == "default" else {"torch_threads": threads}
+    tc = smoke_config(total_timesteps=64, **kw)
+    assert tc.torch_threads == expected
+    callback = pytest.importorskip("stable_baselines3.common.callbacks")
+
+    class Probe(callback.BaseCallback):
+        def _on_step(self) -> bool:
+            seen.append(torch.get_num_threads())
+            return True
+
+    import train.train as trainer
+
+    real = trainer.SwarmStatsCallback
+
+    def with_probe(cfg):
+        return callback.CallbackList([real(cfg), Probe()])
+
+    try:
+        trainer.SwarmStatsCallback = with_probe
+        train(tc, tmp_path, progress_bar=False, tensorboard=False, verbose=0)
+    finally:
+        trainer.SwarmStatsCallback = real
+        torch.set_num_threads(before)
+    assert seen and set(seen) == {expected}
+    assert json.loads((tmp_path / "meta.json").read_text())["torch_threads"] == expected
 
 
 def test_shared_mode_uses_one_slot_per_agent():
@@ -326,10 +410,12 @@ def test_demo_pipeline_smoke(tmp_path: Path):
 
 @pytest.mark.slow
 def test_full_demo_learned_policy_beats_the_analytic_controller(tmp_path: Path):
-    """The main job, as `make demo` runs it (about 3-4 minutes on 2 cores)."""
+    """The main job, as `make demo` runs it: the verdict on 100 held-out episodes."""
     code = demo.main(["--out", str(tmp_path / "demo"), "--no-progress"])
     report = (tmp_path / "demo" / "report.md").read_text()
     assert code == 0, report
+    meta = json.loads((tmp_path / "demo" / "meta.json").read_text())
+    assert meta["torch_threads"] == 1 and meta["status"] == "completed"
 
 
 @pytest.mark.parametrize("dynamics", ["zone", "piecewise", "lagrangian"])

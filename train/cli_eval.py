@@ -14,7 +14,11 @@ folders written by ``swarm-train --engine rllib`` (the shared module, through
 :class:`train.rllib.policy.RLlibPolicy`; needs the ``distributed`` extra). Every
 policy runs on the same seeded episodes; the output folder receives ``results.json``,
 ``summary.md``, ``curves.png`` and one ``episode0_<policy>.gif`` per policy (see
-:mod:`train.evaluate` and ``docs/evaluation.md``).
+:mod:`train.evaluate` and ``docs/evaluation.md``). The episodes run on the backend and
+device of the config (``--set backend=native``, ``--set device=cuda`` with the torch
+backend), recorded in ``results.json`` as ``backend``. A model trained by ``swarm-train``
+records its env: evaluating it where the dynamics, the observation layout or scales, or
+``u_max`` differ prints a one-line warning (``swarm-eval: warning: ...``).
 
 ``--out`` must be new or empty; ``--overwrite`` removes an earlier evaluation's files
 there first (``results.json``, ``summary.md``, ``curves.png``, the GIFs, a demo's
@@ -23,7 +27,8 @@ there first (``results.json``, ``summary.md``, ``curves.png``, the GIFs, a demo'
 Exit status: 0 on success; 2 with one line on stderr for a bad flag (``--seed`` outside
 [0, 2**32 - 1], ``--episodes`` < 1, an unavailable ``--device``, ...), an unknown
 policy name, a missing or unreadable model file, a model whose spaces do not fit the
-env, an unknown env id, a bad config (YAML syntax included) or an ``--out`` that is a
+env (with what it was trained on), an env ``device`` that is unavailable or needs
+another backend, an unknown env id, a bad config (YAML syntax included) or an ``--out`` that is a
 file or holds files (without ``--overwrite``); 130 on Ctrl-C.
 """
 
@@ -31,12 +36,14 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from swarm_envs import ENV_ID, tune_allocator
-from train.cli_common import CliError, OneLineParser, check_device, check_seed, fail
+from train.cli_common import CliError, OneLineParser, check_device, check_seed, fail, one_line
+from train.config import DEFAULT_TORCH_THREADS
 
 PROG = "swarm-eval"
 
@@ -82,6 +89,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="--out may hold an earlier evaluation: remove its files first",
     )
     p.add_argument("--device", default="cpu", help="torch device for SB3 models (default cpu)")
+    p.add_argument(
+        "--torch-threads",
+        type=int,
+        default=DEFAULT_TORCH_THREADS,
+        metavar="N",
+        help=f"torch CPU threads for the models (default {DEFAULT_TORCH_THREADS}; 0: torch's own)",
+    )
     p.add_argument(
         "--stochastic", action="store_true", help="sample SB3 actions (default deterministic)"
     )
@@ -147,6 +161,21 @@ def _make_config(env_id: str, config: str | None, overrides: dict[str, Any]) -> 
         env.close()
 
 
+def check_backend(cfg: Any, batch: int) -> str:
+    """The backend that will run ``batch`` episodes of ``cfg`` (its ``backend`` and
+    ``device``), or :class:`CliError` when its ``device`` is unavailable here or needs
+    another backend."""
+    from swarm_envs.envs.backends import resolve_backend
+    from train.config import device_problem
+
+    if cfg.device != "cpu" and (problem := device_problem(cfg.device)) is not None:
+        raise CliError(f"device {problem}")
+    try:
+        return resolve_backend(cfg, batch)
+    except ValueError as err:
+        raise CliError(str(err)) from None
+
+
 def _unique(name: str, taken: set[str]) -> str:
     out, i = name, 2
     while out in taken:
@@ -157,6 +186,7 @@ def _unique(name: str, taken: set[str]) -> str:
 def _load_policies(specs: Sequence[str], cfg: Any, seed: int, device: str) -> dict[str, Any]:
     from agents import CONTROLLERS, analytic_name, make_controller
     from train.evaluate import SpaceMismatchError, load_sb3_model, policy_mode
+    from train.evaluate.policies import describe_trained_env
 
     policies: dict[str, Any] = {}
     for spec in specs:
@@ -191,7 +221,9 @@ def _load_policies(specs: Sequence[str], cfg: Any, seed: int, device: str) -> di
         try:
             policy_mode(model, cfg)
         except SpaceMismatchError as err:
-            raise CliError(f"model {spec} does not fit the env: {err}") from None
+            trained = describe_trained_env(model)
+            extra = f"; it was {trained}" if trained else ""
+            raise CliError(f"model {spec} does not fit the env: {err}{extra}") from None
         policies[name] = model
     return policies
 
@@ -233,16 +265,43 @@ def _main(args: Any) -> int:
             raise CliError(f"--gif-size must be in [32, 4096] pixels, got {args.gif_size}")
         check_seed("--seed", args.seed)
         check_device("--device", args.device)
+        if args.torch_threads < 0:
+            raise CliError(f"--torch-threads must be >= 0, got {args.torch_threads}")
         check_out_dir(out, overwrite=args.overwrite)
         cfg = _make_config(args.env, args.config, _parse_overrides(args.overrides, args.max_steps))
+        check_backend(cfg, args.episodes)
         policies = _load_policies(args.policies, cfg, args.seed, args.device)
         prepare_out_dir(out, overwrite=args.overwrite, patterns=EVAL_FILES, prog=PROG)
     except (CliError, OutDirError) as err:
         return fail(PROG, err)
 
-    from train.evaluate import evaluate_policies, format_table
+    from train.evaluate import TrainedEnvWarning, evaluate_policies, format_table
 
-    results = evaluate_policies(
+    if args.torch_threads > 0:
+        import torch
+
+        torch.set_num_threads(args.torch_threads)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", TrainedEnvWarning)
+        warnings.showwarning = _one_line_warning
+        results = _evaluate(args, policies, cfg, out, evaluate_policies)
+    print(format_table(results))
+    print(f"\nwrote {out / 'results.json'}, {out / 'summary.md'}", end="")
+    if not args.no_plots:
+        print(f", {out / 'curves.png'}", end="")
+    if not args.no_gif:
+        print(f" and {len(policies)} GIF(s) in {out}", end="")
+    print()
+    return 0
+
+
+def _one_line_warning(message: Any, category: type, *_args: Any, **_kw: Any) -> None:
+    print(f"{PROG}: warning: {one_line(str(message))}", file=sys.stderr)
+
+
+def _evaluate(args: Any, policies: dict[str, Any], cfg: Any, out: Path, evaluate: Any) -> Any:
+    return evaluate(
         policies,
         cfg,
         args.episodes,
@@ -256,14 +315,6 @@ def _main(args: Any) -> int:
         gif_size=args.gif_size,
         extra={"config_path": args.config, "overrides": _parse_overrides(args.overrides, None)},
     )
-    print(format_table(results))
-    print(f"\nwrote {out / 'results.json'}, {out / 'summary.md'}", end="")
-    if not args.no_plots:
-        print(f", {out / 'curves.png'}", end="")
-    if not args.no_gif:
-        print(f" and {len(policies)} GIF(s) in {out}", end="")
-    print()
-    return 0
 
 
 if __name__ == "__main__":  # pragma: no cover

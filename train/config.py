@@ -31,6 +31,7 @@ from swarm_envs.config import (
     resolve_config_path,
 )
 from train.hyperparams import check_hyperparams
+from train.integers import ACCEPTED, check_integer, coerce_integer_fields, integral
 
 ALGOS = ("PPO", "SAC")
 #: Keys a resumed run may change (``swarm-train --resume DIR key=value``): the total
@@ -39,6 +40,8 @@ RESUME_KEYS = ("total_timesteps", "checkpoint_freq", "checkpoint_seconds", "chec
 #: Largest seed numpy's seeding accepts.
 MAX_SEED = 2**32 - 1
 MODES = ("shared", "central")
+#: torch CPU threads of training and evaluation unless a config or flag says otherwise.
+DEFAULT_TORCH_THREADS = 1
 #: SB3 constructor arguments that the trainer sets itself (not allowed in ``hyperparams``).
 RESERVED = {"policy", "env", "seed", "device", "policy_kwargs", "tensorboard_log", "verbose"}
 
@@ -130,8 +133,11 @@ class TrainConfig(RunConfig):
     """How many of the latest checkpoints ``checkpoints/`` keeps (older ones are removed)."""
     device: str = "cpu"
     """Torch device for the networks."""
-    torch_threads: int | None = None
-    """If set, ``torch.set_num_threads`` for the run (fewer threads: steadier timings)."""
+    torch_threads: int | None = DEFAULT_TORCH_THREADS
+    """``torch.set_num_threads`` for the run and its evaluations; null leaves torch's
+    own choice (one per core). One thread is the default: with small networks
+    (``64 × 64``) a second thread gains little, while on cores shared with the env step
+    or other work each minibatch waits for the slowest thread."""
 
     def __post_init__(self) -> None:
         cls = algorithm_class(self.algo)
@@ -147,9 +153,7 @@ class TrainConfig(RunConfig):
             ("checkpoint_freq", 0),
             ("checkpoint_keep", 1),
         ):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+            object.__setattr__(self, name, check_integer(name, getattr(self, name), low=low))
         for name in ("seed", "eval_seed"):
             if getattr(self, name) > MAX_SEED:
                 raise ValueError(
@@ -169,20 +173,16 @@ class TrainConfig(RunConfig):
         problem = device_problem(self.device)
         if problem is not None:
             raise ValueError(f"device {problem}")
-        if self.torch_threads is not None and (
-            not isinstance(self.torch_threads, int) or self.torch_threads < 1
-        ):
-            raise ValueError(
-                f"torch_threads must be null or an integer >= 1, got {self.torch_threads!r}"
-            )
-        arch = tuple(self.net_arch)
-        if not arch or any(isinstance(h, bool) or not isinstance(h, int) or h < 1 for h in arch):
-            raise ValueError(
-                f"net_arch must be a non-empty list of integers >= 1, got {self.net_arch!r}"
-            )
-        object.__setattr__(self, "net_arch", arch)
-        if not isinstance(self.env, Mapping):
-            raise ValueError(f"env must be a mapping of SwarmConfig keys, got {self.env!r}")
+        if self.torch_threads is not None:
+            threads = integral(self.torch_threads)
+            if threads is None or threads < 1:
+                raise ValueError(
+                    f"torch_threads must be null or an integer >= 1 ({ACCEPTED}), "
+                    f"got {self.torch_threads!r}"
+                )
+            object.__setattr__(self, "torch_threads", threads)
+        object.__setattr__(self, "net_arch", net_arch_tuple(self.net_arch))
+        object.__setattr__(self, "env", env_overrides(self.env))
         if not isinstance(self.hyperparams, Mapping):
             raise ValueError(f"hyperparams must be a mapping, got {self.hyperparams!r}")
         allowed = set(inspect.signature(cls.__init__).parameters) - RESERVED - {"self"}
@@ -202,6 +202,33 @@ class TrainConfig(RunConfig):
     def n_slots(self) -> int:
         """Env slots SB3 sees: ``n_swarms × n_agents`` (shared) or ``n_swarms`` (central)."""
         return self.n_swarms * (self.swarm_config().n_agents if self.mode == "shared" else 1)
+
+
+def net_arch_tuple(net_arch: Any) -> tuple[int, ...]:
+    """``net_arch`` as a tuple of layer sizes (integral numbers such as ``6.4e1`` too).
+
+    Raises:
+        ValueError: not a non-empty list of integers >= 1.
+    """
+    problem = ValueError(f"net_arch must be a non-empty list of integers >= 1, got {net_arch!r}")
+    if isinstance(net_arch, (str, bytes, Mapping)) or not hasattr(net_arch, "__iter__"):
+        raise problem
+    sizes = tuple(integral(h) for h in net_arch)
+    if not sizes or any(h is None or h < 1 for h in sizes):
+        raise problem
+    return sizes  # type: ignore[return-value]
+
+
+def env_overrides(env: Any) -> dict[str, Any]:
+    """The ``env`` section with integral values of integer keys as ``int``
+    (``max_steps: 1e3`` → ``1000``; :func:`train.integers.coerce_integer_fields`).
+
+    Raises:
+        ValueError: ``env`` is not a mapping.
+    """
+    if not isinstance(env, Mapping):
+        raise ValueError(f"env must be a mapping of SwarmConfig keys, got {env!r}")
+    return coerce_integer_fields(SwarmConfig, env)
 
 
 def device_problem(device: Any) -> str | None:

@@ -7,7 +7,8 @@ keyword dictionaries) cannot come from YAML and are refused.
 
 Numbers written as YAML strings such as ``1e-3`` (PyYAML reads exponents without a
 decimal point as text) are accepted where a real number is expected and stored as
-floats.
+floats; integral numbers such as ``2e3``, ``2_048`` or ``2048.0`` are accepted where an
+integer is expected and stored as integers.
 
 >>> check_hyperparams("PPO", {"learning_rate": "1e-3", "n_steps": 64}, n_envs=8)
 {'learning_rate': 0.001, 'n_steps': 64}
@@ -23,6 +24,8 @@ import math
 import re
 from collections.abc import Callable, Mapping
 from typing import Any
+
+from train.integers import integral
 
 #: Arguments that need Python objects, which a YAML config cannot build.
 OBJECT_ARGS = frozenset(
@@ -70,11 +73,10 @@ def integer(low: int, *, extra: tuple[int, ...] = ()) -> Check:
     allowed = f"an integer >= {low}" + "".join(f" or {e}" for e in extra)
 
     def check(key: str, value: Any) -> int:
-        if isinstance(value, bool) or not isinstance(value, int):
+        n = integral(value)
+        if n is None or (n < low and n not in extra):
             raise ValueError(f"hyperparams.{key} must be {allowed}, got {value!r}")
-        if value < low and value not in extra:
-            raise ValueError(f"hyperparams.{key} must be {allowed}, got {value!r}")
-        return value
+        return n
 
     return check
 
@@ -127,16 +129,16 @@ def auto_or_real(key: str, value: Any) -> Any:
 def train_freq(key: str, value: Any) -> Any:
     """SAC's ``train_freq``: an integer >= 1 (vector steps) or ``[n, "step"]``."""
     if isinstance(value, (list, tuple)) and len(value) == 2:
-        n, unit = value
-        if not isinstance(n, bool) and isinstance(n, int) and n >= 1 and unit == "step":
+        n, unit = integral(value[0]), value[1]
+        if n is not None and n >= 1 and unit == "step":
             return [n, unit]
         if unit == "episode":
             raise ValueError(
                 f"hyperparams.{key}: unit 'episode' needs a single env; training runs "
                 "several (use an integer: vector steps)"
             )
-    elif not isinstance(value, bool) and isinstance(value, int) and value >= 1:
-        return value
+    elif (n := integral(value)) is not None and n >= 1:
+        return n
     raise ValueError(f"hyperparams.{key} must be an integer >= 1 or [n, 'step'], got {value!r}")
 
 

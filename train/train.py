@@ -13,7 +13,9 @@ once ``meta.json`` says ``completed``), ``best_model.zip`` (best periodic evalua
 enabled), ``checkpoints/step_<timesteps>/`` (the latest ``checkpoint_keep``; see
 :mod:`train.checkpoints`), ``train_config.yaml``, ``env_config.yaml`` (the resolved env
 configuration), ``meta.json`` (package versions, seed, ``status``: ``running``,
-``interrupted`` or ``completed``, the timesteps ``model.zip`` holds, timings) and
+``interrupted`` or ``completed``, the timesteps ``model.zip`` holds, timings, torch's
+thread count, and ``env``: the dynamics and the observation layout and size the model
+was trained on, which every saved model zip also holds) and
 ``tensorboard/``. ``swarm-eval --config <out>/env_config.yaml --policies potential
 <out>/model.zip`` evaluates it.
 
@@ -71,6 +73,7 @@ from train.checkpoints import (
     write_atomic,
 )
 from train.config import TrainConfig, algorithm_class
+from train.evaluate.policies import TRAINED_ENV, trained_env_record
 from train.interrupt import StopRequest, TrainingInterrupted, stop_on_signals
 from train.outdir import RUN_FILES, check_out_dir, prepare_out_dir
 
@@ -136,11 +139,15 @@ def done_slots_only(cls: type) -> type:
 
 
 def build_model(tc: TrainConfig, venv, tensorboard_log: str | None = None):
-    """The SB3 model of ``tc`` on ``venv`` (seeded; hyperparameters from the config)."""
+    """The SB3 model of ``tc`` on ``venv`` (seeded; hyperparameters from the config).
+
+    The model records the env it trains on as its
+    :data:`~train.evaluate.policies.TRAINED_ENV` attribute, which SB3 saves with it.
+    """
     cls = done_slots_only(algorithm_class(tc.algo))
     net = list(tc.net_arch)
     policy_kwargs: dict[str, Any] = {"net_arch": net if tc.algo == "SAC" else dict(pi=net, vf=net)}
-    return cls(
+    model = cls(
         "MlpPolicy",
         venv,
         seed=tc.seed,
@@ -150,6 +157,9 @@ def build_model(tc: TrainConfig, venv, tensorboard_log: str | None = None):
         verbose=0,
         **dict(tc.hyperparams),
     )
+    # Saved in the zip's data (every model.zip, checkpoint and best_model.zip), set on load.
+    setattr(model, TRAINED_ENV, trained_env_record(tc.swarm_config(), tc.env_id))
+    return model
 
 
 def train(
@@ -353,6 +363,12 @@ class _Run:
                 str(self.checkpoint_path.relative_to(self.out)) if self.checkpoint_path else None
             ),
             "train_seconds": round(self.train_seconds(), 2),
+            "torch_threads": torch.get_num_threads(),
+            "env": {
+                k: v
+                for k, v in trained_env_record(tc.swarm_config(), tc.env_id).items()
+                if k != "env_config"  # env_config.yaml holds it
+            },
             "evaluations": self.evaluator.history if self.evaluator is not None else [],
         }
         write_atomic(self.out / "meta.json", json.dumps(meta, indent=2) + "\n")

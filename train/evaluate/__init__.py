@@ -14,7 +14,8 @@ per-agent, as the :mod:`agents` controllers are):
 
 Anything else raises :class:`SpaceMismatchError`.
 
-Episodes run on :class:`swarm_envs.envs.core.SwarmNavCore` with ``batch = episodes``:
+Episodes run on the core that the config's ``backend`` and ``device`` pick
+(:func:`swarm_envs.envs.backends.make_core`, float64) with ``batch = episodes``:
 every episode of a policy steps in one array call, and the start states come from
 ``numpy.random.default_rng(seed)``, so every policy sees the same starts (and a run is
 reproducible). An episode ends as the environments end it: success (terminated) or
@@ -56,9 +57,15 @@ Modules:
 from __future__ import annotations
 
 from train.evaluate.episodes import CURVE_KEYS, FINAL_KEYS, EpisodeBatch, run_episodes
-from train.evaluate.harness import evaluate_policies
+from train.evaluate.harness import TrainedEnvWarning, evaluate_policies
 from train.evaluate.measures import METRIC_DOCS, summarize
-from train.evaluate.policies import SpaceMismatchError, load_sb3_model, policy_mode
+from train.evaluate.policies import (
+    TRAINED_ENV,
+    SpaceMismatchError,
+    load_sb3_model,
+    policy_mode,
+    trained_env_record,
+)
 from train.evaluate.report import TABLE_COLUMNS, format_table, write_outputs
 
 __all__ = [
@@ -66,13 +73,16 @@ __all__ = [
     "FINAL_KEYS",
     "METRIC_DOCS",
     "TABLE_COLUMNS",
+    "TRAINED_ENV",
     "EpisodeBatch",
     "SpaceMismatchError",
+    "TrainedEnvWarning",
     "evaluate_policies",
     "format_table",
     "load_sb3_model",
     "policy_mode",
     "run_episodes",
     "summarize",
+    "trained_env_record",
     "write_outputs",
 ]

@@ -1,7 +1,8 @@
 """Seeded SwarmNav episodes of one policy, all stepped at once on one batched core.
 
-:func:`run_episodes` runs ``B`` episodes on :class:`~swarm_envs.envs.core.SwarmNavCore`
-with ``batch = B`` and records them in an :class:`EpisodeBatch`: per-episode totals,
+:func:`run_episodes` runs ``B`` episodes on one core with ``batch = B``, made by
+:func:`swarm_envs.envs.backends.make_core` from the config's ``backend`` and ``device``
+(float64 state), and records them in an :class:`EpisodeBatch`: per-episode totals,
 the group statistics at each episode's end, their curves over time, and episode 0's
 trajectory (for the GIF).
 """
@@ -15,7 +16,7 @@ import numpy as np
 
 from agents.base import swarm_config_of
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.backends import make_core
 from train.evaluate.policies import SpaceMismatchError, policy_mode
 
 __all__ = ["CURVE_KEYS", "FINAL_KEYS", "EpisodeBatch", "run_episodes"]
@@ -41,12 +42,14 @@ class EpisodeBatch:
     Per-episode arrays are shaped ``(B,)``. ``curves`` maps each of :data:`CURVE_KEYS`
     to ``(T + 1, B)`` (index 0 is the start; an episode that has ended holds its last
     value); ``times`` is ``(T + 1,)`` in simulated seconds. ``trajectory`` holds episode
-    0: positions and velocities ``(T0 + 1, N, d)`` and its goal ``(d,)``.
+    0: positions and velocities ``(T0 + 1, N, d)`` and its goal ``(d,)``. ``backend``
+    names the core that ran the episodes.
     """
 
     name: str
     mode: str
     dt: float
+    backend: str
     returns: np.ndarray
     success: np.ndarray
     lengths: np.ndarray
@@ -83,14 +86,16 @@ def run_episodes(
 
     Raises:
         SpaceMismatchError: see :func:`policy_mode`.
-        ValueError: ``episodes < 1``, or the policy returned non-finite actions.
+        ValueError: ``episodes < 1``, the policy returned non-finite actions, or the
+            config's ``device`` is unavailable or needs another backend
+            (:func:`~swarm_envs.envs.backends.make_core`).
     """
     cfg = swarm_config_of(cfg)
     if isinstance(episodes, bool) or int(episodes) != episodes or episodes < 1:
         raise ValueError(f"episodes must be an integer >= 1, got {episodes!r}")
     mode = policy_mode(policy, cfg)
     B, N, d = int(episodes), cfg.n_agents, cfg.dim
-    core = SwarmNavCore(cfg, batch=B)
+    core = make_core(cfg, batch=B)  # the config's backend and device
     core.reset(np.random.default_rng(seed))
 
     returns = np.zeros(B)
@@ -173,6 +178,7 @@ def run_episodes(
         name=name,
         mode=mode,
         dt=cfg.dt,
+        backend=core.backend,
         returns=returns,
         success=success,
         lengths=lengths,

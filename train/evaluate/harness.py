@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -11,10 +12,21 @@ from swarm_envs import ENV_ID
 from swarm_envs.config import SwarmConfig, as_dict
 from train.evaluate.episodes import run_episodes
 from train.evaluate.measures import METRIC_DOCS, summarize
-from train.evaluate.policies import SpaceMismatchError, policy_mode
+from train.evaluate.policies import (
+    TRAINED_ENV,
+    SpaceMismatchError,
+    describe_trained_env,
+    policy_mode,
+    trained_env_differences,
+)
 from train.evaluate.report import write_outputs
 
-__all__ = ["evaluate_policies"]
+__all__ = ["TrainedEnvWarning", "evaluate_policies"]
+
+
+class TrainedEnvWarning(UserWarning):
+    """A model is evaluated on an env whose observations or actions mean something else
+    than in the env it was trained on (same spaces, other dynamics, layout or scales)."""
 
 
 def evaluate_policies(
@@ -48,12 +60,19 @@ def evaluate_policies(
         gif_size: GIF width and height in pixels.
         extra: more top-level entries for the results (e.g. the config path).
 
+    The episodes run on the backend and device that ``cfg`` names (``backend``,
+    ``device``; ``auto`` picks one), recorded as ``"backend"``. A model that records
+    the env it was trained on (:func:`~train.evaluate.policies.trained_env_record`)
+    and whose observations or actions mean something else here (other dynamics,
+    observation layout, scales or ``u_max``) gives a :class:`TrainedEnvWarning`.
+
     Returns:
-        ``{"env", "config", "episodes", "seed", "policies": {name: measures}}``, the
+        ``{"env", "config", "backend", "episodes", "seed", "policies": {name: measures}}``, the
         content of ``results.json`` (JSON-ready; ``mean_time_to_goal`` may be None).
 
     Raises:
-        SpaceMismatchError: a policy's spaces do not fit (checked for all before running).
+        SpaceMismatchError: a policy's spaces do not fit (checked for all before running;
+            the message says what a recorded model was trained on).
     """
     cfg = swarm_config_of(cfg)
     if not policies:
@@ -62,7 +81,17 @@ def evaluate_policies(
         try:
             policy_mode(policy, cfg)
         except SpaceMismatchError as err:
-            raise SpaceMismatchError(f"policy {name!r}: {err}") from None
+            trained = describe_trained_env(policy)
+            extra = f"; the model was {trained}" if trained else ""
+            raise SpaceMismatchError(f"policy {name!r}: {err}{extra}") from None
+        differences = trained_env_differences(getattr(policy, TRAINED_ENV, None), cfg)
+        if differences:
+            warnings.warn(
+                f"policy {name!r} is evaluated on another env than it was trained on: "
+                + "; ".join(differences),
+                TrainedEnvWarning,
+                stacklevel=2,
+            )
     batches = {
         name: run_episodes(
             policy,
@@ -80,6 +109,7 @@ def evaluate_policies(
         "env": env_id,
         **dict(extra or {}),
         "config": as_dict(cfg),
+        "backend": next(iter(batches.values())).backend,
         "episodes": int(episodes),
         "seed": int(seed),
         "metrics": METRIC_DOCS,

@@ -16,8 +16,35 @@ import numpy as np
 
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.core import observation_size
+from swarm_envs.envs.task.observation import LAYOUT
 
-__all__ = ["SpaceMismatchError", "load_sb3_model", "policy_mode"]
+__all__ = [
+    "TRAINED_ENV",
+    "SpaceMismatchError",
+    "describe_trained_env",
+    "load_sb3_model",
+    "policy_mode",
+    "trained_env_differences",
+    "trained_env_record",
+]
+
+#: The attribute of an SB3 model that holds the env it was trained on
+#: (:func:`trained_env_record`); SB3 saves it in the zip's ``data`` and sets it on load.
+TRAINED_ENV = "swarm_env"
+
+#: Keys of the record that change what a policy's observations or actions mean: a
+#: policy evaluated where one of them differs is warned about.
+MEANING_KEYS = (
+    "dynamics",
+    "dim",
+    "n_neighbors",
+    "observation_size",
+    "observation_layout",
+    "obs_goal_scale",
+    "obs_neighbor_scale",
+    "obs_velocity_scale",
+    "u_max",
+)
 
 
 class SpaceMismatchError(ValueError):
@@ -62,6 +89,59 @@ def policy_mode(policy: Any, cfg: SwarmConfig) -> str:
     raise SpaceMismatchError(f"{found}; expected {expected}")
 
 
+def trained_env_record(cfg: SwarmConfig, env_id: str) -> dict[str, Any]:
+    """What a model trained on ``cfg`` records about its env (plain JSON data).
+
+    ``env_id``, ``dynamics``, ``n_agents``, ``dim``, ``n_neighbors``,
+    ``observation_size`` (per agent), ``observation_layout`` (``LAYOUT`` of
+    :mod:`swarm_envs.envs.task.observation`), the observation scales, ``u_max`` and the
+    whole resolved ``env_config``.
+    """
+    from swarm_envs.config import as_dict
+
+    return {
+        "env_id": env_id,
+        "dynamics": cfg.dynamics,
+        "n_agents": cfg.n_agents,
+        "dim": cfg.dim,
+        "n_neighbors": cfg.n_neighbors,
+        "observation_size": observation_size(cfg),
+        "observation_layout": LAYOUT,
+        "obs_goal_scale": cfg.obs_goal_scale,
+        "obs_neighbor_scale": cfg.obs_neighbor_scale,
+        "obs_velocity_scale": cfg.obs_velocity_scale,
+        "u_max": cfg.u_max,
+        "env_config": as_dict(cfg),
+    }
+
+
+def trained_env_differences(record: Mapping[str, Any] | None, cfg: SwarmConfig) -> list[str]:
+    """How ``cfg`` differs from the env of ``record`` in what observations and actions
+    mean (:data:`MEANING_KEYS`), as ``"key: trained X, here Y"``; empty when it does not
+    or when there is no record."""
+    if not isinstance(record, Mapping):
+        return []
+    here = trained_env_record(cfg, str(record.get("env_id", "")))
+    return [
+        f"{key}: trained {record[key]!r}, here {here[key]!r}"
+        for key in MEANING_KEYS
+        if key in record and record[key] != here[key]
+    ]
+
+
+def describe_trained_env(policy: Any) -> str | None:
+    """``"trained on dynamics=..., N=..., d=..., k=... (observation size ...)"`` for a
+    model that records its env (:data:`TRAINED_ENV`), else None."""
+    record = getattr(policy, TRAINED_ENV, None)
+    if not isinstance(record, Mapping):
+        return None
+    return (
+        f"trained on dynamics={record.get('dynamics')!r}, N={record.get('n_agents')}, "
+        f"d={record.get('dim')}, k={record.get('n_neighbors')} "
+        f"(observation size {record.get('observation_size')} per agent)"
+    )
+
+
 def _detect_sb3_algorithm(data: Mapping[str, Any]) -> str:
     """Guess the SB3 algorithm of a saved model from its ``data`` JSON."""
     module = str(data.get("policy_class", {}).get("__module__", ""))
@@ -74,6 +154,8 @@ def _detect_sb3_algorithm(data: Mapping[str, Any]) -> str:
 def load_sb3_model(path: str | Path, device: str = "cpu") -> Any:
     """Load a Stable-Baselines3 model zip, detecting its algorithm.
 
+    A model saved by ``swarm-train`` has the env it was trained on as its
+    :data:`TRAINED_ENV` attribute (:func:`trained_env_record`); others have none.
     The algorithm is read from the zip's ``data`` JSON (the policy class's module and
     algorithm-specific keys), then PPO, SAC, A2C, TD3 and DQN are tried in turn.
 

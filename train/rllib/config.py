@@ -26,7 +26,8 @@ from pathlib import Path
 from typing import Any
 
 from swarm_envs.config import config_from_mapping, resolve_config_path
-from train.config import RunConfig, read_yaml_mapping
+from train.config import RunConfig, env_overrides, net_arch_tuple, read_yaml_mapping
+from train.integers import check_integer
 
 __all__ = [
     "ALGOS",
@@ -64,11 +65,6 @@ PPO_TRAINING_ARGS = frozenset(
         "shuffle_batch_per_epoch",
     }
 )
-
-
-def _check_int(name: str, value: Any, low: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or value < low:
-        raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -129,9 +125,9 @@ class RLlibTrainConfig(RunConfig):
             ("num_cpus_per_learner", 1),
             ("checkpoint_freq", 0),
         ):
-            _check_int(name, getattr(self, name), low)
+            object.__setattr__(self, name, check_integer(name, getattr(self, name), low=low))
         if self.num_cpus is not None:
-            _check_int("num_cpus", self.num_cpus, 1)
+            object.__setattr__(self, "num_cpus", check_integer("num_cpus", self.num_cpus, low=1))
         gpus = self.num_gpus_per_learner
         if (
             isinstance(gpus, bool)
@@ -144,19 +140,14 @@ class RLlibTrainConfig(RunConfig):
         rfl = self.rollout_fragment_length
         if rfl != "auto":
             try:
-                _check_int("rollout_fragment_length", rfl, 1)
+                rfl = check_integer("rollout_fragment_length", rfl, low=1)
+                object.__setattr__(self, "rollout_fragment_length", rfl)
             except ValueError:
                 raise ValueError(
                     f"rollout_fragment_length must be 'auto' or an integer >= 1, got {rfl!r}"
                 ) from None
-        arch = tuple(self.net_arch) if isinstance(self.net_arch, (list, tuple)) else ()
-        if not arch or any(isinstance(h, bool) or not isinstance(h, int) or h < 1 for h in arch):
-            raise ValueError(
-                f"net_arch must be a non-empty list of integers >= 1, got {self.net_arch!r}"
-            )
-        object.__setattr__(self, "net_arch", arch)
-        if not isinstance(self.env, Mapping):
-            raise ValueError(f"env must be a mapping of SwarmConfig keys, got {self.env!r}")
+        object.__setattr__(self, "net_arch", net_arch_tuple(self.net_arch))
+        object.__setattr__(self, "env", env_overrides(self.env))
         if not isinstance(self.hyperparams, Mapping):
             raise ValueError(f"hyperparams must be a mapping, got {self.hyperparams!r}")
         for key in self.hyperparams:
