@@ -200,12 +200,12 @@ def test_a_library_truncated_after_its_check_is_not_what_is_loaded(tmp_path, gol
         textwrap.dedent(
             """\
             import os
-            checked = build._verified
+            checked = build.store.verified
             def check_then_truncate(path, key):
                 result = checked(path, key)
                 os.truncate(path, 4096)
                 return result
-            build._verified = check_then_truncate
+            build.store.verified = check_then_truncate
             with warnings"""
         ),
         1,

@@ -61,6 +61,8 @@ from collections.abc import Iterator
 from importlib import resources
 from pathlib import Path
 
+from swarm_envs.envs.native import cache as store
+from swarm_envs.envs.native.cache import LEFTOVER_AGE
 from swarm_envs.envs.native.contract import KernelInfo, header, layout_hash
 
 __all__ = [
@@ -92,8 +94,6 @@ CC_TIMEOUT_ENV = "SWARM_ENVS_CC_TIMEOUT"
 #: since a portable (``x86-64-v3``) build on a busy machine can take minutes; a hung
 #: compiler is still stopped.
 DEFAULT_CC_TIMEOUT = 600.0
-#: Seconds after which a build folder that names no live process here is removed.
-LEFTOVER_AGE = 3600.0
 _BASE_FLAGS = ("-O3", "-fopenmp", "-fno-math-errno", "-fno-trapping-math", "-fPIC", "-shared")
 _SOURCES = ("fused_step.c", "fused_step_body.h")
 
@@ -101,10 +101,6 @@ _LOCK = threading.Lock()
 _LIBRARIES: dict[tuple[str, ...], Library] = {}
 _FAILURES: dict[tuple[str, ...], str] = {}
 _WARNED: set[str] = set()
-_PRIVATE_FDS: list[int] = []  # in-memory copies of the loaded libraries (kept open)
-_RECORD_FORMAT = 1
-_MISSING = "missing"
-_BUILD_PREFIX = ".fused_step-build-"
 
 
 class Library:
@@ -197,10 +193,6 @@ def _library_path(cache: Path, key: str, compiler: str) -> Path:
     return cache / f"fused_step-{key[:16]}-{tag}.so"
 
 
-def _record_path(library: Path) -> Path:
-    return library.with_suffix(".json")
-
-
 def _cpu_flags() -> str:
     """The CPU's model and feature flags (``-march=native`` code is built for them)."""
     try:
@@ -211,49 +203,7 @@ def _cpu_flags() -> str:
         return platform.processor()
 
 
-# --------------------------------------------------------------------------- checking
-
-
-def _verified(library: Path, key: str) -> tuple[bytes | None, str]:
-    """``(bytes, "intact")`` where ``library`` is a complete build for ``key`` (its record
-    names ``key`` and the parameter layout, and its size and SHA-256 match the file),
-    else ``(None, why)``; ``why`` is :data:`_MISSING` where there is no library at all.
-    Reads the file once: the bytes returned are the bytes checked."""
-    if not library.exists():
-        return None, _MISSING
-    try:
-        record = json.loads(_record_path(library).read_text())
-    except FileNotFoundError:
-        return None, "no record of a completed build beside it"
-    except (OSError, ValueError) as err:
-        return None, f"unreadable record ({err})"
-    if not isinstance(record, dict) or record.get("format") != _RECORD_FORMAT:
-        return None, "a record in an unknown format"
-    if record.get("key") != key or record.get("layout") != layout_hash():
-        return None, "recorded for other sources, flags or parameter layout"
-    try:
-        data = library.read_bytes()
-    except OSError as err:
-        return None, f"unreadable ({err})"
-    if len(data) != record.get("size"):
-        return None, f"{len(data)} bytes where {record.get('size')} were written"
-    if hashlib.sha256(data).hexdigest() != record.get("sha256"):
-        return None, "its SHA-256 differs from the one recorded when it was written"
-    return data, "intact"
-
-
-def _mtime(path: Path) -> float:
-    try:
-        return path.stat().st_mtime
-    except OSError:
-        return 0.0
-
-
 # --------------------------------------------------------------------------- building
-
-
-def _host_tag() -> str:
-    return hashlib.sha256(platform.node().encode()).hexdigest()[:8]
 
 
 def _compile(cmd: list[str], timeout: float) -> None:
@@ -281,27 +231,12 @@ def _compile(cmd: list[str], timeout: float) -> None:
         raise RuntimeError(f"{' '.join(cmd)} failed: {err.strip()[:2000]}")
 
 
-def _fsync(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
-def _write_durably(path: Path, data: bytes) -> None:
-    with open(path, "wb") as fh:
-        fh.write(data)
-        fh.flush()
-        os.fsync(fh.fileno())
-
-
 def _build(compiler: str, flags: tuple[str, ...], key: str, target: Path, timeout: float) -> None:
     """Compile into a private folder of the cache, then move the library into place and
     write its record last, each file synced and renamed atomically: a library without a
     matching record is never trusted, so a build cut off at any point is rebuilt."""
     cache, src = target.parent, _source_dir()
-    prefix = f"{_BUILD_PREFIX}{os.getpid()}-{_host_tag()}-"
+    prefix = f"{store.BUILD_PREFIX}{os.getpid()}-{store.host_tag()}-"
     with tempfile.TemporaryDirectory(prefix=prefix, dir=cache) as tmp:
         (Path(tmp) / "step_params.h").write_text(header())
         out = Path(tmp) / target.name
@@ -310,9 +245,9 @@ def _build(compiler: str, flags: tuple[str, ...], key: str, target: Path, timeou
             timeout,
         )
         data = out.read_bytes()
-        _fsync(out)
+        store.fsync_path(out)
         record = {
-            "format": _RECORD_FORMAT,
+            "format": store.RECORD_FORMAT,
             "key": key,
             "layout": layout_hash(),
             "size": len(data),
@@ -321,12 +256,12 @@ def _build(compiler: str, flags: tuple[str, ...], key: str, target: Path, timeou
             "flags": list(flags),
         }
         record_tmp = Path(tmp) / "record.json"
-        _write_durably(record_tmp, json.dumps(record, indent=1).encode())
-        _record_path(target).unlink(missing_ok=True)  # it described the file replaced now
+        store.write_durably(record_tmp, json.dumps(record, indent=1).encode())
+        store.record_path(target).unlink(missing_ok=True)  # it described the file replaced now
         os.replace(out, target)
-        _fsync(cache)
-        os.replace(record_tmp, _record_path(target))
-        _fsync(cache)
+        store.fsync_path(cache)
+        os.replace(record_tmp, store.record_path(target))
+        store.fsync_path(cache)
 
 
 @contextlib.contextmanager
@@ -367,103 +302,25 @@ def _rebuilt(
     a damaged library is replaced with a warning."""
     target.parent.mkdir(parents=True, exist_ok=True)
     with _build_lock(target, timeout):
-        data, why = _verified(target, key)
+        data, why = store.verified(target, key)
         if data is not None:
             return data
-        if why != _MISSING:
+        if why != store.MISSING:
             _warn_once(f"the cached C step {target} was damaged ({why}); rebuilding it")
         start = time.perf_counter()
         _build(compiler, flags, key, target, timeout)
         logger.info("built %s in %.1f s", target, time.perf_counter() - start)
-        data, why = _verified(target, key)
+        data, why = store.verified(target, key)
     if data is None:
         raise RuntimeError(f"the C step just built at {target} fails its check ({why})")
     return data
 
 
-# --------------------------------------------------------------------------- leftovers
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
-def _only_build_files(folder: str) -> bool:
-    names = os.listdir(folder)
-    allowed = ("step_params.h", "record.json")
-    return "step_params.h" in names and all(
-        n in allowed or (n.startswith("fused_step-") and n.endswith(".so")) for n in names
-    )
-
-
-def _is_leftover(entry: os.DirEntry[str], now: float) -> bool:
-    """Whether ``entry`` is a build folder that no build will finish: one named by a
-    process of this host that is gone, or one older than :data:`LEFTOVER_AGE` (named by
-    another host, or an unnamed ``tmp*`` folder holding nothing but build files)."""
-    if not entry.is_dir(follow_symlinks=False):
-        return False
-    old = now - entry.stat(follow_symlinks=False).st_mtime > LEFTOVER_AGE
-    if entry.name.startswith(_BUILD_PREFIX):
-        pid, _, rest = entry.name[len(_BUILD_PREFIX) :].partition("-")
-        same_host = rest.startswith(_host_tag() + "-")
-        return old or (same_host and pid.isdigit() and not _alive(int(pid)))
-    return entry.name.startswith("tmp") and old and _only_build_files(entry.path)
-
-
-def _clean_leftovers(cache: Path) -> None:
-    """Remove the folders of builds that were killed (never raises)."""
-    try:
-        entries = list(os.scandir(cache))
-    except OSError:
-        return
-    now = time.time()
-    for entry in entries:
-        try:
-            if _is_leftover(entry, now):
-                shutil.rmtree(entry.path)
-                logger.info("removed the leftover build folder %s", entry.path)
-        except OSError as err:
-            logger.debug("cannot clean %s: %s", entry.path, err)
-
-
 # --------------------------------------------------------------------------- loading
 
 
-def _dlopen_private(data: bytes, path: Path) -> ctypes.CDLL:
-    """Load ``data`` (the checked bytes of ``path``) from a sealed in-memory copy, so that
-    whatever happens to the cached file now cannot reach the loader; where in-memory
-    files cannot be loaded, load ``path`` itself (checked a moment before)."""
-    import fcntl  # POSIX only; the C step is built on Linux only
-
-    try:
-        fd = os.memfd_create("swarm_envs-fused_step", os.MFD_CLOEXEC | os.MFD_ALLOW_SEALING)
-    except (AttributeError, OSError) as err:
-        logger.debug("no in-memory copy (%s); loading %s", err, path)
-        return ctypes.CDLL(str(path))
-    try:
-        view = memoryview(data)
-        while view:
-            view = view[os.write(fd, view) :]
-        seals = fcntl.F_SEAL_SHRINK | fcntl.F_SEAL_GROW | fcntl.F_SEAL_WRITE | fcntl.F_SEAL_SEAL
-        fcntl.fcntl(fd, fcntl.F_ADD_SEALS, seals)
-        lib = ctypes.CDLL(f"/proc/self/fd/{fd}")
-    except OSError as err:
-        os.close(fd)
-        logger.debug("cannot load an in-memory copy (%s); loading %s", err, path)
-        return ctypes.CDLL(str(path))
-    # Kept open: the loader knows the library by this path, which must not name another.
-    _PRIVATE_FDS.append(fd)
-    return lib
-
-
 def _open(data: bytes, path: Path) -> Library:
-    lib = _dlopen_private(data, path)
+    lib = store.dlopen_private(data, path)
     lib.fused_step_layout.restype = ctypes.c_longlong
     if lib.fused_step_layout() != layout_hash():
         raise RuntimeError(f"{path} was built for another parameter layout; delete it")
@@ -473,9 +330,9 @@ def _open(data: bytes, path: Path) -> Library:
 def _open_any(cache: Path, key: str) -> Library:
     """Without a compiler: the newest intact library built for ``key`` by any compiler."""
     damaged = []
-    found = sorted(cache.glob(f"fused_step-{key[:16]}-*.so"), key=_mtime, reverse=True)
+    found = sorted(cache.glob(f"fused_step-{key[:16]}-*.so"), key=store.mtime, reverse=True)
     for path in found:
-        data, why = _verified(path, key)
+        data, why = store.verified(path, key)
         if data is not None:
             return _open(data, path)
         damaged.append(f"{path}: {why}")
@@ -495,12 +352,12 @@ def _load(flags: tuple[str, ...], timeout: float) -> Library:
     if sys.platform != "linux":
         raise RuntimeError(f"the C step is built on Linux only (this is {sys.platform})")
     cache, key = _cache_dir(), _source_key(flags)
-    _clean_leftovers(cache)
+    store.clean_leftovers(cache)
     compiler = _compiler()
     if compiler is None:
         return _open_any(cache, key)
     target = _library_path(cache, key, compiler)
-    data, _ = _verified(target, key)
+    data, _ = store.verified(target, key)
     if data is None:
         data = _rebuilt(compiler, flags, key, target, timeout)
     return _open(data, target)
