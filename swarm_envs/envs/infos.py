@@ -5,8 +5,9 @@ slot. Fresh dicts would cost more than the step itself, and not only to build: e
 tracked object a step leaves alive feeds the garbage collector, whose full passes over a
 process that imported torch take tens of milliseconds. So:
 
-- :data:`QUIET_INFO`: one shared read-only empty mapping, the info of every slot with
-  nothing to report (a write raises ``TypeError``: copy it first, ``dict(info)``);
+- :class:`QuietInfo`: the info of a slot with nothing to report, empty and writable:
+  one object per slot, made once and reused until something is written to it
+  (:class:`QuietInfos` then gives that slot a fresh one from the next step on);
 - :class:`SwarmInfo`: the statistics of a swarm, in the info of its first slot, read on
   access from the step's ``(B,)`` arrays; writable;
 - :class:`TerminalInfo`: the info of a slot whose swarm just ended (the terminal
@@ -21,8 +22,7 @@ dict of its own first (the step's arrays are never written).
 Copies are plain dicts: ``dict(info)``, ``info.copy()``, ``copy.copy`` and
 ``copy.deepcopy`` of an info give a ``dict``, and an info pickles as one. The step's list
 of infos is an :class:`InfoList`, a ``list`` whose ``copy.deepcopy`` and pickle give a
-plain list with a dict of its own per slot (the slots that share :data:`QUIET_INFO` get
-separate empty dicts).
+plain list with a dict of its own per slot.
 """
 
 from __future__ import annotations
@@ -36,8 +36,9 @@ from typing import Any
 import numpy as np
 
 __all__ = [
-    "QUIET_INFO",
     "InfoList",
+    "QuietInfo",
+    "QuietInfos",
     "SwarmInfo",
     "SwarmInfoPool",
     "TerminalInfo",
@@ -68,36 +69,73 @@ class _PlainCopies:
         return dict, (dict(self),)  # type: ignore[call-overload]
 
 
-class _QuietInfo(_PlainCopies, Mapping[str, Any]):
-    """The type of :data:`QUIET_INFO`: an empty mapping that refuses writes."""
+class QuietInfo(_PlainCopies, MutableMapping[str, Any]):
+    """The info of a slot with nothing to report: an empty mapping, writable.
 
-    __slots__ = ()
+    One object per slot is made once and reused by every step in which its slot has
+    nothing to report, until something is written to it; from the next step on, that
+    slot gets a fresh empty object (:class:`QuietInfos`), and the written one keeps what
+    was written, in the lists that hold it.
+    """
+
+    __slots__ = ("_data", "_owner", "_slot")
+
+    def __init__(self, owner: QuietInfos, slot: int) -> None:
+        self._data: dict[str, Any] | None = None
+        self._owner, self._slot = owner, slot
 
     def __getitem__(self, key: str) -> Any:
-        raise KeyError(key)
+        if self._data is None:
+            raise KeyError(key)
+        return self._data[key]
 
     def __iter__(self) -> Iterator[str]:
-        return iter(())
+        return iter(self._data) if self._data is not None else iter(())
 
     def __len__(self) -> int:
-        return 0
+        return len(self._data) if self._data is not None else 0
 
     def __setitem__(self, key: str, value: Any) -> None:
-        raise TypeError(
-            "the info of a slot with nothing to report is one shared read-only empty "
-            "mapping; copy it first (dict(info)) to write to it"
-        )
+        if self._data is None:
+            self._data = {}
+            self._owner.written(self._slot)
+        self._data[key] = value
 
-    __delitem__ = __setitem__  # type: ignore[assignment]
+    def __delitem__(self, key: str) -> None:
+        if self._data is None:
+            raise KeyError(key)
+        del self._data[key]
 
     def __repr__(self) -> str:
-        return "QUIET_INFO"
+        return repr(self._data or {})
 
 
-#: The info of every slot with nothing to report (not the first slot of a swarm, and
-#: its swarm did not just end): one shared, read-only empty mapping. Writing to it
-#: raises ``TypeError``; copy it first (``dict(info)``), as SB3's ``VecMonitor`` does.
-QUIET_INFO: Mapping[str, Any] = _QuietInfo()
+class QuietInfos:
+    """The quiet slots' infos: one :class:`QuietInfo` per slot, replaced once written.
+
+    :meth:`infos` gives a step's list (an :class:`InfoList` of the current objects: one
+    list copy); a slot whose object was written since the last call gets a fresh one
+    first, so a step's quiet infos are always empty when handed out. Pickles as its size.
+    """
+
+    def __init__(self, n_slots: int) -> None:
+        self._n = n_slots
+        self._current = [QuietInfo(self, i) for i in range(n_slots)]
+        self._written: list[int] = []
+
+    def __reduce__(self) -> tuple[type, tuple[int]]:
+        return QuietInfos, (self._n,)
+
+    def written(self, slot: int) -> None:
+        """Slot ``slot``'s object was written to: replace it at the next step."""
+        self._written.append(slot)
+
+    def infos(self) -> InfoList:
+        """A new step's list of infos, every slot's quiet info (empty)."""
+        for slot in self._written:
+            self._current[slot] = QuietInfo(self, slot)
+        self._written.clear()
+        return InfoList(self._current)
 
 
 def _plain(info: Any) -> Any:

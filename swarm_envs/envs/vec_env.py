@@ -18,15 +18,15 @@ the ``episode`` infos without a Monitor warning. ``swarm_episode`` is the same d
 under its older name.
 
 Infos: the swarm's statistics (:data:`swarm_envs.envs.task.STAT_KEYS`) are in the info
-of the swarm's first slot (``b·N``) only, as a read-only :class:`SwarmInfo` mapping; the
-slots of a swarm that just ended get :class:`~swarm_envs.envs.infos.TerminalInfo`
-mappings (with the statistics in the first; writable, a write copies the info into a
-dict of its own); every other slot's info is :data:`QUIET_INFO`, one shared read-only
-empty mapping. None of them is built per step: fresh dicts for 32k slots would cost
-more than the fused step (see :mod:`swarm_envs.envs.infos`). Copies of them
-(``copy.copy``, ``copy.deepcopy``, pickling) are plain dicts, and the list
-(:class:`~swarm_envs.envs.infos.InfoList`) deep-copies and pickles as a plain list with
-a dict of its own per slot.
+of the swarm's first slot (``b·N``) only, as a :class:`SwarmInfo` mapping; the slots of a
+swarm that just ended get :class:`~swarm_envs.envs.infos.TerminalInfo` mappings (with
+the statistics in the first); every other slot's info is an empty
+:class:`~swarm_envs.envs.infos.QuietInfo`. All are writable (a write to a statistics or
+terminal info copies it into a dict of its own). None of them is built per step: fresh
+dicts for 32k slots would cost more than the fused step (see
+:mod:`swarm_envs.envs.infos`). Copies of them (``copy.copy``, ``copy.deepcopy``,
+pickling) are plain dicts, and the list (:class:`~swarm_envs.envs.infos.InfoList`)
+deep-copies and pickles as a plain list with a dict of its own per slot.
 :attr:`SwarmNavVecEnv.last_stats` holds the statistics as ``(B,)`` arrays.
 
 The step runs on the backend ``auto`` picks (``backend=`` overrides; see
@@ -68,9 +68,8 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from swarm_envs.envs.backends import make_core, resolve_backend
 from swarm_envs.envs.common import check_dtype
-from swarm_envs.envs.infos import (  # noqa: F401  (QUIET_INFO, SwarmInfo: re-exported)
-    QUIET_INFO,
-    InfoList,
+from swarm_envs.envs.infos import (  # noqa: F401  (SwarmInfo: re-exported)
+    QuietInfos,
     SwarmInfo,
     SwarmInfoPool,
     TerminalInfoPool,
@@ -136,7 +135,7 @@ class SwarmNavVecEnv(VecEnv):
         self.episode_lengths = np.zeros(self.n_swarms, np.int64)
         self._swarm_infos = SwarmInfoPool(self.n_swarms)
         self._terminal_infos = TerminalInfoPool(self.n_swarms, self.n_agents)
-        self._quiet_infos = [QUIET_INFO] * self.num_envs  # copied into each step's list
+        self._quiet_infos = QuietInfos(self.num_envs)  # each step's list starts as a copy
         self._t_start = time.time()  # the "t" of the episode infos, as VecMonitor's
 
     def _check_threads(self, n_threads: int | None) -> int:
@@ -182,12 +181,10 @@ class SwarmNavVecEnv(VecEnv):
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state["_pool"] = None  # threads do not pickle; recreated on first use
-        del state["_quiet_infos"]  # the shared QUIET_INFO would pickle as plain dicts
         return state  # the info pools pickle as their sizes (see infos.py)
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
-        self._quiet_infos = [QUIET_INFO] * self.num_envs
 
     # ------------------------------------------------------------------ VecEnv API
     def reset(self) -> np.ndarray:
@@ -251,7 +248,7 @@ class SwarmNavVecEnv(VecEnv):
         done = terminated | truncated
         # Slots with nothing to report share one read-only empty mapping: building 32k
         # fresh dicts per step would cost more than the fused step itself.
-        infos = InfoList(self._quiet_infos)
+        infos = self._quiet_infos.infos()
         infos[::N] = self._swarm_infos.infos(stats)  # read on access; see the pool
         if done.any():
             self._end_episodes(done, truncated & ~terminated, stats, infos)
