@@ -35,6 +35,9 @@ class ArrayNamespace:
 
     name = "numpy"
     inf = math.inf
+    #: How the pair energy's exponentials are evaluated (``pair_law``'s
+    #: ``potential_decay``): ``None`` reuses the force's.
+    potential_decay: Any = None
 
     def exp(self, a: Array) -> Array:
         return np.exp(a)
@@ -151,6 +154,16 @@ class TorchNamespace(ArrayNamespace):
         import torch
 
         self.torch = torch
+
+    @staticmethod
+    def potential_decay(rho: Array, length: float) -> Array:
+        # The pair energy's exponentials evaluated anew, written unlike the force's
+        # ``exp(ρ · (−1/l))`` so that TorchInductor does not merge the two: it then sums
+        # the energy inside the force's loop, where sharing them made it store both
+        # (B, N, N) exponentials and read them back in a second loop.
+        import torch
+
+        return torch.exp(rho / (-length))
 
     def exp(self, a: Array) -> Array:
         return self.torch.exp(a)

@@ -128,6 +128,11 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
             xs.append(torch.where(keep, xc, x[c]))
             vs.append(torch.where(keep, vc, v[c]))
 
+        # The new state stored first, component first (d, B, N), as returned: the pair
+        # pass reads it (left to itself, the compiler recomputes the update for every
+        # pair inside the pair loop); the shared definitions read (B, N, d) views of it.
+        x_new, v_new = torch.stack(xs), torch.stack(vs)
+        xs, vs = list(x_new.unbind(0)), list(v_new.unbind(0))
         geo = pair_geometry(xs)
         fs, pairs = pair_terms(geo, vs, p)
         if p.beta > 0:
@@ -135,9 +140,6 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
         sink, potential, goal_distance = goal_terms(xs, p, goal)
         if physics_goal:
             fs = [fc + gc for fc, gc in zip(fs, sink, strict=True)]
-        # The new state component first (d, B, N), as returned; the shared definitions
-        # read it through (B, N, d) views (contiguous planes, no interleaved copy).
-        x_new, v_new = torch.stack(xs), torch.stack(vs)
         xn, vn = x_new.permute(1, 2, 0), v_new.permute(1, 2, 0)
         energy = kinetic_energy(vn, p) + pairs
         if p.C_g > 0:  # the energy statistic includes the sink whenever it exists

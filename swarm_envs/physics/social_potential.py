@@ -131,6 +131,7 @@ def pair_law(
     l_o: float,
     exp: Any,
     potential: bool = True,
+    potential_decay: Any = None,
 ) -> tuple[Array, Array | None]:
     """The pair law of the social potential model, per pair: ``(s_ij, U(ρ_ij))``.
 
@@ -152,6 +153,10 @@ def pair_law(
             ``exp`` in compiled loops).
         potential: ``False`` skips ``U`` (returned as ``None``) where only forces are
             wanted.
+        potential_decay: ``None`` (``U`` reuses the force's exponentials), or a function
+            ``(ρ, l) -> e^{−ρ/l}`` that evaluates them anew for ``U`` (an execution
+            choice: a compiler then evaluates ``U`` inside the force's loop instead of
+            storing the exponentials of every pair; see ``TorchNamespace``).
 
     >>> s, u = pair_law(1.0, 1.0, None, 1.0, 1.2, 1.0, 0.2, 0.1, 1.5, math.exp)
     >>> round(s, 6), round(u, 6)  # attraction at ρ = 1 (positive: toward j)
@@ -171,6 +176,8 @@ def pair_law(
     s *= inv_rho
     if not potential:
         return s, None
+    if potential_decay is not None:
+        e_a, e_r = potential_decay(rho, l_a), potential_decay(rho, l_r)
     u = C_r * e_r
     u -= C_a * e_a
     return s, u
@@ -201,7 +208,18 @@ def _pair_law(
     potential: bool = True,
 ) -> tuple[Array, Array | None]:
     return pair_law(
-        rho, inv_rho, vdot, p.C_a, p.C_r, p.l_a, p.l_r, p.C_o, p.l_o, xp.exp_temp, potential
+        rho,
+        inv_rho,
+        vdot,
+        p.C_a,
+        p.C_r,
+        p.l_a,
+        p.l_r,
+        p.C_o,
+        p.l_o,
+        xp.exp_temp,
+        potential,
+        xp.potential_decay,
     )
 
 
