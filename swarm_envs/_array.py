@@ -155,15 +155,12 @@ class TorchNamespace(ArrayNamespace):
 
         self.torch = torch
 
-    @staticmethod
-    def potential_decay(rho: Array, length: float) -> Array:
+    def potential_decay(self, rho: Array, length: float) -> Array:
         # The pair energy's exponentials evaluated anew, written unlike the force's
         # ``exp(ρ · (−1/l))`` so that TorchInductor does not merge the two: it then sums
         # the energy inside the force's loop, where sharing them made it store both
         # (B, N, N) exponentials and read them back in a second loop.
-        import torch
-
-        return torch.exp(rho / (-length))
+        return self.torch.exp(rho / (-length))
 
     def exp(self, a: Array) -> Array:
         return self.torch.exp(a)

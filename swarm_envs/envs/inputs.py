@@ -226,11 +226,22 @@ def stack_agent_actions(actions: dict[str, Any], agents: Sequence[str], dim: int
     Each agent's action follows the action rule; the error names the agent.
     """
     shape = (dim,)
-    rows = [as_action(actions[a], shape, f"action of {a}") for a in agents]
-    stacked = np.array(rows, dtype=np.float64)
-    finite = np.isfinite(stacked).all(axis=1)
-    if not finite.all():
-        bad = agents[int(np.flatnonzero(~finite)[0])]
+    rows = [actions[a] for a in agents]
+    # The usual case, numpy arrays of a real dtype and shape (dim,), checked without a
+    # call per agent; anything else goes through as_action, whose error names the agent.
+    stacked = None
+    if all(type(r) is np.ndarray and r.dtype.kind in ACTION_KINDS for r in rows):
+        try:
+            stacked = np.array(rows, dtype=np.float64)
+        except ValueError:  # rows of different shapes
+            stacked = None
+        if stacked is not None and stacked.shape != (len(rows), dim):
+            stacked = None
+    if stacked is None:
+        rows = [as_action(r, shape, f"action of {a}") for a, r in zip(agents, rows, strict=True)]
+        stacked = np.array(rows, dtype=np.float64)
+    if not np.isfinite(stacked).all():
+        bad = agents[int(np.flatnonzero(~np.isfinite(stacked).all(axis=1))[0])]
         raise ValueError(f"action of {bad}: {NON_FINITE_ACTIONS}")
     return stacked
 

@@ -183,9 +183,6 @@ class SwarmNavVecEnv(VecEnv):
         state["_pool"] = None  # threads do not pickle; recreated on first use
         return state  # the info pools pickle as their sizes (see infos.py)
 
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__dict__.update(state)
-
     # ------------------------------------------------------------------ VecEnv API
     def reset(self) -> np.ndarray:
         """Reset every swarm. Uses the seed of :meth:`seed` once, if one was set.
