@@ -48,6 +48,9 @@ DYNAMICS = ("social_potential", "zone", "piecewise", "lagrangian")
 #: How the env computes a step (``SwarmConfig.backend``); see ``swarm_envs.envs.backends``.
 BACKENDS = ("auto", "numpy", "sparse", "native", "torch")
 
+#: What a step that goes unstable does (``SwarmConfig.on_unstable``).
+ON_UNSTABLE = ("raise", "truncate")
+
 #: Where the shipped YAML files live: ``configs/`` at the repository root, which the
 #: package holds as ``swarm_envs/configs`` (a symbolic link in the repository, the files
 #: themselves in an installed wheel), so named configs resolve after any install.
@@ -126,6 +129,17 @@ class SwarmConfig:
     """Integration time step (the paper gives none; chosen and documented)."""
     integrator: str = "semi_implicit_euler"
     """One of ``swarm_envs.physics.INTEGRATORS``."""
+    max_substeps: int = 100
+    """Step-size control: each step of ``dt`` is integrated in as many equal substeps as
+    the state's stiffness needs for a stable step (``docs/models.md`` §7), at most this
+    many; ``info["substeps"]`` reports the count. A state that needs more is unstable
+    (see ``on_unstable``). 1 integrates every step in one, and still checks it."""
+    on_unstable: str = "raise"
+    """What a step that goes unstable does (non-finite state, or more substeps needed
+    than ``max_substeps``), one of :data:`ON_UNSTABLE`: ``"raise"`` a
+    :class:`~swarm_envs.envs.common.SwarmUnstableError` naming the cause and the keys to
+    change, or ``"truncate"`` that swarm's episode at its last sound state with
+    ``info["unstable"] = 1.0``."""
     physics: SocialPotentialParams = field(default_factory=SocialPotentialParams.navigation)
     """Social potential parameters; the goal sink ``C_g, l_g`` defines the task (the
     sink force the analytic controllers apply, for every ``dynamics``)."""
@@ -188,6 +202,11 @@ class SwarmConfig:
         if self.integrator not in INTEGRATORS:
             raise ValueError(
                 f"{owner}.integrator must be one of {INTEGRATORS}, got {self.integrator!r}"
+            )
+        _check_int(owner, "max_substeps", self.max_substeps, low=1)
+        if self.on_unstable not in ON_UNSTABLE:
+            raise ValueError(
+                f"{owner}.on_unstable must be one of {ON_UNSTABLE}, got {self.on_unstable!r}"
             )
         if self.backend not in BACKENDS:
             raise ValueError(f"{owner}.backend must be one of {BACKENDS}, got {self.backend!r}")
@@ -416,6 +435,7 @@ __all__ = [
     "BACKENDS",
     "CONFIG_ROOT",
     "DYNAMICS",
+    "ON_UNSTABLE",
     "RewardWeights",
     "SwarmConfig",
     "UnknownKeyError",

@@ -17,6 +17,54 @@ from swarm_envs.physics import uniform_ball
 NON_FINITE_ACTIONS = "actions must be finite (got NaN or inf); allowed range [-1, 1]"
 
 
+class SwarmUnstableError(RuntimeError):
+    """A step went unstable: its state became non-finite, or it needed more substeps
+    than ``max_substeps`` for a stable integration. The message names the swarm, the
+    cause and the config keys that change it (``SwarmConfig.on_unstable = "truncate"``
+    ends such an episode instead)."""
+
+
+#: Statistics that are finite exactly when a swarm's positions and velocities are: the
+#: step checks these ``(B,)`` values instead of every coordinate.
+FINITE_KEYS = ("energy", "expanse", "mean_goal_distance")
+
+
+def unstable_swarms(stats: dict[str, np.ndarray], over_cap: np.ndarray) -> np.ndarray:
+    """Where a step went unstable, ``(B,)`` bool: a non-finite state (seen in
+    :data:`FINITE_KEYS`) or more substeps needed than the cap (``over_cap``)."""
+    bad = np.array(over_cap, dtype=bool, copy=True)
+    for key in FINITE_KEYS:
+        bad |= ~np.isfinite(stats[key])
+    return bad
+
+
+def unstable_message(
+    cfg: Any, stats: dict[str, np.ndarray], bad: np.ndarray, needed: np.ndarray, step: Any
+) -> str:
+    """The :class:`SwarmUnstableError` message for the first unstable swarm of ``bad``."""
+    b = int(np.flatnonzero(bad)[0])
+    finite = all(np.isfinite(stats[key][b]) for key in FINITE_KEYS)
+    where = f"swarm {b} of {bad.size}, step {int(step[b])}"
+    if finite:
+        cause = (
+            f"the state needs at least {int(needed[b])} substeps of dt={cfg.dt:g} for a stable "
+            f"integration, more than max_substeps={cfg.max_substeps}"
+        )
+    else:
+        cause = "the state became NaN or infinite"
+    hint = "raise max_substeps, lower dt"
+    if cfg.dynamics == "social_potential":
+        hint += (
+            ", use fewer agents or an H-stable parameter set (physics with C_r/C_a * "
+            "(l_r/l_a)^2 > 1, e.g. SocialPotentialParams.large_swarm()), or start less "
+            "dense (init_radius)"
+        )
+    return (
+        f"unstable step ({where}, {cfg.n_agents} agents, dynamics={cfg.dynamics!r}): {cause}. "
+        f"To fix: {hint}; or pass on_unstable='truncate' to end such episodes instead."
+    )
+
+
 def check_action_shape(actions: Any, shape: tuple[int, ...]) -> np.ndarray:
     """Actions as a numeric array of exactly ``shape`` (a same-size array of another
     rank is reshaped); a non-numeric dtype or another size → :class:`ValueError`."""

@@ -27,11 +27,14 @@ from swarm_envs._array import NUMPY
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.common import (
     NON_FINITE_ACTIONS,
+    SwarmUnstableError,
     check_action_shape,
     check_actions,
     check_batch,
     check_dtype,
     draw_starts,
+    unstable_message,
+    unstable_swarms,
     wide_dtypes,
 )
 from swarm_envs.envs.dynamics import make_dynamics
@@ -132,9 +135,13 @@ class SwarmNavCore:
         cfg = self.cfg
         # In the core's dtype, so that every adapter gives bit-identical results.
         a = check_actions(actions, self.x.shape).astype(self.dtype, copy=False)
+        before = (self.x, self.v)  # a step makes new arrays: these stay the old state
         self._advance(cfg.u_max * a if a.any() else None)
         self.t += 1
-        self._measure()
+        self._measure(substeps=self.dynamics.substeps)
+        bad = unstable_swarms(self._stats, self.dynamics.over_cap)
+        if bad.any():
+            self._unstable(bad, before)
         stats = self._stats
         effort = np.einsum("bik,bik->b", a, a)
         inputs = RewardInputs(stats, self._prev, self._start, effort, cfg.n_agents, NUMPY)
@@ -142,7 +149,26 @@ class SwarmNavCore:
         self._prev = {key: value.copy() for key, value in stats.items()}
         success = stats["success"].astype(bool)
         truncated = (self.t >= cfg.max_steps) & ~success
+        if bad.any():
+            r[bad], success[bad], truncated[bad] = 0.0, False, True
         return r, success, truncated, self.stats()
+
+    def _unstable(self, bad: np.ndarray, before: tuple[np.ndarray, np.ndarray]) -> None:
+        """Raise :class:`SwarmUnstableError`, or (``on_unstable="truncate"``) put the
+        swarms ``bad`` back to their state before the step, marked ``unstable``."""
+        cfg = self.cfg
+        if cfg.on_unstable == "raise":
+            raise SwarmUnstableError(
+                unstable_message(cfg, self._stats, bad, self.dynamics.needed, self.t)
+            )
+        idx = np.flatnonzero(bad)
+        self.x[idx], self.v[idx] = before[0][idx], before[1][idx]
+        self.dynamics.restore(self.x, self.v, self.goal, idx)
+        self._geometry = pair_geometry(self.x)
+        substeps = self.dynamics.substeps.copy()
+        substeps[idx] = 0.0  # the step was undone
+        self._measure(substeps=substeps)
+        self._stats["unstable"][idx] = 1.0
 
     # ------------------------------------------------------------------ physics hooks
     # A subclass with another state representation (the cut-off core for large swarms)
@@ -175,8 +201,9 @@ class SwarmNavCore:
         return near, nearest, close, energy
 
     # ------------------------------------------------------------------ measures
-    def _measure(self) -> None:
-        """The statistics of the current state (shared definitions)."""
+    def _measure(self, substeps: np.ndarray | None = None) -> None:
+        """The statistics of the current state (shared definitions); ``substeps`` the
+        step's per swarm (``None``: none, after a reset)."""
         near, nearest, close, energy = self._pair_measures()
         self._near = near
         goal_offset = self.goal[:, None, :] - self.x
@@ -188,6 +215,7 @@ class SwarmNavCore:
             nearest,
             close,
             energy,
+            np.zeros(self.batch) if substeps is None else substeps,
         )
         self._stats = {
             key: np.asarray(value, dtype=self._wide[key]).reshape(self.batch)

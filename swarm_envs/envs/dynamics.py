@@ -44,18 +44,19 @@ from swarm_envs.physics import (
     forces,
     goal_force,
     kinetic_energy,
+    pair_geometry,
     uniform_ball,
     verlet_step,
 )
-from swarm_envs.physics.integrators import euler_update
+from swarm_envs.physics.integrators import euler_update, stable_substep, substep_plan
 from swarm_envs.physics.lagrangian import (
-    lagrangian_step,
+    lagrangian_frame,
     lagrangian_value,
     lagrangian_velocity,
     pair_clearance,
 )
-from swarm_envs.physics.piecewise import piecewise_forces
-from swarm_envs.physics.social_potential import goal_terms, pair_terms
+from swarm_envs.physics.piecewise import interaction_forces, piecewise_rates, random_force
+from swarm_envs.physics.social_potential import goal_terms, pair_rates, pair_terms
 from swarm_envs.physics.zone import (
     ZoneAgentParams,
     draw_agent_params,
@@ -75,6 +76,11 @@ class Dynamics(ABC):
         self.cfg = cfg
         self.batch = batch
         self.dtype = dtype
+        #: Substeps the last step took per swarm, and where it needed more than
+        #: ``cfg.max_substeps`` (``needed``: how many, at least, for the message).
+        self.substeps = np.ones(batch)
+        self.over_cap = np.zeros(batch, dtype=bool)
+        self.needed = np.ones(batch)
 
     def reset(
         self,
@@ -112,24 +118,39 @@ class Dynamics(ABC):
         by default."""
         return 0.5 * np.einsum("bik,bik->b", v, v)
 
+    def restore(self, x: np.ndarray, v: np.ndarray, goal: np.ndarray, idx: np.ndarray) -> None:
+        """The swarms ``idx`` were put back to an earlier state ``x, v`` (an unstable step
+        undone): recompute what the model carries for them. Nothing by default."""
+        return None
+
+    def _count(self, used: np.ndarray, over: np.ndarray, needed: np.ndarray) -> None:
+        self.substeps, self.over_cap, self.needed = used, over, needed
+
 
 class SocialPotentialDynamics(Dynamics):
     """Mabrouk & McInnes: ``m v̇ = F_i + u_i`` (eq. 13), Euler or velocity Verlet.
 
-    Both integrators carry the passive force from one step to the next: semi-implicit
+    Both integrators carry the passive force from one substep to the next: semi-implicit
     Euler the force ``F(x, v)`` of the current state, computed in :meth:`measure` in the
     same pass over the pairs as the energy; velocity Verlet the force at the
     extrapolated velocity (:func:`~swarm_envs.physics.integrators.verlet_step`).
+
+    Step-size control: the stable substep ``h*`` of the current state (its Gershgorin
+    rates, :func:`~swarm_envs.physics.social_potential.pair_rates`) is carried like the
+    force. A step of ``dt`` takes ``⌈τ/h*⌉`` equal substeps of the time ``τ`` left,
+    re-planned after each (:func:`~swarm_envs.physics.integrators.substep_plan`); every
+    swarm plans its own, and only the swarms with time left are evaluated.
     """
 
     def __init__(self, cfg: SwarmConfig, batch: int, dtype: np.dtype) -> None:
         super().__init__(cfg, batch, dtype)
         self._force: np.ndarray | None = None  # the passive force carried to the next step
+        self._h_stable = np.full(batch, np.inf)  # the stable substep of the current state
         self._verlet = cfg.integrator == "velocity_verlet"
+        self._sink = cfg.goal_in_physics and cfg.physics.C_g > 0
 
     def _physics_goal(self, goal: np.ndarray) -> np.ndarray | None:
-        cfg = self.cfg
-        return goal if cfg.goal_in_physics and cfg.physics.C_g > 0 else None
+        return goal if self._sink else None
 
     def reset(self, x, v, goal, idx, rng) -> None:
         if self._verlet:
@@ -139,21 +160,83 @@ class SocialPotentialDynamics(Dynamics):
             else:
                 self._force[idx] = f[idx]
 
+    def restore(self, x, v, goal, idx) -> None:
+        if self._verlet:
+            assert self._force is not None
+            g = self._physics_goal(goal)
+            self._force[idx] = forces(x[idx], v[idx], self.cfg.physics, None if g is None else g[idx])
+
+    def _rates(self, geometry: PairGeometry) -> np.ndarray:
+        omega2, gamma = pair_rates(geometry, self.cfg.physics, sink=self._sink)
+        return stable_substep(omega2, gamma)
+
+    def _passive(self, x, v, goal, geometry) -> np.ndarray:
+        """The passive force at ``(x, v)`` (semi-implicit Euler's carried force)."""
+        p = self.cfg.physics
+        fs, _ = pair_terms(geometry, v, p, energy=False)
+        if p.beta > 0:
+            fs = [fc - p.beta * v[..., k] for k, fc in enumerate(fs)]
+        if goal is not None:
+            sink, _, _ = goal_terms(x, p, goal)
+            fs = [fc + gc for fc, gc in zip(fs, sink, strict=True)]
+        return np.stack(fs, axis=-1)
+
     def step(self, x, v, goal, control):
         cfg = self.cfg
         assert self._force is not None
-        goal = goal if cfg.physics.C_g > 0 else None
-        if self._verlet:
-            x, v, self._force, geometry = verlet_step(
-                x, v, self._force, cfg.physics, dt=cfg.dt, goal=goal, control=control
-            )
-            return x, v, geometry
-        accel = self._force if control is None else self._force + control
-        x, v = euler_update(x, v, accel, cfg.dt, cfg.physics.m)
-        return x, v, None
+        goal = goal if self._sink else None
+        B, cap = self.batch, cfg.max_substeps
+        remaining = np.full(B, cfg.dt)
+        used = np.zeros(B)
+        over = np.zeros(B, dtype=bool)
+        needed = np.zeros(B)
+        rows = np.arange(B)
+        geometry: PairGeometry | None = None
+        while True:
+            every = rows.size == B  # no gather while every swarm is still stepping
+            n, h = substep_plan(remaining[rows], self._h_stable[rows])
+            needed[rows] = np.maximum(needed[rows], used[rows] + n)
+            left = cap - used[rows]
+            late = n > left
+            if late.any():  # the rest in the substeps left, and marked
+                over[rows[late]] = True
+                h = np.where(late, remaining[rows] / np.maximum(left, 1.0), h)
+                n = np.where(late, np.maximum(left, 1.0), n)
+            hb = h[:, None, None].astype(self.dtype)
+            xr, vr = (x, v) if every else (x[rows], v[rows])
+            fr = self._force if every else self._force[rows]
+            ur = control if control is None or every else control[rows]
+            gr = goal if goal is None or every else goal[rows]
+            if self._verlet:
+                xr, vr, fr, geometry = verlet_step(
+                    xr, vr, fr, cfg.physics, dt=hb, goal=gr, control=ur
+                )
+            else:
+                xr, vr = euler_update(xr, vr, fr if ur is None else fr + ur, hb, cfg.physics.m)
+            if every:
+                x, v = xr, vr  # new arrays: the caller's are never written
+                if self._verlet:
+                    self._force = fr
+            else:
+                x[rows], v[rows] = xr, vr
+                if self._verlet:
+                    self._force[rows] = fr
+            used[rows] += 1
+            remaining[rows] = np.where(n <= 1, 0.0, remaining[rows] - h)
+            done = remaining[rows] == 0
+            if done.all():
+                self._count(used, over, needed)
+                return x, v, geometry if every else None
+            rows = rows[~done]
+            xr, vr = x[rows], v[rows]
+            geo = pair_geometry(xr)
+            if not self._verlet:
+                self._force[rows] = self._passive(xr, vr, None if goal is None else goal[rows], geo)
+            self._h_stable[rows] = self._rates(geo)
 
     def measure(self, x, v, goal, geometry):
         p = self.cfg.physics
+        self._h_stable = self._rates(geometry)
         if self._verlet:
             return energy(x, v, p, goal if p.C_g > 0 else None, geometry=geometry)
         fs, pairs = pair_terms(geometry, v, p)
@@ -230,6 +313,13 @@ class PiecewiseDynamics(Dynamics):
     def __init__(self, cfg: SwarmConfig, batch: int, dtype: np.dtype) -> None:
         super().__init__(cfg, batch, dtype)
         self._noise_rng: np.random.Generator | None = None
+        needed = piecewise_substeps(cfg)
+        self._n = min(needed, cfg.max_substeps)
+        self._count(
+            np.full(batch, float(self._n)),
+            np.full(batch, needed > cfg.max_substeps),
+            np.full(batch, float(needed)),
+        )
 
     def reset(self, x, v, goal, idx, rng) -> None:
         if self.cfg.piecewise.sigma > 0 and (self._noise_rng is None or idx.size == self.batch):
@@ -237,16 +327,37 @@ class PiecewiseDynamics(Dynamics):
 
     def step(self, x, v, goal, control):
         cfg, p = self.cfg, self.cfg.piecewise
-        f = piecewise_forces(x, v, p, self._noise_rng)
-        if goal is not None and cfg.physics.C_g > 0:
-            f += goal_force(x, cfg.physics, goal)
-        if control is not None:
-            f += control
-        v = v + (cfg.dt / p.m) * f
-        return x + cfg.dt * v, v, None
+        h = cfg.dt / self._n
+        noise = None  # the random force, drawn once per step and held over its substeps
+        for _ in range(self._n):
+            f = interaction_forces(x, p)
+            if p.sigma > 0:
+                if noise is None:
+                    noise = random_force(self._noise_rng, x.shape, p, f.dtype)
+                f += noise
+            if p.beta > 0:
+                f -= p.beta * v
+            if goal is not None and cfg.physics.C_g > 0:
+                f += goal_force(x, cfg.physics, goal)
+            if control is not None:
+                f += control
+            v = v + (h / p.m) * f
+            x = x + h * v
+        return x, v, None
 
     def measure(self, x, v, goal, geometry):
         return 0.5 * self.cfg.piecewise.m * np.einsum("bik,bik->b", v, v)
+
+
+def piecewise_substeps(cfg: SwarmConfig) -> int:
+    """The substeps every step of the piecewise model needs (its rates are fixed by the
+    parameters, :func:`~swarm_envs.physics.piecewise.piecewise_rates`; the goal sink's
+    curvature ``C_g/l_g²`` joins them when it acts passively)."""
+    omega2, gamma = piecewise_rates(cfg.piecewise)
+    if cfg.goal_in_physics and cfg.physics.C_g > 0:
+        omega2 += cfg.physics.C_g / (cfg.physics.l_g**2 * cfg.piecewise.m)
+    n, _ = substep_plan(np.float64(cfg.dt), stable_substep(np.float64(omega2), np.float64(gamma)))
+    return int(n)
 
 
 class LagrangianDynamics(Dynamics):
@@ -282,15 +393,19 @@ class LagrangianDynamics(Dynamics):
         self._substep[idx] = cfg.dt
 
     def step(self, x, v, goal, control):
-        x, v, self._substep = lagrangian_step(
+        frame = lagrangian_frame(
             x,
             self.cfg.lagrangian,
             dt=self.cfg.dt,
             goal=goal,
             control=control,
             substep=self._substep,
+            max_substeps=self.cfg.max_substeps,
         )
-        return x, v.astype(self.dtype, copy=False), None
+        self._substep = frame.substep
+        needed = np.where(frame.over_cap, self.cfg.max_substeps + 1.0, frame.substeps)
+        self._count(frame.substeps, frame.over_cap, needed)
+        return frame.x, frame.v.astype(self.dtype, copy=False), None
 
     def measure(self, x, v, goal, geometry):
         return lagrangian_value(x, self.cfg.lagrangian, self._centre(goal))

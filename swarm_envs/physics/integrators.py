@@ -18,10 +18,27 @@ Two explicit schemes, both one force evaluation per step:
 
 Damping is applied per unit of time (``−β v`` inside the force), so halving ``dt``
 converges to the same trajectory. The measured orders are checked in the tests.
+
+Step-size control (``docs/models.md`` §7). Linearised about a state, the model is
+``q̈ = −K q − D q̇`` with ``K`` the Hessian of the potential and ``D`` the damping of
+dissipation and alignment, per unit mass. On one mode, ``q̈ = −ω² q − γ q̇``, a step
+``h`` of semi-implicit Euler maps ``(q, v)`` by a matrix of trace ``2 − h²ω² − hγ`` and
+determinant ``1 − hγ``; it is stable (Jury's conditions) exactly when
+
+    ``h²ω² + 2hγ < 4``,  i.e.  ``h < h* = 4 / (γ + √(γ² + 4ω²))``
+
+(:func:`stable_substep`; ``γ = 0`` gives the familiar ``hω < 2``, ``ω = 0`` gives
+``hγ < 2``). ``ω²`` and ``γ`` are Gershgorin bounds on the largest eigenvalues of ``K``
+and ``D`` (``swarm_envs.physics.social_potential.pair_rates``), so ``h*`` is safe for
+every mode; the bound overestimates by at most a factor 2, which is the rule's margin
+against the state changing within a substep. An environment step of length ``dt`` is
+split into ``n = ⌈τ/h*⌉`` equal substeps of what remains of it (:func:`substep_plan`),
+re-planned after every substep from the new state.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -45,6 +62,45 @@ Control = np.ndarray | Callable[[float, np.ndarray, np.ndarray], np.ndarray] | N
 def _check_integrator(integrator: str) -> None:
     if integrator not in INTEGRATORS:
         raise ValueError(f"integrator must be one of {INTEGRATORS}, got {integrator!r}")
+
+
+def stable_substep(omega2: Any, gamma: Any, xp: Any = np) -> Any:
+    """``h* = 4 / (γ + √(γ² + 4ω²))``: the longest stable semi-implicit Euler step for
+    the stiffness ``ω² ≥ 0`` and damping rate ``γ ≥ 0`` (see the module docstring).
+
+    Elementwise on numpy arrays or torch tensors (``xp``: ``np`` or ``torch``). ``inf``
+    where both rates are 0 (any step is stable) and, so that a non-finite state takes
+    one substep and is caught by the caller's finiteness check, where a rate is NaN;
+    0 where a rate is ``inf`` (no step is stable).
+
+    >>> float(stable_substep(np.float64(100.0), np.float64(0.0)))  # h·ω < 2 with ω = 10
+    0.2
+    >>> float(stable_substep(np.float64(0.0), np.float64(4.0)))  # h·γ < 2
+    0.5
+    """
+    den = gamma + xp.sqrt(gamma * gamma + 4.0 * omega2)
+    ok = den > 0
+    return xp.where(ok, 4.0 / xp.where(ok, den, 1.0), math.inf)
+
+
+def substep_plan(remaining: Any, h_stable: Any, xp: Any = np) -> tuple[Any, Any]:
+    """``(n, h)``: the equal substeps ``n = ⌈τ/h*⌉`` still needed for the time ``τ ≥ 0``
+    left of an environment step, and their length ``h = τ/n`` (both 0 where ``τ = 0``).
+
+    ``n`` is a float array, ``inf`` where no step is stable (``h* = 0``; then ``h = 0``).
+    The relative slack of ``1e-9`` keeps a ratio that is an integer up to round-off at
+    that integer, so that every backend counts alike.
+
+    >>> n, h = substep_plan(np.array([0.1, 0.1, 0.0]), np.array([0.2, 0.03, 0.01]))
+    >>> n.tolist(), [round(float(t), 4) for t in h]
+    ([1.0, 4.0, 0.0], [0.1, 0.025, 0.0])
+    """
+    ratio = xp.where(h_stable > 0, remaining / xp.where(h_stable > 0, h_stable, 1.0), math.inf)
+    n = xp.where(remaining > 0, xp.ceil(ratio * (1.0 - 1e-9)), 0.0)
+    n = xp.where(remaining > 0, xp.where(n < 1.0, 1.0, n), 0.0)
+    finite = (n > 0) & (n < math.inf)
+    h = xp.where(finite, remaining / xp.where(finite, n, 1.0), 0.0)
+    return n, h
 
 
 def euler_update(x: Any, v: Any, accel: Any, dt: float, m: float) -> tuple[Any, Any]:

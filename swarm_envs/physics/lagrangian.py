@@ -53,7 +53,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 from functools import cached_property
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -468,6 +468,19 @@ def check_start_clearance(x: np.ndarray, params: LagrangianParams) -> None:
             )
 
 
+class LagrangianFrame(NamedTuple):
+    """One frame of :func:`lagrangian_frame`: the new positions ``x``, the velocity ``v``
+    (``ẋ`` at ``x``, control included), the substep length to carry into the next frame,
+    the accepted substeps per batch element (``substeps``, float) and where the frame
+    was cut short at ``max_substeps`` (``over_cap``, bool)."""
+
+    x: np.ndarray
+    v: np.ndarray
+    substep: np.ndarray
+    substeps: np.ndarray
+    over_cap: np.ndarray
+
+
 def lagrangian_step(
     x: np.ndarray,
     params: LagrangianParams,
@@ -477,6 +490,21 @@ def lagrangian_step(
     control: np.ndarray | None = None,
     substep: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(x', v', substep')`` of :func:`lagrangian_frame` (no cap on the substeps)."""
+    frame = lagrangian_frame(x, params, dt=dt, goal=goal, control=control, substep=substep)
+    return frame.x, frame.v, frame.substep
+
+
+def lagrangian_frame(
+    x: np.ndarray,
+    params: LagrangianParams,
+    *,
+    dt: float,
+    goal: Any | None = None,
+    control: np.ndarray | None = None,
+    substep: np.ndarray | None = None,
+    max_substeps: int | None = None,
+) -> LagrangianFrame:
     """Advance eq. 7 by one frame ``dt`` with the safe substep rule of :func:`simulate_lagrangian`.
 
     ``ẋ_i = −α_i ⊙ ∂L/∂x_i + u_i``: ``control`` ``u`` (shaped like ``x``, held over the
@@ -494,10 +522,12 @@ def lagrangian_step(
         control: added velocity shaped like ``x``, or ``None``.
         substep: the substep length ``(...)`` carried from the previous frame (``None``:
             start at ``dt``).
+        max_substeps: the most substeps a batch element may accept in this frame
+            (``None``: no cap). An element that reaches it with time left stops there,
+            its state held, and is marked in ``over_cap``.
 
     Returns:
-        ``(x', v', substep')``: new positions, the velocity ``ẋ`` at ``x'`` (control
-        included) and the substep length to carry into the next frame.
+        A :class:`LagrangianFrame`.
 
     >>> x = np.array([[-3.0, 0.0], [3.0, 0.0], [0.0, 4.0]])
     >>> p = LagrangianParams(gamma=1.0, beta=1.0, r=0.5, gradient="exact")
@@ -532,6 +562,8 @@ def lagrangian_step(
         h = np.array(np.broadcast_to(substep, batch), dtype=float).reshape(B)
     h_min = dt * MIN_STEP_FRACTION
     remaining = np.full(B, dt)
+    accepted = np.zeros(B)
+    over_cap = np.zeros(B, dtype=bool)
     while (rows := np.flatnonzero(remaining > 0)).size:
         h_old = h[rows]
         h_try = np.minimum(h_old, remaining[rows])
@@ -558,6 +590,11 @@ def lagrangian_step(
         xf[acc], v[acc], clear[acc], L[acc] = x_try[ok], v_try[ok], clear_try[ok], L_try[ok]
         left = remaining[acc] - h_try[ok]
         remaining[acc] = np.where(left <= dt * 1e-12, 0.0, left)
+        accepted[acc] += 1
+        if max_substeps is not None:
+            capped = acc[(accepted[acc] >= max_substeps) & (remaining[acc] > 0)]
+            over_cap[capped] = True
+            remaining[capped] = 0.0
         grown = np.where(h_try < h_old, h_old, np.minimum(h_try * STEP_GROWTH, dt))
         new_h = np.where(ok, grown, h_try * 0.5)
         stuck = ~ok & (new_h < h_min)
@@ -569,13 +606,21 @@ def lagrangian_step(
             stuck |= ~ok & (drop <= ROUNDOFF_HOLD * eps * np.abs(L[rows]))
         remaining[rows[stuck]] = 0.0
         h[rows] = np.where(stuck, np.maximum(h_try, h_min), new_h)
-    return xf.reshape(x.shape), v.reshape(x.shape), h.reshape(batch)
+    return LagrangianFrame(
+        xf.reshape(x.shape),
+        v.reshape(x.shape),
+        h.reshape(batch),
+        accepted.reshape(batch),
+        over_cap.reshape(batch),
+    )
 
 
 __all__ = [
     "GRADIENTS",
+    "LagrangianFrame",
     "LagrangianParams",
     "check_start_clearance",
+    "lagrangian_frame",
     "lagrangian_gradient",
     "lagrangian_step",
     "lagrangian_value",

@@ -74,6 +74,7 @@ __all__ = [
     "interaction_forces",
     "nearest_neighbors",
     "piecewise_forces",
+    "piecewise_rates",
     "random_force",
     "simulate_piecewise",
 ]
@@ -327,6 +328,27 @@ def piecewise_forces(
     if params.beta > 0:
         total -= params.beta * v
     return total
+
+
+def piecewise_rates(params: PiecewiseParams) -> tuple[float, float]:
+    """``(ω², γ)``: Gershgorin bounds of the model's stiffness and damping, per unit mass.
+
+    Each of an agent's ``λ`` acting neighbours contributes at most the force law's
+    steepest slope, ``F_max/r_r`` (repulsion) or ``F_max/(r_a − r_0)`` (the ramp), and,
+    the relation being one-way, each pair enters one row twice at most:
+    ``ω² = 2 λ max slope / m``; ``γ = β/m``. They do not depend on the state, so a
+    step's substeps are fixed by the parameters
+    (:func:`~swarm_envs.physics.integrators.stable_substep`).
+
+    >>> piecewise_rates(PiecewiseParams(F_max=3.0, r_r=0.6, r_0=1.0, r_a=2.0, n_neighbors=6,
+    ...                                 beta=1.5))
+    (60.0, 1.5)
+    """
+    p = params
+    slope = p.F_max / p.r_r
+    if p.r_a > p.r_0:
+        slope = max(slope, p.F_max / (p.r_a - p.r_0))
+    return 2.0 * p.n_neighbors * slope / p.m, p.beta / p.m
 
 
 def simulate_piecewise(

@@ -199,6 +199,28 @@ def sink_law(dist: Array, inv_dist: Array, C_g: float, l_g: float, exp: Any) -> 
     return ((C_g / l_g) * e) * inv_dist, -C_g * e
 
 
+def rate_law(
+    rho: Array, C_a: float, C_r: float, l_a: float, l_r: float, C_o: float, l_o: float, exp: Any
+) -> tuple[Array, Array | None]:
+    """The pair's rates for the step-size rule, per pair: ``(κ(ρ_ij), w(ρ_ij))``.
+
+    ``κ(ρ) = (C_r/l_r²) e^{−ρ/l_r} + (C_a/l_a²) e^{−ρ/l_a}`` bounds the curvature
+    ``|U''(ρ)|`` of the Morse potential (eq. 9), the pair's stiffness along ``u_ij``;
+    ``w(ρ) = C_o e^{−ρ/l_o}`` is the alignment's damping rate (eq. 11; ``None`` when
+    ``C_o = 0``). :func:`~swarm_envs.physics.integrators.stable_substep` turns their
+    per-agent sums into a step length (``docs/models.md`` §7).
+
+    >>> k, w = rate_law(0.0, 1.0, 1.0, 1.0, 0.2, 0.7, 1.5, math.exp)
+    >>> round(k, 6), round(w, 6)
+    (26.0, 0.7)
+    """
+    kappa = (C_r / (l_r * l_r)) * exp(rho * (-1.0 / l_r))
+    kappa += (C_a / (l_a * l_a)) * exp(rho * (-1.0 / l_a))
+    if C_o == 0:
+        return kappa, None
+    return kappa, C_o * exp(rho * (-1.0 / l_o))
+
+
 def _pair_law(
     rho: Array,
     inv_rho: Array,
@@ -292,6 +314,32 @@ def pair_terms(
         n = rho.shape[-1]
         total = 0.5 * (xp.sum(xp.sum(u, axis=-1), axis=-1) - n * (p.C_r - p.C_a))
     return [xp.sum_product(s, c) for c in dx], total
+
+
+def pair_rates(
+    geometry: PairGeometry, params: SocialPotentialParams, *, sink: bool = False
+) -> tuple[Array, Array]:
+    """``(ω², γ)`` per swarm ``(...)``: the Gershgorin bounds of the step-size rule.
+
+    ``ω² = (2/m) max_i Σ_{j≠i} κ(ρ_ij)`` bounds the largest eigenvalue of the Hessian of
+    the potential divided by the mass (each pair's block enters its two agents' rows),
+    and ``γ = (β + 2 max_i Σ_{j≠i} w(ρ_ij))/m`` the largest damping rate of dissipation
+    and alignment (:func:`rate_law`). ``sink=True`` adds the goal sink's curvature
+    ``C_g/l_g²`` (its largest, at the goal) to ``ω²``: the sink acts passively.
+    """
+    p = params
+    rho = geometry.rho
+    xp = namespace(rho)
+    kappa, w = rate_law(rho, p.C_a, p.C_r, p.l_a, p.l_r, p.C_o, p.l_o, xp.exp_temp)
+    k0 = p.C_r / (p.l_r * p.l_r) + p.C_a / (p.l_a * p.l_a)  # κ(0), the diagonal
+    omega2 = (2.0 / p.m) * (xp.amax(xp.sum(kappa, axis=-1), axis=-1) - k0)
+    if sink:
+        omega2 = omega2 + p.C_g / (p.l_g * p.l_g * p.m)
+    if w is None:
+        gamma = p.beta / p.m + 0.0 * omega2
+    else:
+        gamma = (p.beta + 2.0 * (xp.amax(xp.sum(w, axis=-1), axis=-1) - p.C_o)) / p.m
+    return omega2, gamma
 
 
 def goal_terms(

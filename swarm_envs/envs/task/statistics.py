@@ -36,6 +36,8 @@ class Frame(NamedTuple):
             (zeros when ``N = 1``).
         close_pairs: unordered pairs closer than ``collision_radius`` ``(B,)``.
         energy: the model's energy statistic ``(B,)`` (``swarm_envs.envs.dynamics``).
+        substeps: integration substeps the step took ``(B,)`` (step-size control;
+            ``None``: none, as after a reset).
     """
 
     x: Array
@@ -45,6 +47,7 @@ class Frame(NamedTuple):
     nearest_distance: Array
     close_pairs: Array
     energy: Array
+    substeps: Array | None = None
 
 
 @dataclass(frozen=True)
@@ -87,6 +90,12 @@ def _centroid_distance(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
 def _success(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
     need = success_count(task.n_agents, task.success_fraction)
     return xp.astype(_arrived_count(f, task, xp) >= need, f.goal_distance)
+
+
+def _substeps(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
+    if f.substeps is None:
+        return xp.zeros(f.energy.shape, like=f.energy)
+    return f.substeps
 
 
 #: Every statistic in ``info``, in this order (``STAT_KEYS``).
@@ -134,6 +143,18 @@ STATISTICS: tuple[Statistic, ...] = (
         "success",
         "1 when at least success_fraction of the agents are within goal_radius",
         _success,
+        wide=True,
+    ),
+    Statistic(
+        "substeps",
+        "integration substeps this step took (step-size control, docs/models.md §7)",
+        _substeps,
+        wide=True,
+    ),
+    Statistic(
+        "unstable",
+        "1 when the step went unstable and the episode was truncated (on_unstable)",
+        lambda f, task, xp: xp.zeros(f.energy.shape, like=f.energy),
         wide=True,
     ),
 )
