@@ -129,7 +129,7 @@ class SwarmConfig:
     """Integration time step (the paper gives none; chosen and documented)."""
     integrator: str = "semi_implicit_euler"
     """One of ``swarm_envs.physics.INTEGRATORS``."""
-    max_substeps: int = 100
+    max_substeps: int = 1000
     """Step-size control: each step of ``dt`` is integrated in as many equal substeps as
     the state's stiffness needs for a stable step (``docs/models.md`` §7), at most this
     many; ``info["substeps"]`` reports the count. A state that needs more is unstable
