@@ -154,13 +154,11 @@ class SwarmNavCore:
         return r, success, truncated, self.stats()
 
     def _unstable(self, bad: np.ndarray, before: tuple[np.ndarray, np.ndarray]) -> None:
-        """Raise :class:`SwarmUnstableError`, or (``on_unstable="truncate"``) put the
-        swarms ``bad`` back to their state before the step, marked ``unstable``."""
+        """Put the swarms ``bad`` back to their state before the step; then raise
+        :class:`SwarmUnstableError` (the core stays at the last sound state, as before
+        the step), or (``on_unstable="truncate"``) mark them ``unstable``."""
         cfg = self.cfg
-        if cfg.on_unstable == "raise":
-            raise SwarmUnstableError(
-                unstable_message(cfg, self._stats, bad, self.dynamics.needed, self.t)
-            )
+        message = unstable_message(cfg, self._stats, bad, self.dynamics.needed, self.t)
         idx = np.flatnonzero(bad)
         self.x[idx], self.v[idx] = before[0][idx], before[1][idx]
         self.dynamics.restore(self.x, self.v, self.goal, idx)
@@ -168,6 +166,8 @@ class SwarmNavCore:
         substeps = self.dynamics.substeps.copy()
         substeps[idx] = 0.0  # the step was undone
         self._measure(substeps=substeps)
+        if cfg.on_unstable == "raise":
+            raise SwarmUnstableError(message)
         self._stats["unstable"][idx] = 1.0
 
     # ------------------------------------------------------------------ physics hooks
