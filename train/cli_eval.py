@@ -340,6 +340,9 @@ def _main(args: Any) -> int:
         overrides = _parse_overrides(args.overrides, args.max_steps)
         if args.n_agents is not None and "n_agents" in overrides:
             raise CliError("--n-agents and --set n_agents=... both set the swarm size; use one")
+        if args.n_agents and all(isinstance(n, int) and n >= 1 for n in args.n_agents):
+            # the base config at the smallest size: the sizes are checked one by one below
+            overrides = {**overrides, "n_agents": min(args.n_agents, default=1)}
         cfg = _make_config(args.env, args.config, overrides)
         if not _user_sets("on_unstable", args.config, overrides):
             # count unstable episodes instead of stopping at the first

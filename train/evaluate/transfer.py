@@ -32,6 +32,7 @@ from agents.base import swarm_config_of
 from swarm_envs import ENV_ID
 from swarm_envs.config import SwarmConfig, as_dict
 from swarm_envs.envs.core import observation_size
+from swarm_envs.envs.step_control import check_step_control
 from train.evaluate.episodes import run_episodes
 from train.evaluate.harness import check_policies
 from train.evaluate.measures import METRIC_DOCS, summarize
@@ -140,7 +141,8 @@ def size_configs(cfg: SwarmConfig, n_agents: Sequence[int]) -> list[SwarmConfig]
     Raises:
         ValueError: an empty list, a size that is not an integer ``≥ 1``, a size listed
             twice, or a config that is not valid at a size (e.g. per-agent arrays of
-            the Lagrangian model), naming the size.
+            the Lagrangian model, or a start predictably too dense for ``max_substeps``,
+            :func:`~swarm_envs.envs.step_control.check_step_control`), naming the size.
     """
     sizes = list(n_agents)
     if not sizes:
@@ -154,9 +156,11 @@ def size_configs(cfg: SwarmConfig, n_agents: Sequence[int]) -> list[SwarmConfig]
     out = []
     for n in sorted(sizes):
         try:
-            out.append(dataclasses.replace(cfg, n_agents=n))
+            sized = dataclasses.replace(cfg, n_agents=n)
+            check_step_control(sized)
         except ValueError as err:
             raise ValueError(f"the config is not valid at n_agents={n}: {err}") from None
+        out.append(sized)
     return out
 
 
