@@ -142,7 +142,7 @@ def test_substeps_follow_a_brute_force_small_step_reference():
         )
 
     e_ref, r_ref = final(cfg.dt / 50)
-    e_fixed, r_fixed = final(cfg.dt)
+    e_fixed, _ = final(cfg.dt)
     e, r = float(stats["energy"][0]), float(stats["expanse"][0])
     assert abs(e - e_ref) <= 0.03 * abs(e_ref)
     assert abs(r - r_ref) <= 0.03 * r_ref
@@ -180,9 +180,9 @@ def test_truncate_undoes_the_unstable_step_and_marks_it():
 
 def test_predictably_unstable_configs_are_refused_when_built():
     assert start_substeps(SwarmConfig(n_agents=10)) == 1
-    with pytest.raises(ValueError, match="predictably unstable.*max_substeps=1000"):
+    with pytest.raises(ValueError, match=r"predictably unstable.*max_substeps=1000"):
         make_core(SwarmConfig(n_agents=30_000))
-    with pytest.raises(ValueError, match="predictably unstable.*max_substeps=100\\b"):
+    with pytest.raises(ValueError, match=r"predictably unstable.*max_substeps=100\b"):
         make_core(SwarmConfig(n_agents=3_000, max_substeps=100))
     with pytest.raises(ValueError, match="piecewise"):
         check_step_control(SwarmConfig(dynamics="piecewise", dt=2.0, max_substeps=1))
@@ -198,6 +198,7 @@ def test_n_agents_one_needs_no_substeps_beyond_damping():
 
 
 # --------------------------------------------------------------------------- property
+
 
 @st.composite
 def _scale(draw, low: float, high: float) -> float:
