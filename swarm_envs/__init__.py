@@ -8,8 +8,8 @@ no ``max_episode_steps`` (``TimeLimit``) is registered. The import also makes th
 OpenMP users safe in processes forked afterwards (:mod:`swarm_envs._runtime.fork`).
 :class:`SwarmUnstableError` is what a step that goes unstable raises
 (``SwarmConfig.on_unstable``). :func:`tune_allocator` is an explicit, process-wide
-speed-up of glibc's heap for long runs (the command-line tools call it; ``SWARM_ENVS_TUNE_ALLOCATOR=1`` applies it at
-import).
+speed-up of glibc's heap for long runs (the command-line tools call it;
+``SWARM_ENVS_TUNE_ALLOCATOR=1`` applies it at import).
 """
 
 import os
