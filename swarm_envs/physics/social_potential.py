@@ -332,13 +332,15 @@ def pair_rates(
     xp = namespace(rho)
     kappa, w = rate_law(rho, p.C_a, p.C_r, p.l_a, p.l_r, p.C_o, p.l_o, xp.exp_temp)
     k0 = p.C_r / (p.l_r * p.l_r) + p.C_a / (p.l_a * p.l_a)  # κ(0), the diagonal
-    omega2 = (2.0 / p.m) * (xp.amax(xp.sum(kappa, axis=-1), axis=-1) - k0)
+    # the diagonal's κ(0) is subtracted from the row sums; the clip drops its round-off
+    omega2 = (2.0 / p.m) * xp.clip(xp.amax(xp.sum(kappa, axis=-1), axis=-1) - k0, 0.0, None)
     if sink:
         omega2 = omega2 + p.C_g / (p.l_g * p.l_g * p.m)
     if w is None:
         gamma = p.beta / p.m + 0.0 * omega2
     else:
-        gamma = (p.beta + 2.0 * (xp.amax(xp.sum(w, axis=-1), axis=-1) - p.C_o)) / p.m
+        rows = xp.clip(xp.amax(xp.sum(w, axis=-1), axis=-1) - p.C_o, 0.0, None)
+        gamma = (p.beta + 2.0 * rows) / p.m
     return omega2, gamma
 
 
