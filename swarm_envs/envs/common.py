@@ -38,6 +38,20 @@ def unstable_swarms(stats: dict[str, np.ndarray], over_cap: np.ndarray) -> np.nd
     return bad
 
 
+def check_start(cfg: Any, stats: dict[str, np.ndarray], idx: np.ndarray, dtype: Any) -> None:
+    """Raise :class:`SwarmUnstableError` if a new start (swarms ``idx``) is not finite in
+    the state's ``dtype`` (a start too large for it: its speeds, distances or energy)."""
+    bad = np.zeros(next(iter(stats.values())).shape, dtype=bool)
+    bad[idx] = unstable_swarms(stats, bad)[idx]
+    if bad.any():
+        b = int(np.flatnonzero(bad)[0])
+        raise SwarmUnstableError(
+            f"the start of swarm {b} is not finite in {np.dtype(dtype).name} (its energy, "
+            f"expanse or goal distance overflows): lower init_speed, init_radius, the goal "
+            f"distances or the physics' amplitudes, or use float64"
+        )
+
+
 def unstable_message(
     cfg: Any, stats: dict[str, np.ndarray], bad: np.ndarray, needed: np.ndarray, step: Any
 ) -> str:

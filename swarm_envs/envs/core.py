@@ -32,6 +32,7 @@ from swarm_envs.envs.common import (
     check_actions,
     check_batch,
     check_dtype,
+    check_start,
     draw_starts,
     unstable_message,
     unstable_swarms,
@@ -115,8 +116,10 @@ class SwarmNavCore:
             return
         self.x[idx], self.v[idx], self.goal[idx] = draw_starts(self.cfg, rng, idx.size)
         self.t[idx] = 0
-        self._after_reset(idx, rng)
-        self._measure()
+        with np.errstate(over="ignore", invalid="ignore"):
+            self._after_reset(idx, rng)
+            self._measure()
+        check_start(self.cfg, self._stats, idx, self.dtype)
         for key, value in self._stats.items():
             self._prev[key][idx] = value[idx]
             self._start[key][idx] = value[idx]
@@ -136,9 +139,12 @@ class SwarmNavCore:
         # In the core's dtype, so that every adapter gives bit-identical results.
         a = check_actions(actions, self.x.shape).astype(self.dtype, copy=False)
         before = (self.x, self.v)  # a step makes new arrays: these stay the old state
-        self._advance(cfg.u_max * a if a.any() else None)
-        self.t += 1
-        self._measure(substeps=self.dynamics.substeps)
+        # Overflow on the way is not reported as it happens: the unstable check below
+        # raises (or truncates) for every swarm whose state stopped being finite.
+        with np.errstate(over="ignore", invalid="ignore"):
+            self._advance(cfg.u_max * a if a.any() else None)
+            self.t += 1
+            self._measure(substeps=self.dynamics.substeps)
         bad = unstable_swarms(self._stats, self.dynamics.over_cap)
         if bad.any():
             self._unstable(bad, before)
