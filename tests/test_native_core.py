@@ -52,8 +52,8 @@ def test_resets_measure_exactly_the_reset_swarms_in_place(monkeypatch, dtype):
     monkeypatch.setattr(
         core,
         "_call",
-        lambda a, move, obs, rows: (
-            calls.append(64 if rows is None else rows.size) or inner(a, move, obs, rows)
+        lambda a, move, obs, rows, **kw: (
+            calls.append(64 if rows is None else rows.size) or inner(a, move, obs, rows, **kw)
         ),
     )
     rng, ref_rng = np.random.default_rng(4), np.random.default_rng(4)

@@ -2,8 +2,9 @@
  *
  * An execution strategy for the shared definitions of swarm_envs.physics and
  * swarm_envs.envs.task (docs/design.md): the same semi-implicit Euler step with the
- * carried force, pair law, goal sink, neighbour ranking, observation layout and
- * statistics, laid out for the CPU. The reward is not here: Python combines it from the
+ * carried force and stable substep (step-size control, docs/models.md §7), pair law,
+ * goal sink, neighbour ranking, observation layout and statistics, laid out for the
+ * CPU. The reward is not here: Python combines it from the
  * statistics and the effort this step writes (swarm_envs.envs.task.reward).
  *
  * The parameters arrive in StepParams, and the output columns are PK_*, both from the
@@ -38,7 +39,8 @@ double exp(double);
 #define KERNEL_PHYSICS "C_a C_r l_a l_r C_o l_o beta C_g l_g m"
 #define KERNEL_STATS                                                                        \
     "polarization angular_momentum expanse nearest_neighbor_distance energy "              \
-    "fraction_arrived collisions centroid_distance mean_goal_distance success"
+    "fraction_arrived collisions centroid_distance mean_goal_distance success substeps "   \
+    "unstable"
 #define KERNEL_OBS_LAYOUT                                                                   \
     "goal_offset/obs_goal_scale,velocity/obs_velocity_scale;"                              \
     "offset/obs_neighbor_scale,relative_velocity/obs_velocity_scale,mask"
@@ -74,6 +76,19 @@ static inline float exp_f32(float x) {
     float scale;
     memcpy(&scale, &bits, sizeof scale); /* a bit cast (folded; it vectorises) */
     return flush ? 0.0f : y * scale;
+}
+
+/* swarm_envs.physics.integrators.substep_plan for one swarm: the n equal substeps still
+ * needed for the time tau >= 0 left of a step whose stable substep is hs (n = 0 where
+ * tau = 0, at least 1 where tau > 0, inf where hs = 0), and their length h = tau / n (0
+ * where n is 0 or inf). The relative slack of 1e-9 is Python's, so that the counts
+ * agree with the numpy core's. */
+static inline void substep_plan(double tau, double hs, double *n_out, double *h_out) {
+    const double ratio = hs > 0 ? tau / hs : INFINITY;
+    double n = tau > 0 ? ceil(ratio * (1.0 - 1e-9)) : 0.0;
+    n = tau > 0 ? (n < 1.0 ? 1.0 : n) : 0.0;
+    *n_out = n;
+    *h_out = n > 0 && n < INFINITY ? tau / n : 0.0;
 }
 
 /* An action x clipped to [-1, 1] (x finite). */
