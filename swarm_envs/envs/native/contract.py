@@ -56,6 +56,7 @@ __all__ = [
     "HOST_CONFIG_FIELDS",
     "KERNEL_CONFIG_FIELDS",
     "PACKED_COLUMNS",
+    "UNSOUND",
     "Field",
     "KernelInfo",
     "header",
@@ -101,6 +102,11 @@ HOST_CONFIG_FIELDS = {
     "device": "the C step runs on the CPU",
     "on_unstable": "the guard after the step runs in Python (it raises, or undoes the step)",
 }
+
+#: Or'ed into the C step's return value where a swarm of the call went over the cap or
+#: wrote a non-finite column: only then does the caller run its guard (the exact check,
+#: :func:`~swarm_envs.envs.common.unstable_swarms`).
+UNSOUND = 4
 
 #: Columns of the kernel's per-swarm output: the statistics, the actions' effort, then
 #: the step-size control's ``over_cap`` (1 where the step needed more substeps than
@@ -187,6 +193,7 @@ def _header_body() -> list[str]:
     columns = ", ".join(f"PK_{name}" for name in PACKED_COLUMNS)
     lines.append(f"enum {{ {columns}, PK_SIZE }};")
     lines.append(f'#define STEP_OBS_LAYOUT "{LAYOUT}"')
+    lines.append(f"#define STEP_UNSOUND {UNSOUND}")
     return lines
 
 

@@ -42,7 +42,7 @@ from swarm_envs.envs.common import (
     wide_dtypes,
 )
 from swarm_envs.envs.native.build import NATIVE_ENV, Library, load_library, resolve_native
-from swarm_envs.envs.native.contract import PACKED_COLUMNS, step_params, unsupported
+from swarm_envs.envs.native.contract import PACKED_COLUMNS, UNSOUND, step_params, unsupported
 from swarm_envs.envs.task import (
     STAT_KEYS,
     STATISTICS,
@@ -166,9 +166,10 @@ class NativeSwarmNavCore:
         obs: np.ndarray,
         rows: np.ndarray | None,
         into_spare: bool = False,
-    ) -> None:
+    ) -> bool:
         """The C step on all swarms (``rows`` None) or on ``rows``: the new state in
-        place, or (``into_spare``) into the spare buffers (:meth:`_swap` then)."""
+        place, or (``into_spare``) into the spare buffers (:meth:`_swap` then). True
+        where a swarm may have gone unstable (the guard's check is needed)."""
         n = self.batch if rows is None else rows.size
         x, v, f = self._state_ptrs
         x_out, v_out, f_out = self._spare_ptrs if into_spare else self._state_ptrs
@@ -192,10 +193,12 @@ class NativeSwarmNavCore:
             obs.ctypes.data,
             packed,
         )
-        if code == 3:
+        error = code & ~UNSOUND
+        if error == 3:
             raise ValueError(NON_FINITE_ACTIONS)
-        if code:
+        if error:
             raise MemoryError("the C step could not allocate its scratch memory")
+        return bool(code & UNSOUND)
 
     def _bind(self) -> None:
         """The kernel, its parameters and the addresses of the state (fixed buffers)."""
@@ -298,15 +301,14 @@ class NativeSwarmNavCore:
         shape = (self.batch, self.cfg.n_agents, self.cfg.dim)
         a = np.ascontiguousarray(check_action_shape(actions, shape), dtype=self.dtype)
         obs = self._pool.get()
-        self._call(a, self._move_all, obs, None, into_spare=True)
+        unsound = self._call(a, self._move_all, obs, None, into_spare=True)
         self._swap()
         self._obs, self._obs_given = obs, False
         self.t += 1
         self._stats = self._unpack()
-        over = self._packed[:, _OVER_CAP]
         bad = None
-        if over.any() or not np.isfinite(self._packed).all():  # else every swarm is sound
-            bad = unstable_swarms(self._stats, over > 0)
+        if unsound:  # else every swarm is sound: nothing to check
+            bad = unstable_swarms(self._stats, self._packed[:, _OVER_CAP] > 0)
             if bad.any():
                 self._unstable(bad)
             else:

@@ -96,7 +96,7 @@ static inline __attribute__((always_inline)) void KNN_BLOCK(
         }
 }
 
-static inline __attribute__((always_inline)) void FUSED_SWARM(
+static inline __attribute__((always_inline)) int FUSED_SWARM(
     const StepParams *P, const int64_t d, int64_t b, REAL *scratch, const REAL *x,
     const REAL *v, const REAL *f, const double *h_in, const REAL *goal, const REAL *a,
     const uint8_t *move, REAL *x_out, REAL *v_out, REAL *f_out, double *h_out, float *obs,
@@ -211,18 +211,18 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
          * diagonal tile (I, I) needs offsets 1 .. LANES/2 only (offset LANES/2 holds
          * every pair twice, so it adds to i only). Lanes past N are padding: masked
          * out, their distances inf. ρ is stored per tile and offset, the layout the
-         * k-NN below reads. */
+         * k-NN below reads. The lane loop (PAIR_BODY) writes each pair's terms; the
+         * offset loop (S_LOOP) adds them to the sums of i (FI, KI, ...: vectors, so
+         * that they stay in registers) and of j (FJ, KJ, ...). */
         for (int64_t c = 0; c < d; c++)
             for (int64_t i = 0; i < NP; i++) fs[c * S + i] = 0;
         for (int64_t i = 0; i < NP; i++) ks[i] = ws[i] = 0;
         for (int64_t I = 0; I < nb; I++) {
             const int64_t I0 = I * LANES;
-            REAL FI[3][LANES], E_lane[LANES], KI[LANES], WI[LANES];
-            int32_t close_lane[LANES];
-            for (int l = 0; l < LANES; l++) {
-                FI[0][l] = FI[1][l] = FI[2][l] = E_lane[l] = KI[l] = WI[l] = 0;
-                close_lane[l] = 0;
-            }
+            /* Sums per agent i of block I, lane by lane: force, pair energy (× 2 for
+             * ordered pairs), κ, w and ordered pairs closer than the collision radius. */
+            VREAL FI[3] = {{0}, {0}, {0}}, E_lane = {0}, KI = {0}, WI = {0};
+            VINDEX close_lane = {0};
             const REAL *xi0 = xs + I0, *xi1 = xs + S + I0, *xi2 = xs + 2 * S + I0;
             const REAL *vi0 = vs + I0, *vi1 = vs + S + I0, *vi2 = vs + 2 * S + I0;
             for (int64_t J = I; J < nb; J++) {
@@ -235,18 +235,6 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
                 }
                 const int s_first = J == I ? 1 : 0, s_last = J == I ? LANES / 2 : LANES - 1;
                 const int full = I0 + LANES <= N && J0 + LANES <= N; /* no padding lanes */
-                for (int s = s_first; s <= s_last; s++) {
-                    const int both = !(J == I && s == LANES / 2); /* else each pair twice */
-                    const REAL w = both ? 2 : 1;
-                    const int32_t wc = both ? 2 : 1;
-                    REAL xj[3][LANES], vj[3][LANES], cx[3][LANES], kx[LANES], wx[LANES];
-                    for (int64_t c = 0; c < d; c++) {
-                        VREAL t = __builtin_shuffle(xJ[c], rot[s]);
-                        memcpy(xj[c], &t, sizeof t);
-                        t = __builtin_shuffle(vJ[c], rot[s]);
-                        memcpy(vj[c], &t, sizeof t);
-                    }
-                    REAL *drow = rho + ((I * nb + J) * LANES + s) * LANES;
 #define PAIR_BODY(ALIGN, SAME, FULL, LAST)                                                 \
     _Pragma("omp simd") for (int l = 0; l < LANES; l++) {                                  \
         const int valid = FULL || ((I0 + l < N) & (J0 + ((l + s) & (LANES - 1)) < N));     \
@@ -266,67 +254,98 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
         REAL er = SAME ? ea : EXP(r * dec_r);                                              \
         REAL sp = ea * ca_la - cr_lr * er;                                                 \
         kx[l] = valid ? kappa_r * er + kappa_a * ea : 0; /* κ(ρ) */                        \
-        KI[l] += kx[l];                                                                    \
         if (ALIGN) {                                                                       \
             REAL proj = (vi0[l] - vj[0][l]) * dx0 + (vi1[l] - vj[1][l]) * dx1;             \
             if (d == 3) proj = proj + (vi2[l] - vj[2][l]) * dx2;                           \
             REAL eo = EXP(r * dec_o);                                                      \
             sp = sp - proj * inv * eo * C_o;                                               \
             wx[l] = valid ? C_o * eo : 0; /* w(ρ) */                                       \
-            WI[l] += wx[l];                                                                \
         }                                                                                  \
         sp = valid ? sp * inv : 0;                                                         \
         cx[0][l] = sp * dx0;                                                               \
         cx[1][l] = sp * dx1;                                                               \
-        FI[0][l] += cx[0][l];                                                              \
-        FI[1][l] += cx[1][l];                                                              \
-        if (d == 3) {                                                                      \
-            cx[2][l] = sp * dx2;                                                           \
-            FI[2][l] += cx[2][l];                                                          \
-        }                                                                                  \
+        if (d == 3) cx[2][l] = sp * dx2;                                                   \
         if (LAST) {                                                                        \
-            E_lane[l] += valid ? w * (C_r * er - C_a * ea) : 0;                            \
-            close_lane[l] += valid & (r < collision_radius) ? wc : 0;                      \
+            ex[l] = valid ? w * (C_r * er - C_a * ea) : 0;                                 \
+            cl[l] = valid & (r < collision_radius) ? wc : 0;                               \
             drow[l] = valid ? r : inf;                                                     \
         }                                                                                  \
     }
-#define PAIR_TILE(LAST)                                                                    \
-    if (full) {                                                                            \
-        if (alignment) {                                                                   \
-            if (same_decay) { PAIR_BODY(1, 1, 1, LAST) } else { PAIR_BODY(1, 0, 1, LAST) } \
-        } else {                                                                           \
-            if (same_decay) { PAIR_BODY(0, 1, 1, LAST) } else { PAIR_BODY(0, 0, 1, LAST) } \
+#define S_LOOP(ALIGN, SAME, FULL, LAST)                                                    \
+    for (int s = s_first; s <= s_last; s++) {                                              \
+        const int both = !(J == I && s == LANES / 2); /* else each pair twice */           \
+        const REAL w = both ? 2 : 1;                                                       \
+        const INDEX wc = both ? 2 : 1;                                                     \
+        REAL xj[3][LANES], vj[3][LANES], cx[3][LANES], kx[LANES], wx[LANES], ex[LANES];    \
+        INDEX cl[LANES];                                                                   \
+        for (int64_t c = 0; c < d; c++) {                                                  \
+            VREAL t = __builtin_shuffle(xJ[c], rot[s]);                                    \
+            memcpy(xj[c], &t, sizeof t);                                                   \
+            t = __builtin_shuffle(vJ[c], rot[s]);                                          \
+            memcpy(vj[c], &t, sizeof t);                                                   \
         }                                                                                  \
-    } else if (alignment) {                                                                \
-        if (same_decay) { PAIR_BODY(1, 1, 0, LAST) } else { PAIR_BODY(1, 0, 0, LAST) }     \
-    } else {                                                                               \
-        if (same_decay) { PAIR_BODY(0, 1, 0, LAST) } else { PAIR_BODY(0, 0, 0, LAST) }     \
+        REAL *drow = rho + ((I * nb + J) * LANES + s) * LANES;                             \
+        PAIR_BODY(ALIGN, SAME, FULL, LAST)                                                 \
+        { /* to i, in its lane */                                                          \
+            VREAL t;                                                                       \
+            for (int64_t c = 0; c < d; c++) {                                              \
+                memcpy(&t, cx[c], sizeof t);                                               \
+                FI[c] += t;                                                                \
+            }                                                                              \
+            memcpy(&t, kx, sizeof t);                                                      \
+            KI += t;                                                                       \
+            if (ALIGN) {                                                                   \
+                memcpy(&t, wx, sizeof t);                                                  \
+                WI += t;                                                                   \
+            }                                                                              \
+            if (LAST) {                                                                    \
+                memcpy(&t, ex, sizeof t);                                                  \
+                E_lane += t;                                                               \
+                VINDEX ct;                                                                 \
+                memcpy(&ct, cl, sizeof ct);                                                \
+                close_lane += ct;                                                          \
+            }                                                                              \
+        }                                                                                  \
+        if (both) { /* to j, rotated back */                                               \
+            const VINDEX back = rot[(LANES - s) & (LANES - 1)];                            \
+            for (int64_t c = 0; c < d; c++) {                                              \
+                VREAL t;                                                                   \
+                memcpy(&t, cx[c], sizeof t);                                               \
+                FJ[c] -= __builtin_shuffle(t, back);                                       \
+            }                                                                              \
+            VREAL t;                                                                       \
+            memcpy(&t, kx, sizeof t);                                                      \
+            KJ += __builtin_shuffle(t, back);                                              \
+            if (ALIGN) {                                                                   \
+                memcpy(&t, wx, sizeof t);                                                  \
+                WJ += __builtin_shuffle(t, back);                                          \
+            }                                                                              \
+        }                                                                                  \
     }
-                    /* Constant flags: alignment, equal decay lengths, no padding lane in
-                     * the tile (the masks fold away), and the last substep's pass. */
-                    if (last) {
-                        PAIR_TILE(1)
-                    } else {
-                        PAIR_TILE(0)
-                    }
-#undef PAIR_TILE
-#undef PAIR_BODY
-                    if (both) {
-                        const VINDEX back = rot[(LANES - s) & (LANES - 1)];
-                        for (int64_t c = 0; c < d; c++) {
-                            VREAL t;
-                            memcpy(&t, cx[c], sizeof t);
-                            FJ[c] -= __builtin_shuffle(t, back);
-                        }
-                        VREAL t;
-                        memcpy(&t, kx, sizeof t);
-                        KJ += __builtin_shuffle(t, back);
+                /* Constant flags: alignment, equal decay lengths, no padding lane in the
+                 * tile (the masks fold away), and the last substep's pass; each copy has
+                 * its own offset loop, so that its sums stay in registers. The other
+                 * passes do not share the exponential of equal decay lengths (four
+                 * copies fewer to compile). */
+                if (last) {
+                    if (full) {
                         if (alignment) {
-                            memcpy(&t, wx, sizeof t);
-                            WJ += __builtin_shuffle(t, back);
+                            if (same_decay) { S_LOOP(1, 1, 1, 1) } else { S_LOOP(1, 0, 1, 1) }
+                        } else {
+                            if (same_decay) { S_LOOP(0, 1, 1, 1) } else { S_LOOP(0, 0, 1, 1) }
                         }
+                    } else if (alignment) {
+                        if (same_decay) { S_LOOP(1, 1, 0, 1) } else { S_LOOP(1, 0, 0, 1) }
+                    } else {
+                        if (same_decay) { S_LOOP(0, 1, 0, 1) } else { S_LOOP(0, 0, 0, 1) }
                     }
+                } else if (full) {
+                    if (alignment) { S_LOOP(1, 0, 1, 0) } else { S_LOOP(0, 0, 1, 0) }
+                } else {
+                    if (alignment) { S_LOOP(1, 0, 0, 0) } else { S_LOOP(0, 0, 0, 0) }
                 }
+#undef S_LOOP
+#undef PAIR_BODY
                 for (int64_t c = 0; c < d; c++)
                     for (int l = 0; l < LANES; l++) fs[c * S + J0 + l] += FJ[c][l];
                 for (int l = 0; l < LANES; l++) {
@@ -610,6 +629,11 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
      * -DSWARM_ENVS_PERTURB_COLUMN=PK_<name>): they check that the suite catches it. */
     pk[SWARM_ENVS_PERTURB_COLUMN] += (REAL)0.25;
 #endif
+    /* Over the cap, or a column not finite (x - x is NaN for NaN and inf): the caller's
+     * guard decides (swarm_envs.envs.common.unstable_swarms); else it has nothing to do. */
+    REAL probe = 0; /* NaN where a column is (or the sum overflows: checked needlessly) */
+    for (int c = 0; c < PK_SIZE; c++) probe += pk[c];
+    const int unsound = over | !(probe - probe == 0);
     for (int64_t c = 0; c < d; c++)
         for (int64_t i = 0; i < N; i++) {
             x_out[(c * B + b) * N + i] = xs[c * S + i];
@@ -617,6 +641,7 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
             f_out[(c * B + b) * N + i] = fs[c * S + i];
         }
     h_out[b] = hs;
+    return unsound;
 }
 
 /* Swarms [b0, b1) (or rows[b0 .. b1) where rows is not NULL: a reset re-measures the
@@ -631,7 +656,8 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
  * the statistics, the actions' effort, over_cap (1 where the step needed more than
  * max_substeps) and needed (the substeps it would have taken).
  * Returns 0, 1 if scratch memory could not be allocated, 2 if k_sort > KMAX_SORT, 3 if
- * an action of these swarms is NaN or infinite (checked first: nothing is written).
+ * an action of these swarms is NaN or infinite (checked first: nothing is written);
+ * or'ed with STEP_UNSOUND where a swarm went over the cap or wrote a non-finite column.
  * Finite actions outside [-1, 1] are clipped, as numpy's clip would. */
 int FUSED_STEP(const StepParams *P, int64_t b0, int64_t b1, const int64_t *rows,
                const REAL *x, const REAL *v, const REAL *f, const double *h, const REAL *goal,
@@ -660,15 +686,17 @@ int FUSED_STEP(const StepParams *P, int64_t b0, int64_t b1, const int64_t *rows,
 #pragma omp for schedule(static)
             for (int64_t t = b0; t < b1; t++) {
                 if (!scratch) { status |= 1; continue; }
-                FUSED_SWARM(P, 2, rows ? rows[t] : t, scratch, x, v, f, h, goal, a, move,
-                            x_out, v_out, f_out, h_out, obs, packed);
+                if (FUSED_SWARM(P, 2, rows ? rows[t] : t, scratch, x, v, f, h, goal, a, move,
+                                x_out, v_out, f_out, h_out, obs, packed))
+                    status |= STEP_UNSOUND;
             }
         } else {
 #pragma omp for schedule(static)
             for (int64_t t = b0; t < b1; t++) {
                 if (!scratch) { status |= 1; continue; }
-                FUSED_SWARM(P, 3, rows ? rows[t] : t, scratch, x, v, f, h, goal, a, move,
-                            x_out, v_out, f_out, h_out, obs, packed);
+                if (FUSED_SWARM(P, 3, rows ? rows[t] : t, scratch, x, v, f, h, goal, a, move,
+                                x_out, v_out, f_out, h_out, obs, packed))
+                    status |= STEP_UNSOUND;
             }
         }
         free(scratch);
