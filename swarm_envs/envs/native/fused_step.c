@@ -121,6 +121,7 @@ typedef int32_t vindex_f32 __attribute__((vector_size(64)));
 #define FLOOR floorf
 #define FABS fabsf
 #define FUSED_SWARM fused_swarm_f32
+#define STABLE_SUBSTEP stable_substep_f32
 typedef uint64_t vkey __attribute__((vector_size(64)));
 /* Lanes [8h, 8h + 8) of a 16-lane int32 vector, zero-extended to 64 bits. */
 #define KEY_HALF(v, h)                                                                 \
@@ -154,6 +155,7 @@ static inline vkey key_max(vkey a, vkey b) { vkey lt = (vkey)(a < b); return (b 
 #undef FLOOR
 #undef FABS
 #undef FUSED_SWARM
+#undef STABLE_SUBSTEP
 #undef KNN_BLOCK
 #undef KNN_KEYS
 #undef OBS_PAIRS_AVX512
@@ -177,6 +179,18 @@ typedef int64_t vindex_f64 __attribute__((vector_size(64)));
 #define FLOOR floor
 #define FABS fabs
 #define FUSED_SWARM fused_swarm_f64
+#define STABLE_SUBSTEP stable_substep_f64
 #define KNN_BLOCK knn_block_f64
 #define FUSED_STEP fused_step_f64
 #include "fused_step_body.h"
+
+/* The step-size rule over arrays, for the tests (against swarm_envs.physics.integrators). */
+void fused_stable_substep_f32(const float *omega2, const float *gamma, double *h, int64_t n) {
+    for (int64_t t = 0; t < n; t++) h[t] = stable_substep_f32(omega2[t], gamma[t]);
+}
+void fused_stable_substep_f64(const double *omega2, const double *gamma, double *h, int64_t n) {
+    for (int64_t t = 0; t < n; t++) h[t] = stable_substep_f64(omega2[t], gamma[t]);
+}
+void fused_substep_plan(const double *tau, const double *hs, double *n, double *h, int64_t count) {
+    for (int64_t t = 0; t < count; t++) substep_plan(tau[t], hs[t], &n[t], &h[t]);
+}

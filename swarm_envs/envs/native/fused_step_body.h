@@ -96,6 +96,15 @@ static inline __attribute__((always_inline)) void KNN_BLOCK(
         }
 }
 
+/* swarm_envs.physics.integrators.stable_substep in REAL, as numpy computes it in the
+ * state's dtype: h* = 4 / (γ + √(γ² + 4ω²)); inf where both rates are 0 or one is NaN
+ * (the non-finite state then takes one substep, and the guard sees it), 0 where one is
+ * inf. */
+static inline double STABLE_SUBSTEP(REAL omega2, REAL gamma) {
+    const REAL den = gamma + SQRT(gamma * gamma + (REAL)4 * omega2);
+    return den > 0 ? (double)((REAL)4 / den) : INFINITY;
+}
+
 static inline __attribute__((always_inline)) int FUSED_SWARM(
     const StepParams *P, const int64_t d, int64_t b, REAL *scratch, const REAL *x,
     const REAL *v, const REAL *f, const double *h_in, const REAL *goal, const REAL *a,
@@ -385,11 +394,10 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
             }
         }
 
-        /* The stable substep of the new state (pair_rates, then stable_substep, in
+        /* The stable substep of the new state (pair_rates, then STABLE_SUBSTEP, in
          * REAL as numpy computes them in the state's dtype): ω² = (2/m) max_i Σ_j κ_ij
          * (+ the sink's C_g/(l_g² m) where it acts passively), γ = (β + 2 max_i Σ_j
-         * w_ij)/m, h* = 4/(γ + √(γ² + 4ω²)); inf where both are 0 or a sum is NaN (a
-         * NaN is kept, as numpy's max keeps it), 0 where a rate is inf. */
+         * w_ij)/m; a NaN sum makes ω² NaN, as numpy's max keeps a NaN. */
         REAL kmax = 0, wmax = 0;
         int nan = 0;
 #pragma omp simd reduction(max : kmax, wmax) reduction(| : nan)
@@ -400,9 +408,9 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
         }
         REAL omega2 = nan ? (REAL)NAN : omega2_scale * kmax;
         if (physics_goal) omega2 = omega2 + omega2_sink;
-        const REAL gamma = alignment ? (beta + (REAL)2 * wmax) / m : gamma_still + (REAL)0 * omega2;
-        const REAL den = gamma + SQRT(gamma * gamma + (REAL)4 * omega2);
-        hs = den > 0 ? (double)((REAL)4 / den) : INFINITY;
+        const REAL gamma =
+            alignment ? (beta + (REAL)2 * wmax) / m : gamma_still + (REAL)0 * omega2;
+        hs = STABLE_SUBSTEP(omega2, gamma);
         if (last) break;
     }
 
