@@ -64,6 +64,25 @@ def test_every_backend_runs_the_default_and_the_navigation_configs(variant):
         assert check(variant, cfg) == []
 
 
+#: Configs whose steps take several substeps, and one with a cap that some steps exceed
+#: (their episodes truncated and reset, as the VecEnv resets them).
+SUBSTEP_CONFIGS = (
+    SwarmConfig(n_agents=24, dt=0.3),
+    SwarmConfig(n_agents=10, dt=0.5, dim=3, goal_in_physics=True),
+    SwarmConfig(n_agents=10, dt=0.5, max_substeps=4, on_unstable="truncate"),
+)
+
+
+@pytest.mark.parametrize(
+    "variant", [v for v in VARIANTS if v.backend == "native"], ids=lambda v: v.name
+)
+def test_the_c_step_matches_the_reference_through_substeps_and_the_cap(variant):
+    for cfg in SUBSTEP_CONFIGS:
+        if variant.unsupported(cfg):
+            pytest.skip(f"C step unavailable: {variant.unsupported(cfg)}")
+        assert check(variant, cfg) == [], cfg
+
+
 @SETTINGS
 @given(cfg=configs(dynamics=DYNAMICS))
 def test_other_models_are_refused_with_a_reason_and_run_on_numpy(cfg):
