@@ -116,9 +116,11 @@ class SwarmNavCore:
             return
         self.x[idx], self.v[idx], self.goal[idx] = draw_starts(self.cfg, rng, idx.size)
         self.t[idx] = 0
+        substeps = self._stats["substeps"].copy()
+        substeps[idx] = 0.0  # no step yet; the other swarms keep their last step's
         with np.errstate(over="ignore", invalid="ignore"):
             self._after_reset(idx, rng)
-            self._measure()
+            self._measure(substeps=substeps)
         check_start(self.cfg, self._stats, idx, self.dtype)
         for key, value in self._stats.items():
             self._prev[key][idx] = value[idx]

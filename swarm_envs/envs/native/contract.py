@@ -49,6 +49,7 @@ from swarm_envs.envs.task import (
 from swarm_envs.envs.task.observation import LAYOUT
 from swarm_envs.metrics import CENTRE_RTOL
 from swarm_envs.physics import SocialPotentialParams
+from swarm_envs.physics.integrators import STEP_SAFETY
 from swarm_envs.physics.social_potential import RHO_FLOOR
 
 __all__ = [
@@ -194,6 +195,8 @@ def _header_body() -> list[str]:
     lines.append(f"enum {{ {columns}, PK_SIZE }};")
     lines.append(f'#define STEP_OBS_LAYOUT "{LAYOUT}"')
     lines.append(f"#define STEP_UNSOUND {UNSOUND}")
+    # the numerator of the step-size rule, 4 · STEP_SAFETY, exactly as Python rounds it
+    lines.append(f"#define STEP_EDGE_NUMERATOR {float.hex(4.0 * STEP_SAFETY)}")
     return lines
 
 

@@ -36,6 +36,7 @@ from swarm_envs.envs.common import (
     check_action_shape,
     check_batch,
     check_dtype,
+    check_start,
     draw_starts,
     unstable_message,
     unstable_swarms,
@@ -273,9 +274,10 @@ class NativeSwarmNavCore:
         self._x[:, idx] = x.transpose(2, 0, 1)
         self._v[:, idx] = v.transpose(2, 0, 1)
         self._goal[idx] = goal
-        # As the numpy core's statistics after any reset: no step, no substeps.
-        self._packed[:, _SUBSTEPS] = 0.0
+        # As the numpy core's statistics after a reset: no step, no substeps.
+        self._packed[idx, _SUBSTEPS] = 0.0
         self._measure(None if idx.size == self.batch else idx.astype(np.int64))
+        check_start(self.cfg, self._stats, idx, self.dtype)
         for key, value in self._stats.items():
             self._prev[key][idx] = value[idx]
             self._start[key][idx] = value[idx]

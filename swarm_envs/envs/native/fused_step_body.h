@@ -97,12 +97,12 @@ static inline __attribute__((always_inline)) void KNN_BLOCK(
 }
 
 /* swarm_envs.physics.integrators.stable_substep in REAL, as numpy computes it in the
- * state's dtype: h* = 4 / (γ + √(γ² + 4ω²)); inf where both rates are 0 or one is NaN
+ * state's dtype: h* = 4·STEP_SAFETY / (γ + √(γ² + 4ω²)); inf where both rates are 0 or one is NaN
  * (the non-finite state then takes one substep, and the guard sees it), 0 where one is
  * inf. */
 static inline double STABLE_SUBSTEP(REAL omega2, REAL gamma) {
     const REAL den = gamma + SQRT(gamma * gamma + (REAL)4 * omega2);
-    return den > 0 ? (double)((REAL)4 / den) : INFINITY;
+    return den > 0 ? (double)((REAL)STEP_EDGE_NUMERATOR / den) : INFINITY;
 }
 
 static inline __attribute__((always_inline)) int FUSED_SWARM(
