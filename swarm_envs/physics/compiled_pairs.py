@@ -54,7 +54,12 @@ import numpy as np
 
 from swarm_envs.physics.cutoff import PairSums
 from swarm_envs.physics.neighbors import CellList
-from swarm_envs.physics.social_potential import RHO_FLOOR, SocialPotentialParams, pair_law
+from swarm_envs.physics.social_potential import (
+    RHO_FLOOR,
+    SocialPotentialParams,
+    pair_law,
+    rate_law,
+)
 
 __all__ = [
     "AVAILABLE",
@@ -94,19 +99,21 @@ def _scalar_exp(x: float) -> float:
 # (inlined into the kernel's loop, where LLVM folds them into the surrounding code).
 prange = range
 _law = pair_law
+_rates = rate_law
 _exp = _scalar_exp
 _compiled_fns: dict[Callable[..., Any], Callable[..., Any]] = {}
 
 
 def _compiled(fn: Callable[..., Any]) -> Callable[..., Any]:
     """``fn`` through ``numba.njit(parallel=True)``, made on first use (under the lock)."""
-    global prange, _law, _exp
+    global prange, _law, _rates, _exp
     if fn not in _compiled_fns:
         import numba
 
         if prange is range:
             prange = numba.prange
             _law = numba.njit(inline="always")(pair_law)
+            _rates = numba.njit(inline="always")(rate_law)
             _exp = numba.njit(inline="always")(_scalar_exp)
         _compiled_fns[fn] = numba.njit(parallel=True, cache=True, nogil=True)(fn)
     return _compiled_fns[fn]
@@ -167,11 +174,12 @@ def numba_enabled() -> bool:
 
 
 def _pair_pass_kernel(law_key: str) -> Callable[..., Any]:
-    """The pair kernel, closed over ``law_key``, a hash of :func:`pair_law`'s code.
+    """The pair kernel, closed over ``law_key``, a hash of the code of :func:`pair_law`
+    and :func:`rate_law`.
 
     numba's disk cache keys a kernel on its own file, bytecode and closure, not on the
-    functions it calls from other files: the closure brings ``pair_law`` into the key,
-    so that a changed law is compiled anew instead of loaded stale.
+    functions it calls from other files: the closure brings the laws into the key, so
+    that a changed law is compiled anew instead of loaded stale.
     """
 
     def _pair_pass(
@@ -187,13 +195,16 @@ def _pair_pass_kernel(law_key: str) -> Callable[..., Any]:
         close2: float,
         consts: np.ndarray,
         blocks: int,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        rates: bool,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The kernel that numba compiles (see :func:`cell_pair_sums`).
 
         ``coords`` and ``vel`` are ``(3, M)``: 2-D points come with a zero third row, so
         that one loop body, on scalars, serves both dimensions. ``consts`` holds
         ``C_a, C_r, l_a, l_r, C_o, l_o`` (``pair_law``'s parameters), ``align`` (1 for
-        the alignment term, 0 without) and ``RHO_FLOOR``.
+        the alignment term, 0 without) and ``RHO_FLOOR``. With ``rates`` each point also
+        sums ``κ`` and ``w`` of ``rate_law`` over its pairs (rows 0 and 1 of the fourth
+        output; without, that output is empty).
         """
         _ = law_key  # in the closure: part of numba's cache key (see above)
         m = coords.shape[1]
@@ -202,6 +213,7 @@ def _pair_pass_kernel(law_key: str) -> Callable[..., Any]:
         force = np.zeros((blocks, 3, m))
         pot = np.zeros((blocks, n_groups))
         close = np.zeros((blocks, n_groups), dtype=np.int64)
+        rate = np.zeros((blocks, 2, m if rates else 0))
         for b in prange(blocks):
             start = b * m // blocks
             stop = (b + 1) * m // blocks
@@ -210,6 +222,7 @@ def _pair_pass_kernel(law_key: str) -> Callable[..., Any]:
                 x0, x1, x2 = coords[0, p], coords[1, p], coords[2, p]
                 v0, v1, v2 = vel[0, p], vel[1, p], vel[2, p]
                 f0 = f1 = f2 = 0.0  # the force on p, added once at the end
+                k_p = w_p = 0.0  # its rate sums (with rates)
                 pot_p = 0.0
                 close_p = 0
                 for r in range(n_rows + 1):
@@ -242,18 +255,30 @@ def _pair_pass_kernel(law_key: str) -> Callable[..., Any]:
                         force[b, 0, q] -= w0
                         force[b, 1, q] -= w1
                         force[b, 2, q] -= w2
+                        if rates:  # symmetric: both ends of the pair
+                            kap, damp = _rates(rho, C_a, C_r, l_a, l_r, C_o, l_o, _exp)
+                            k_p += kap
+                            rate[b, 0, q] += kap
+                            if damp is not None:
+                                w_p += damp
+                                rate[b, 1, q] += damp
                 force[b, 0, p] += f0
                 force[b, 1, p] += f1
                 force[b, 2, p] += f2
+                if rates:
+                    rate[b, 0, p] += k_p
+                    rate[b, 1, p] += w_p
                 pot[b, groups[p]] += pot_p
                 close[b, groups[p]] += close_p
-        return force, pot, close
+        return force, pot, close, rate
 
     return _pair_pass
 
 
 #: The pair kernel (see :func:`_pair_pass_kernel`).
-_pair_pass = _pair_pass_kernel(hashlib.sha256(marshal.dumps(pair_law.__code__)).hexdigest())
+_pair_pass = _pair_pass_kernel(
+    hashlib.sha256(marshal.dumps((pair_law.__code__, rate_law.__code__))).hexdigest()
+)
 
 
 def _knn_round(
@@ -337,14 +362,16 @@ def cell_pair_sums(
     groups: np.ndarray | None = None,
     n_groups: int = 1,
     close_radius: float = 0.0,
+    rates: bool = False,
 ) -> PairSums:
     """:class:`PairSums` over every pair within ``radius`` of ``cells``, in sorted order.
 
     The same as ``PairAccumulator(params, M, v, groups=groups, n_groups=n_groups,
-    potential=True, close_radius=close_radius)`` fed with ``cells.iter_pairs(radius)``:
-    ``v`` (velocities ``(M, d)`` in the cells' sorted order, or ``None`` for no
-    alignment) and ``groups`` (``(M,)`` swarm of each sorted point) as there; the
-    force comes back ``(M, d)`` in sorted order, float64.
+    potential=True, close_radius=close_radius, rates=rates)`` fed with
+    ``cells.iter_pairs(radius)``: ``v`` (velocities ``(M, d)`` in the cells' sorted
+    order, or ``None`` for no alignment) and ``groups`` (``(M,)`` swarm of each sorted
+    point) as there; the force (and, with ``rates``, the rate sums) come back in sorted
+    order, float64.
     """
     m_pts = cells.order.size
     d = cells.dim
@@ -358,7 +385,7 @@ def cell_pair_sums(
     grp = np.zeros(m_pts, np.int64) if groups is None else np.asarray(groups, np.int64)
     p = params
     consts = np.array([p.C_a, p.C_r, p.l_a, p.l_r, p.C_o, p.l_o, 1.0 if align else 0.0, RHO_FLOOR])
-    force, pot, close = _run(
+    force, pot, close, rate = _run(
         _pair_pass,
         coords,
         vel,
@@ -372,8 +399,18 @@ def cell_pair_sums(
         float(close_radius) ** 2,
         consts,
         BLOCKS,
+        bool(rates),
     )
     total_force = force[0]
+    total_rate = rate[0]
     for b in range(1, BLOCKS):
         total_force = total_force + force[b]
-    return PairSums(total_force[:d].T.copy(), pot.sum(axis=0), close.sum(axis=0))
+        if rates:
+            total_rate = total_rate + rate[b]
+    return PairSums(
+        total_force[:d].T.copy(),
+        pot.sum(axis=0),
+        close.sum(axis=0),
+        total_rate[0].copy() if rates else None,
+        total_rate[1].copy() if rates else None,
+    )

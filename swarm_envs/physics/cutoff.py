@@ -92,6 +92,7 @@ from swarm_envs.physics.social_potential import (
     goal_potential,
     kinetic_energy,
     pair_law,
+    rate_law,
 )
 
 #: Pairs processed per chunk by :func:`pair_sums` (bounded, cache-sized temporaries).
@@ -272,6 +273,38 @@ class PairSums(NamedTuple):
     """``(n_groups,)``: ``Σ U(ρ_ij)`` over the listed pairs of each group (float64)."""
     close: np.ndarray
     """``(n_groups,)``: number of listed pairs with ``ρ_ij < close_radius``."""
+    kappa: np.ndarray | None = None
+    """``(M,)``: ``Σ_j κ(ρ_ij)`` per row over the listed pairs (the stiffness of the
+    step-size rule, :func:`~swarm_envs.physics.social_potential.rate_law`; float64), or
+    ``None`` when the rates were not asked for."""
+    damping: np.ndarray | None = None
+    """``(M,)``: ``Σ_j w(ρ_ij)`` per row (the alignment's damping rate; zeros when
+    ``C_o = 0``), or ``None`` as :attr:`kappa`."""
+
+
+def swarm_rates(
+    kappa: np.ndarray, damping: np.ndarray, params: SocialPotentialParams, *, sink: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(ω², γ)`` per swarm ``(...)`` from the per-agent rate sums ``(..., N)``.
+
+    The rule of :func:`~swarm_envs.physics.social_potential.pair_rates` applied to sums
+    over a pair list (:attr:`PairSums.kappa`, :attr:`PairSums.damping`):
+    ``ω² = (2/m) max_i Σ_j κ_ij`` (``+ C_g/(l_g² m)`` with ``sink``, the goal sink acting
+    passively) and ``γ = (β + 2 max_i Σ_j w_ij)/m``. With every pair listed it equals
+    ``pair_rates``; with the pairs within ``r_c`` it drops the rates of the pairs beyond,
+    as the force drops their terms.
+
+    >>> p = SocialPotentialParams.navigation()
+    >>> omega2, gamma = swarm_rates(np.array([[3.0, 5.0]]), np.array([[0.5, 0.2]]), p)
+    >>> omega2.tolist(), gamma.tolist()
+    ([10.0], [2.0])
+    """
+    p = params
+    omega2 = (2.0 / p.m) * (kappa.max(axis=-1) if kappa.shape[-1] else np.zeros(kappa.shape[:-1]))
+    if sink:
+        omega2 = omega2 + p.C_g / (p.l_g * p.l_g * p.m)
+    top = damping.max(axis=-1) if damping.shape[-1] else np.zeros(damping.shape[:-1])
+    return omega2, (p.beta + 2.0 * top) / p.m
 
 
 def _check_pairs(i: Any, j: Any, m: int) -> tuple[np.ndarray, np.ndarray]:
@@ -307,6 +340,9 @@ class PairAccumulator:
         n_groups: number of groups.
         potential: whether to sum ``U(ρ_ij)``.
         close_radius: count the pairs with ``ρ_ij < close_radius`` (0: none).
+        rates: whether to sum each row's ``κ(ρ_ij)`` and ``w(ρ_ij)`` of
+            :func:`~swarm_envs.physics.social_potential.rate_law` (both ends of a pair),
+            for the step-size rule (:attr:`PairSums.kappa`, :attr:`PairSums.damping`).
     """
 
     def __init__(
@@ -319,6 +355,7 @@ class PairAccumulator:
         n_groups: int = 1,
         potential: bool = False,
         close_radius: float = 0.0,
+        rates: bool = False,
     ) -> None:
         self.params = _check_params("PairAccumulator", params)
         self.m = int(m)
@@ -333,6 +370,8 @@ class PairAccumulator:
         self._force: list[np.ndarray] | None = None
         self._pot = np.zeros(self.n_groups)
         self._close = np.zeros(self.n_groups, dtype=np.int64)
+        self._kappa = np.zeros(self.m) if rates else None
+        self._damping = np.zeros(self.m) if rates else None
 
     def add(self, i: np.ndarray, j: np.ndarray, dx: list[np.ndarray], rho2: np.ndarray) -> None:
         """Add one chunk of pairs (see the class docstring)."""
@@ -375,12 +414,23 @@ class PairAccumulator:
             out = self._force[k][lo:hi]
             out += np.bincount(il, weights=w, minlength=hi - lo)
             out -= np.bincount(jl, weights=w, minlength=hi - lo)
+        if self._kappa is not None and self._damping is not None:
+            kappa, damp = rate_law(rho, p.C_a, p.C_r, p.l_a, p.l_r, p.C_o, p.l_o, np.exp)
+            for total, rate in ((self._kappa, kappa), (self._damping, damp)):
+                if rate is not None:  # symmetric: both ends of the pair
+                    out = total[lo:hi]
+                    out += np.bincount(il, weights=rate, minlength=hi - lo)
+                    out += np.bincount(jl, weights=rate, minlength=hi - lo)
 
     def result(self, d: int, dtype: Any = np.float64) -> PairSums:
         """The sums so far; ``d`` and ``dtype`` shape the force when no chunk came."""
         force = self._force if self._force is not None else [np.zeros(self.m)] * d
         return PairSums(
-            np.stack(force, axis=-1).astype(dtype, copy=False), self._pot.copy(), self._close.copy()
+            np.stack(force, axis=-1).astype(dtype, copy=False),
+            self._pot.copy(),
+            self._close.copy(),
+            None if self._kappa is None else self._kappa.copy(),
+            None if self._damping is None else self._damping.copy(),
         )
 
 
@@ -395,8 +445,10 @@ def pair_sums(
     n_groups: int = 1,
     potential: bool = False,
     close_radius: float = 0.0,
+    rates: bool = False,
 ) -> PairSums:
-    """Pair forces, pair potential and close-pair count over a pair list, in one pass.
+    """Pair forces, pair potential and close-pair count (and, with ``rates``, the
+    step-size rule's rate sums) over a pair list, in one pass.
 
     ``x, v`` are flat ``(M, d)``; ``(i, j)`` index their rows, each unordered pair once;
     the other arguments are those of :class:`PairAccumulator`. Pairs are processed in
@@ -413,6 +465,7 @@ def pair_sums(
         n_groups=n_groups,
         potential=potential,
         close_radius=close_radius,
+        rates=rates,
     )
     coords = [np.ascontiguousarray(x[:, k]) for k in range(d)]
     for s in range(0, i.size, PAIR_CHUNK):
@@ -522,4 +575,5 @@ __all__ = [
     "pair_sums",
     "sparse_energy",
     "sparse_forces",
+    "swarm_rates",
 ]
