@@ -2,8 +2,8 @@
 crossover N), with the physical state of every timed run; and the regime table.
 
 Usage: ``python benchmarks/large_swarms.py [--dim 2] [--physics large_swarm]
-[--repeats 7] [--max-n 100000] [--dense-max 4000] [--kdtree] [--accuracy 2000]
-[--cutoff-tol 0.03] [--regime [--regime-steps 100] [--regime-wall 900]]``
+[--repeats 7] [--settle 1] [--max-n 100000] [--sizes N,...] [--dense-max 4000] [--kdtree]
+[--accuracy 2000] [--cutoff-tol 0.03] [--regime [--regime-steps 100] [--regime-wall 900]]``
 
 The sparse core's pair pass is compiled with numba where it imports
 (:mod:`swarm_envs.physics.compiled_pairs`); ``SWARM_ENVS_NUMBA=0`` times the numpy pass
@@ -19,7 +19,9 @@ disc of radius 1.5, ``init_density`` 1.41 per unit area in 2-D, 0.71 per unit vo
 Timing: a full step is ``core.step(actions)`` followed by ``core.observe()`` (what every
 env adapter does), for one swarm (B = 1, float64) with random actions drawn once per row
 (not timed). Each cell is the median (and the best) of ``--repeats`` single steps after
-one warm-up step; on a shared machine the medians are what a run sees. Beside the time,
+``--settle`` untimed steps (default 1, the warm-up; the first steps of a random start
+can need more substeps than the settled swarm); on a shared machine the medians are
+what a run sees. Beside the time,
 each row reports the physical state of the sparse run at its end: the mean
 nearest-neighbour distance, the expanse (mean distance to the centroid), the energy
 drift per agent since the reset (``(E − E_0)/N``; dissipation makes it negative, a
@@ -156,17 +158,22 @@ def run_steps(
     return times, state
 
 
+#: Steps run before the timed ones (``--settle``; the first is the warm-up).
+SETTLE = [1]
+
+
 def time_step(
     core_cls: Core, n: int, dim: int, repeats: int, physics: str = "navigation"
 ) -> tuple[float, float, RunState]:
-    """``(median, best)`` seconds of one full step (step + observe) of one swarm, after a
-    warm-up step, and the run's state at its end."""
+    """``(median, best)`` seconds of one full step (step + observe) of one swarm, after
+    ``--settle`` steps (at least the warm-up), and the run's state at its end."""
     core = make_core(core_cls, config(n, dim, physics))
     actions = np.random.default_rng(1).uniform(-1.0, 1.0, (1, n, dim))
-    times, state = run_steps(core, actions, repeats + 1)
-    if len(times) < 2:
+    settle = SETTLE[0]
+    times, state = run_steps(core, actions, repeats + settle)
+    if len(times) <= settle:
         return math.nan, math.nan, state
-    return statistics.median(times[1:]), min(times[1:]), state
+    return statistics.median(times[settle:]), min(times[settle:]), state
 
 
 def time_call(fn: Callable[[], object], repeats: int) -> float:
@@ -309,7 +316,9 @@ def main() -> None:
     parser.add_argument("--dim", type=int, default=2, choices=(2, 3))
     parser.add_argument("--physics", default="navigation", choices=PHYSICS)
     parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--settle", type=int, default=1, help="untimed steps first (>= 1)")
     parser.add_argument("--max-n", type=int, default=100_000)
+    parser.add_argument("--sizes", default="", help="comma-separated N (default: 100 … --max-n)")
     parser.add_argument("--dense-max", type=int, default=4000)
     parser.add_argument("--kdtree", action="store_true")
     parser.add_argument("--accuracy", type=int, default=0, metavar="N")
@@ -320,13 +329,17 @@ def main() -> None:
     parser.add_argument("--regime-wall", type=float, default=900.0)
     args = parser.parse_args()
     SPARSE_KWARGS["cutoff_tol"] = args.cutoff_tol
+    SETTLE[0] = max(1, args.settle)
     header(args)
     if args.regime:
         dims = [int(d) for d in args.regime_dims.split(",")]
         regime(dims, args.max_n, args.regime_steps, args.regime_wall)
         return
     dim, reps, physics = args.dim, args.repeats, args.physics
-    print(f"timing: physics {physics}, d = {dim}; the state columns are the sparse run's")
+    print(
+        f"timing: physics {physics}, d = {dim}, {SETTLE[0]} untimed steps, then {reps} timed; "
+        "the state columns are the sparse run's (substeps/step over all its steps)"
+    )
     print()
     head = "| N | start radius | dense s/step (median) | sparse s/step (median) | dense best | "
     head += "sparse best | dense / sparse | NND | expanse | (E − E0)/N | substeps/step |"
@@ -335,6 +348,8 @@ def main() -> None:
     print(head)
     print("|" + "---:|" * (head.count("|") - 1))
     sizes = [n for n in (100, 300, 1000, 3000, 10_000, 30_000, 100_000) if n <= args.max_n]
+    if args.sizes:
+        sizes = [int(n) for n in args.sizes.split(",")]
     winner: dict[int, str] = {}
     for n in sizes:
         sparse = time_step(SparseSwarmNavCore, n, dim, reps, physics)

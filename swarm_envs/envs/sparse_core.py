@@ -7,80 +7,58 @@
 array. One step:
 
 1. the action becomes the control force ``u = u_max · a``, added to the passive force
-   carried from the previous substep (the passive force at the current state, or for
-   velocity Verlet at its extrapolated velocity, exactly as the dense core);
-2. step-size control, as the dense core (``SocialPotentialDynamics.step``): each swarm
-   carries, beside its force, the stable substep ``h*`` of its current state
-   (:func:`~swarm_envs.physics.integrators.stable_substep` of its rates). The step of
-   ``dt`` is taken in ``n = ⌈τ/h*⌉`` equal substeps of the time ``τ`` left, re-planned
-   after every substep (:func:`~swarm_envs.physics.integrators.substep_plan`), at most
-   ``cfg.max_substeps`` (a swarm that needs more takes the rest of ``dt`` in the
-   substeps left and is marked: ``over_cap``). Each substep advances the swarms with
-   time left by the integrator's formulas (:mod:`swarm_envs.physics.integrators`);
-   only those swarms are evaluated, so a swarm's trajectory never depends on the others;
+   carried from the previous substep (at the current state, or for velocity Verlet at
+   its extrapolated velocity, exactly as the dense core);
+2. step-size control, as in the dense core (``SocialPotentialDynamics.step``): each
+   swarm carries, beside its force, the stable substep ``h*`` of its current state
+   (:func:`~swarm_envs.physics.integrators.stable_substep`). The step of ``dt`` takes
+   ``⌈τ/h*⌉`` equal substeps of the time ``τ`` left, re-planned after each
+   (:func:`~swarm_envs.physics.integrators.substep_plan`), at most ``cfg.max_substeps``
+   (a swarm that needs more takes the rest of ``dt`` in the substeps left and is
+   marked over the cap). Only the swarms with time left are advanced and evaluated, so
+   a swarm's trajectory never depends on the others of the batch;
 3. after each substep, one cell-list search (:class:`swarm_envs.physics.neighbors.CellList`)
    finds every pair within ``max(r_c, collision_radius)`` of the new positions, and one
-   pass over those pairs gives the next passive force, the rates of the step-size rule
-   (``Σ_j κ_ij`` and ``Σ_j w_ij`` per agent, :func:`~swarm_envs.physics.social_potential.rate_law`,
-   turned into ``(ω², γ)`` by :func:`~swarm_envs.physics.cutoff.swarm_rates`), the pair
-   potential of the ``energy`` statistic and the collision count (the agents are taken
-   in cell order, so the pairs' memory accesses stay local). Where numba imports, that
-   pass is one compiled loop over the cell pairs
-   (:func:`swarm_envs.physics.compiled_pairs.cell_pair_sums`, each candidate visited
-   once); otherwise numpy sums chunks of candidates
-   (:class:`swarm_envs.physics.cutoff.PairAccumulator`). Both apply the one pair law,
-   :func:`swarm_envs.physics.social_potential.pair_law`, and the one rate law, and give
-   the same sums to round-off; ``SWARM_ENVS_NUMBA=0`` picks numpy;
+   pass over them, in cell order, gives the next passive force, the rate sums of the
+   step-size rule (``Σ_j κ_ij``, ``Σ_j w_ij`` per agent of
+   :func:`~swarm_envs.physics.social_potential.rate_law`, turned into ``(ω², γ)`` by
+   :func:`~swarm_envs.physics.pair_sums.swarm_rates`), the pair potential of the
+   ``energy`` statistic and the collision count. Where numba imports, that pass is one
+   compiled loop (:func:`swarm_envs.physics.compiled_pairs.cell_pair_sums`); otherwise
+   numpy sums chunks of candidates (:class:`swarm_envs.physics.pair_sums.PairAccumulator`).
+   Both apply the one pair law and the one rate law and agree to round-off;
+   ``SWARM_ENVS_NUMBA=0`` picks numpy;
 4. the k nearest neighbours (observations, nearest-neighbour distance) come from the
-   same cell-list structure (:func:`swarm_envs.physics.neighbors.knn`), on demand and
-   cached per state; the search starts at the previous step's neighbour distances
-   (each round compiled with numba where it imports).
-   From :data:`KNN_AHEAD_MIN_AGENTS` agents it starts in a worker thread as soon as
-   the step's last positions are known, and runs while the last pair pass does;
-5. the guard of the dense core: a swarm whose state is no longer finite, or that needed
-   more substeps than ``max_substeps``, raises
+   cell-list structure (:func:`swarm_envs.physics.neighbors.knn`), on demand, cached per
+   state and started from the previous step's distances; from
+   :data:`KNN_AHEAD_MIN_AGENTS` agents the search starts in a worker thread as soon as
+   the step's last positions are known, while the last pair pass runs;
+5. the dense core's guard: a swarm whose state is no longer finite, or that needed more
+   substeps than ``max_substeps``, raises
    :class:`~swarm_envs.envs.common.SwarmUnstableError` (``on_unstable="raise"``) or is
    put back to its state before the step and truncated (``"truncate"``). A swarm that
-   diverges (non-finite, or wider than :data:`MAX_SPAN` search radii) takes no further
+   diverges (non-finite, or beyond :data:`MAX_SPAN` search radii) takes no further
    substeps, is never handed to the neighbour search, and its energy is NaN.
 
-What differs from the dense core is the cut-off only: pair terms (Morse cohesion,
-alignment; docs/models.md §1 eqs. 9–11) of agents farther apart than
-``r_c = cutoff_radius(cfg.physics, cutoff_tol, speed=cutoff_speed)`` are dropped, each
-smaller than ``cutoff_tol`` (force units) for relative speeds up to ``cutoff_speed``,
-and so are their rates (``κ(r_c) ≤ g(r_c)/min(l_a, l_r)``: the dropped stiffness is of
-the dropped force's order). The per-agent force bound is
-:func:`swarm_envs.physics.cutoff.force_error_bound`: ``(N − 1) g(r_c; w)`` always,
-``n Σ_t A_t Φ_d(r_c, l_t)`` at density ``n``. The ``energy`` statistic drops the same
-pairs (:func:`~swarm_envs.physics.cutoff.energy_error_bound`). Observations, collisions
-and the nearest-neighbour distance are exact. The substep counts equal the dense core's
-unless the dropped rates move ``τ/h*`` across an integer.
-
-The defaults, ``cutoff_tol = 0.03`` (1 % of the default action bound ``u_max = 3``) and
-``cutoff_speed = 1``, give ``r_c ≈ 5.08`` with the navigation parameters. What they cost
-in accuracy, measured at 2,000 agents at the default start density
-(``benchmarks/large_swarms.py --accuracy 2000``): per-agent force errors of median
-0.1–0.3 and maximum 0.6–1.3 in the first 20 steps, mostly the alignment drag of agents
-beyond ``r_c`` (:mod:`swarm_envs.physics.cutoff`); the bound holds with a factor of
-about 10 to spare. ``cutoff_tol = 0.01`` (``r_c ≈ 6.59``) divides the errors by about
-2.5, ``0.003`` (``r_c ≈ 8.31``) by about 7.
-
-Cost is ``O(N)`` per substep at bounded density: the cell list and the pair pass visit,
-per agent, a number of candidates proportional to its pairs within ``r_c``, about
-``n ω_d r_c^d`` at density ``n`` (``ω_2 = π``, ``ω_3 = 4π/3``), so a larger ``r_c``
-costs as ``r_c^d``. The paper's parameters are in the collapsing regime (``C l² < 1``,
-``SocialPotentialParams.h_stability``): a swarm left to itself contracts, its density,
-its pairs within ``r_c`` and its stiffness grow with ``N`` and over an episode, and so
-do the substeps a step needs, until ``max_substeps`` is reached. Large swarms should
-use an H-stable parameter set (:meth:`SocialPotentialParams.large_swarm
-<swarm_envs.physics.SocialPotentialParams.large_swarm>`, ``configs/env/large_swarm.yaml``)
-and start at a bounded density (``SwarmConfig.init_density``); ``docs/large_swarms.md``
-has the measured regimes of both parameter sets from 10 to 100,000 agents.
+What differs from the dense core is the cut-off only: the pair terms (and their rates)
+of agents farther apart than ``r_c = cutoff_radius(cfg.physics, cutoff_tol,
+speed=cutoff_speed)`` are dropped, each below ``cutoff_tol`` (force units) for relative
+speeds up to ``cutoff_speed``; :func:`swarm_envs.physics.cutoff.force_error_bound` and
+:func:`~swarm_envs.physics.cutoff.energy_error_bound` bound the per-agent force and the
+energy statistic's errors. Observations, collisions and the nearest-neighbour distance
+are exact; the substep counts equal the dense core's unless the dropped rates move
+``τ/h*`` across an integer. The defaults (``cutoff_tol = 0.03``, 1 % of the default
+``u_max``, and ``cutoff_speed = 1``) give ``r_c ≈ 5.08`` with the navigation set and
+``≈ 3.30`` with the large-swarm preset; ``docs/large_swarms.md`` has the measured
+errors, the cost (``O(N)`` per substep at bounded density, ``∝ r_c^d``) and the regimes
+of both parameter sets from 10 to 100,000 agents. Large swarms need an H-stable
+parameter set (``SocialPotentialParams.large_swarm()``, ``configs/env/large_swarm.yaml``)
+and a bounded start density (``SwarmConfig.init_density``): the paper's sets collapse,
+and the substeps a step needs grow with ``N`` until ``max_substeps``.
 
 Below :data:`SPARSE_MIN_AGENTS` agents per swarm the dense core (``O(N²)`` per step) is
-as fast or faster (and exact); above it this one is faster, increasingly so
-(``benchmarks/large_swarms.py`` measures the crossover on a given machine, with the
-compiled or the numpy pair pass). :func:`use_sparse_core` is the selection rule.
+as fast or faster (and exact); :func:`use_sparse_core` is the selection rule
+(``benchmarks/large_swarms.py`` measures the crossover).
 """
 
 from __future__ import annotations
@@ -96,9 +74,10 @@ from swarm_envs.envs.common import SwarmUnstableError, unstable_message
 from swarm_envs.envs.core import SwarmNavCore
 from swarm_envs.physics import compiled_pairs, goal_force, goal_potential, kinetic_energy
 from swarm_envs.physics._validation import check_real
-from swarm_envs.physics.cutoff import PairAccumulator, cutoff_radius, swarm_rates
+from swarm_envs.physics.cutoff import cutoff_radius
 from swarm_envs.physics.integrators import euler_update, stable_substep, substep_plan
-from swarm_envs.physics.neighbors import CELL_MARGIN, REACH, CellList, knn
+from swarm_envs.physics.neighbors import knn
+from swarm_envs.physics.pair_sums import swarm_rates
 
 #: Agents per swarm from which to use :class:`SparseSwarmNavCore`: above the crossover
 #: with the dense cores that ``benchmarks/large_swarms.py`` measures (default config at
@@ -127,10 +106,11 @@ DEFAULT_CUTOFF_TOL = 0.03
 #: Default relative speed up to which the alignment term's tolerance holds.
 DEFAULT_CUTOFF_SPEED = 1.0
 
-#: A swarm wider than this many search radii (``max(r_c, collision_radius, 1)``) along
-#: an axis has diverged: like a non-finite one it is left out of the pair pass and the
-#: neighbour search (whose grids it would make too coarse for the other swarms), and
-#: its energy is NaN, which the step's guard catches.
+#: A swarm with an agent farther than half this many search radii
+#: (``max(r_c, collision_radius, 1)``) from the origin along an axis has diverged: like
+#: a non-finite one it is left out of the pair pass and the neighbour search (whose
+#: grids it would make too coarse for the other swarms), and its energy is NaN, which
+#: the step's guard catches.
 MAX_SPAN = 2**24
 
 __all__ = [
@@ -212,9 +192,10 @@ class _Pass(NamedTuple):
 
 def _sound_swarms(x: np.ndarray, v: np.ndarray | None, span: float) -> np.ndarray:
     """``(b,)`` bool: the swarms whose positions ``x`` (and velocities ``v``) ``(b, N, d)``
-    are finite and span at most ``span`` along every axis."""
-    with np.errstate(invalid="ignore", over="ignore"):
-        ok = (x.max(axis=1) - x.min(axis=1) <= span).all(axis=-1)  # False for NaN or inf
+    are finite and within ``span / 2`` of the origin along every axis (so they span at
+    most ``span``)."""
+    flat = np.abs(x.reshape(x.shape[0], -1)).max(axis=1) if x.size else np.zeros(x.shape[0])
+    ok = flat <= 0.5 * span  # False for NaN
     if v is not None:
         ok &= np.isfinite(v).all(axis=(1, 2))
     return ok
@@ -301,12 +282,12 @@ class SparseSwarmNavCore(SwarmNavCore):
     # ------------------------------------------------------------------ neighbours
     @property
     def _span(self) -> float:
-        """The widest sound swarm (:data:`MAX_SPAN`)."""
+        """The widest sound swarm, in length units (:data:`MAX_SPAN`)."""
         return MAX_SPAN * max(self.cutoff, self.cfg.collision_radius, 1.0)
 
     def _searchable(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(positions, bad)``: ``x`` with the diverged swarms (``bad``: non-finite, or
-        wider than :data:`MAX_SPAN`) at the origin, which the neighbour search accepts
+        beyond :data:`MAX_SPAN`) at the origin, which the neighbour search accepts
         (their distances are replaced by NaN)."""
         bad = ~_sound_swarms(x, None, self._span)
         if bad.any():
@@ -366,11 +347,12 @@ class SparseSwarmNavCore(SwarmNavCore):
         pass over the pairs gives: the stable substep, the pair potential, the collisions.
 
         One cell-list search within ``max(r_c, collision_radius)`` and one pass over
-        its pairs (agents in cell order): the pair forces (eqs. 10–11), the rate sums of
-        the step-size rule, the pair potential (eq. 9) and the collision count; then
+        its pairs (:func:`~swarm_envs.physics.compiled_pairs.swarm_pair_sums`): the pair
+        forces (eqs. 10–11), the rate sums of the step-size rule, the pair potential
+        (eq. 9) and the collision count; then
         ``−β v`` (eq. 12) and the goal sink (eqs. 19–21) when it acts passively
         (``goal`` ``(b, d)``, else ``None``). Diverged swarms (a non-finite position or
-        velocity, or wider than :data:`MAX_SPAN`) are left out: NaN force and potential,
+        velocity, or beyond :data:`MAX_SPAN`) are left out: NaN force and potential,
         ``h* = inf``.
         """
         ok = _sound_swarms(x, velocity, self._span)
@@ -390,48 +372,13 @@ class SparseSwarmNavCore(SwarmNavCore):
             return out
         cfg, p = self.cfg, self.cfg.physics
         b, N, d = x.shape
-        radius = max(self.cutoff, cfg.collision_radius)
-        force = np.zeros((b * N, d), self.dtype)
-        kappa = np.zeros(b * N)
-        damping = np.zeros(b * N)
-        potential = np.zeros(b)
-        collisions = np.zeros(b)
-        if radius > 0 and N > 1:
-            cells = CellList.build(x, radius * (1.0 + CELL_MARGIN) / REACH, REACH)
-            order = cells.order
-            vel = velocity.reshape(b * N, d)[order]
-            groups = order // N if b > 1 else None
-            if compiled_pairs.numba_enabled():  # one compiled loop over the cell pairs
-                sums = compiled_pairs.cell_pair_sums(
-                    cells,
-                    radius,
-                    p,
-                    vel,
-                    groups=groups,
-                    n_groups=b,
-                    close_radius=cfg.collision_radius,
-                    rates=True,
-                )
-            else:
-                acc = PairAccumulator(
-                    p,
-                    b * N,
-                    vel,
-                    groups=groups,
-                    n_groups=b,
-                    potential=True,
-                    close_radius=cfg.collision_radius,
-                    rates=True,
-                )
-                for chunk in cells.iter_pairs(radius):
-                    acc.add(*chunk)
-                sums = acc.result(d, self.dtype)
-            assert sums.kappa is not None and sums.damping is not None
-            force[order] = sums.force
-            kappa[order] = sums.kappa
-            damping[order] = sums.damping
-            potential = sums.potential
-            collisions = sums.close.astype(np.float64)
+        sums = compiled_pairs.swarm_pair_sums(
+            x, velocity, p, max(self.cutoff, cfg.collision_radius), cfg.collision_radius
+        )
+        assert sums.kappa is not None and sums.damping is not None
+        force = sums.force.astype(self.dtype, copy=False)
+        kappa, damping = sums.kappa, sums.damping
+        potential, collisions = sums.potential, sums.close.astype(np.float64)
         force = force.reshape(b, N, d)
         if p.beta > 0:
             force -= p.beta * velocity
