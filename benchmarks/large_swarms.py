@@ -3,7 +3,8 @@ crossover N), with the physical state of every timed run; and the regime table.
 
 Usage: ``python benchmarks/large_swarms.py [--dim 2] [--physics large_swarm]
 [--repeats 7] [--settle 1] [--max-n 100000] [--sizes N,...] [--dense-max 4000] [--kdtree]
-[--accuracy 2000] [--cutoff-tol 0.03] [--regime [--regime-steps 100] [--regime-wall 900]]``
+[--accuracy 2000] [--cutoff-tol 0.03] [--regime [--regime-steps 100] [--regime-wall 900]
+[--regime-dims 2,3] [--regime-physics navigation,large_swarm]]``
 
 The sparse core's pair pass is compiled with numba where it imports
 (:mod:`swarm_envs.physics.compiled_pairs`); ``SWARM_ENVS_NUMBA=0`` times the numpy pass
@@ -34,13 +35,14 @@ temporaries need about ``12 · 8 N²`` bytes). The crossover is then bisected
 the sparse core wins.
 
 ``--regime``: instead of the timing table, the regime table of ``docs/large_swarms.md``:
-for both parameter sets, N = 10 … ``--max-n`` (the dense core below
-:data:`~swarm_envs.envs.sparse_core.SPARSE_MIN_AGENTS`, the sparse core from there), the
-passive swarm (zero actions) for ``--regime-steps`` steps of ``dt = 0.1``: its state
-at the end (as above), the mean and largest substeps per step, and the seconds per
-step. A run that raises ``SwarmUnstableError`` (``on_unstable="raise"``, the default)
-is reported with the step and the message; one that exceeds ``--regime-wall`` seconds
-stops there and says so.
+for both parameter sets (``--regime-physics``), N = 10 … ``--max-n`` (or ``--sizes``;
+the dense core below :data:`~swarm_envs.envs.sparse_core.SPARSE_MIN_AGENTS`, the sparse
+core from there), the passive swarm (zero actions) for ``--regime-steps`` steps of
+``dt = 0.1``: its state at the end (as above), the mean and largest substeps per step,
+the seconds per step, and the outcome: a run that raises ``SwarmUnstableError`` (``on_unstable="raise"``,
+the default) is reported with the step and the message, one that exceeds
+``--regime-wall`` seconds stops there and says so; the state is then that of its last
+completed step.
 
 ``--kdtree``: also time the neighbour work alone (all pairs within ``r_c`` plus the
 k nearest neighbours) with the numpy cell list and with ``scipy.spatial.cKDTree``
@@ -104,13 +106,16 @@ class RunState(NamedTuple):
     drift: float  # (E − E_0) / N
     substeps: float  # mean per step
     max_substeps: float
-    error: str | None  # the SwarmUnstableError message, if the run raised
+    steps: int  # steps completed
+    error: str | None  # why the run stopped early (SwarmUnstableError, wall limit)
 
     def cells(self) -> str:
-        """The state as markdown table cells."""
-        if self.error is not None:
-            return f"{self.error} | — | — | — |"
+        """The state (after the last completed step) as markdown table cells."""
         return f"{self.nnd:.3f} | {self.expanse:.2f} | {self.drift:+.3f} | {self.substeps:.2f} |"
+
+    def outcome(self) -> str:
+        """``ok`` or why the run stopped early."""
+        return "ok" if self.error is None else self.error
 
 
 def make_core(core_cls: Core, cfg: SwarmConfig) -> SwarmNavCore:
@@ -140,6 +145,7 @@ def run_steps(
             *_, stats = core.step(a)
         except SwarmUnstableError as err:
             error = f"SwarmUnstableError at step {len(times) + 1}: {str(err).split('. To fix')[0]}"
+            error = error.replace("|", "/")
             break
         core.observe()
         times.append(time.perf_counter() - t0)
@@ -153,6 +159,7 @@ def run_steps(
         (float(stats["energy"][0]) - e0) / n,
         float(np.mean(subs)) if subs else math.nan,
         float(np.max(subs)) if subs else math.nan,
+        len(times),
         error,
     )
     return times, state
@@ -264,7 +271,14 @@ def accuracy(n: int, dim: int, cutoff_tol: float, physics: str) -> None:
             )
 
 
-def regime(dims: list[int], max_n: int, steps: int, wall: float) -> None:
+def regime(
+    dims: list[int],
+    max_n: int,
+    steps: int,
+    wall: float,
+    sizes: list[int] | None = None,
+    physics_sets: tuple[str, ...] = PHYSICS,
+) -> None:
     """The regime table (see the module docstring)."""
     print(
         f"passive swarms (zero actions), {steps} steps of dt = 0.1 from the reset (seed 0); "
@@ -272,11 +286,11 @@ def regime(dims: list[int], max_n: int, steps: int, wall: float) -> None:
     )
     print()
     head = "| physics | d | N | start radius | NND | expanse | (E − E0)/N | substeps/step "
-    head += "| max substeps | s/step |"
+    head += "| max substeps | s/step | outcome |"
     print(head)
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-    sizes = [n for n in (10, 100, 1000, 10_000, 100_000) if n <= max_n]
-    for physics in PHYSICS:
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
+    sizes = [n for n in (10, 100, 1000, 10_000, 100_000) if n <= max_n] if not sizes else sizes
+    for physics in physics_sets:
         for dim in dims:
             for n in sizes:
                 cfg = config(n, dim, physics)
@@ -284,7 +298,7 @@ def regime(dims: list[int], max_n: int, steps: int, wall: float) -> None:
                 times, state = run_steps(make_core(cls, cfg), None, steps, wall)
                 per_step = statistics.median(times) if times else math.nan
                 line = f"| {physics} | {dim} | {n:,} | {cfg.start_radius:.1f} | {state.cells()}"
-                line += f" {state.max_substeps:.0f} | {per_step:.4f} |"
+                line += f" {state.max_substeps:.0f} | {per_step:.4f} | {state.outcome()} |"
                 print(line, flush=True)
 
 
@@ -326,6 +340,7 @@ def main() -> None:
     parser.add_argument("--regime", action="store_true")
     parser.add_argument("--regime-dims", default="2,3")
     parser.add_argument("--regime-steps", type=int, default=100)
+    parser.add_argument("--regime-physics", default=",".join(PHYSICS))
     parser.add_argument("--regime-wall", type=float, default=900.0)
     args = parser.parse_args()
     SPARSE_KWARGS["cutoff_tol"] = args.cutoff_tol
@@ -333,7 +348,9 @@ def main() -> None:
     header(args)
     if args.regime:
         dims = [int(d) for d in args.regime_dims.split(",")]
-        regime(dims, args.max_n, args.regime_steps, args.regime_wall)
+        sizes = [int(n) for n in args.sizes.split(",")] if args.sizes else None
+        physics_sets = tuple(args.regime_physics.split(","))
+        regime(dims, args.max_n, args.regime_steps, args.regime_wall, sizes, physics_sets)
         return
     dim, reps, physics = args.dim, args.repeats, args.physics
     print(
