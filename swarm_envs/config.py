@@ -51,6 +51,12 @@ BACKENDS = ("auto", "numpy", "sparse", "native", "torch")
 #: What a step that goes unstable does (``SwarmConfig.on_unstable``).
 ON_UNSTABLE = ("raise", "truncate")
 
+#: Where the goal distances are measured from (``SwarmConfig.goal_distance_scale``).
+GOAL_DISTANCE_SCALES = ("absolute", "relative")
+
+#: Volume of the unit ball by dimension (start radius from a density).
+_UNIT_BALL = {2: math.pi, 3: 4.0 * math.pi / 3.0}
+
 #: Where the shipped YAML files live: ``configs/`` at the repository root, which the
 #: package holds as ``swarm_envs/configs`` (a symbolic link in the repository, the files
 #: themselves in an installed wheel), so named configs resolve after any install.
@@ -151,13 +157,28 @@ class SwarmConfig:
     """Lagrangian gradient model parameters (``dynamics="lagrangian"``); array-valued
     fields must match ``n_agents``."""
     init_radius: float = 1.5
-    """Agents start uniformly in a disc (ball) of this radius around the origin."""
+    """Agents start uniformly in a disc (ball) of this radius around the origin (unless
+    ``init_density`` is set; see :attr:`start_radius`)."""
+    init_density: float | None = None
+    """Start density in agents per unit area (``d = 2``) or volume (``d = 3``), ``> 0``;
+    ``None``: start in ``init_radius``. Set, the start radius is
+    ``R = (N / (ω_d n))^{1/d}`` (``ω_2 = π``, ``ω_3 = 4π/3``; :attr:`start_radius`), so
+    that every ``N`` starts at this density: ``R ∝ N^{1/d}``. ``init_radius`` must then
+    keep its default (give one of the two); not with ``dynamics="lagrangian"``, whose
+    start checks read ``init_radius``."""
     init_speed: float = 0.1
     """Initial velocities uniform in a disc (ball) of this speed."""
     goal_distance_min: float = 8.0
-    """Goal placed at a random bearing, at a distance drawn uniformly from [min, max]."""
+    """Goal placed at a random bearing, at a distance drawn uniformly from [min, max]
+    (measured as ``goal_distance_scale`` says)."""
     goal_distance_max: float = 12.0
     """Upper end of the goal distance range, ``≥ goal_distance_min``."""
+    goal_distance_scale: str = "absolute"
+    """Where the goal distances are measured from, one of :data:`GOAL_DISTANCE_SCALES`:
+    ``"absolute"`` from the origin (the centre of the start disc), ``"relative"`` from
+    the edge of the start disc, so the goal lies ``start_radius + U[min, max]`` from the
+    origin: ``goal_distance_min/max`` keep their meaning (how far the nearest agents
+    must travel) at every ``N``."""
     goal_radius: float = 1.5
     """An agent within this distance of the goal has arrived."""
     success_fraction: float = 1.0
@@ -248,6 +269,28 @@ class SwarmConfig:
         }
         for name, bounds in reals.items():
             object.__setattr__(self, name, check_real(owner, name, getattr(self, name), **bounds))
+        if self.init_density is not None:
+            object.__setattr__(
+                self,
+                "init_density",
+                check_real(owner, "init_density", self.init_density, low=0.0, low_inclusive=False),
+            )
+            if self.init_radius != _INIT_RADIUS_DEFAULT:
+                raise ValueError(
+                    f"{owner}.init_density ({self.init_density!r}) and init_radius "
+                    f"({self.init_radius!r}) are both set: give one (init_density sets the "
+                    "start radius from N; set init_density to None to start in init_radius)"
+                )
+            if self.dynamics == "lagrangian":
+                raise ValueError(
+                    f"{owner}.init_density must be None with dynamics='lagrangian' (its "
+                    f"start checks read init_radius), got {self.init_density!r}"
+                )
+        if self.goal_distance_scale not in GOAL_DISTANCE_SCALES:
+            raise ValueError(
+                f"{owner}.goal_distance_scale must be one of {GOAL_DISTANCE_SCALES}, got "
+                f"{self.goal_distance_scale!r}"
+            )
         if self.goal_distance_max < self.goal_distance_min:
             raise ValueError(
                 f"{owner}.goal_distance_max ({self.goal_distance_max}) must be >= "
@@ -264,6 +307,25 @@ class SwarmConfig:
                     f"this radius with non-overlapping bins (lagrangian.r), got "
                     f"{self.init_radius!r}"
                 )
+
+    @property
+    def start_radius(self) -> float:
+        """The radius of the start disc (ball): ``init_radius``, or with ``init_density``
+        set, ``(N / (ω_d · init_density))^{1/d}``.
+
+        >>> SwarmConfig().start_radius
+        1.5
+        >>> cfg = SwarmConfig(n_agents=100_000, init_density=10 / (math.pi * 1.5**2))
+        >>> round(cfg.start_radius, 6)  # 10 agents in a disc of 1.5, scaled to 100,000
+        150.0
+        """
+        if self.init_density is None:
+            return self.init_radius
+        return (self.n_agents / (_UNIT_BALL[self.dim] * self.init_density)) ** (1.0 / self.dim)
+
+
+#: ``SwarmConfig.init_radius``'s default (``init_density`` requires it unchanged).
+_INIT_RADIUS_DEFAULT = next(f.default for f in fields(SwarmConfig) if f.name == "init_radius")
 
 
 def lagrangian_min_init_radius(params: LagrangianParams, n_agents: int, dim: int) -> float:
@@ -435,6 +497,7 @@ __all__ = [
     "BACKENDS",
     "CONFIG_ROOT",
     "DYNAMICS",
+    "GOAL_DISTANCE_SCALES",
     "ON_UNSTABLE",
     "RewardWeights",
     "SwarmConfig",
