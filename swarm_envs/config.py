@@ -180,7 +180,9 @@ class SwarmConfig:
     origin: ``goal_distance_min/max`` keep their meaning (how far the nearest agents
     must travel) at every ``N``."""
     goal_radius: float = 1.5
-    """An agent within this distance of the goal has arrived."""
+    """An agent within this distance of the goal has arrived; with
+    ``goal_distance_scale="relative"`` within ``goal_radius + start_radius``, so that a
+    swarm of any ``N`` fits inside (:attr:`arrival_radius`)."""
     success_fraction: float = 1.0
     """Fraction of agents that must have arrived (at once) for success, in (0, 1]."""
     max_steps: int = 400
@@ -322,6 +324,22 @@ class SwarmConfig:
         if self.init_density is None:
             return self.init_radius
         return (self.n_agents / (_UNIT_BALL[self.dim] * self.init_density)) ** (1.0 / self.dim)
+
+    @property
+    def arrival_radius(self) -> float:
+        """The distance from the goal within which an agent has arrived: ``goal_radius``,
+        or with ``goal_distance_scale="relative"``, ``goal_radius + start_radius`` (the
+        goal region grows with the swarm as the goal distance does).
+
+        >>> SwarmConfig().arrival_radius
+        1.5
+        >>> cfg = SwarmConfig(n_agents=1000, init_density=0.3, goal_distance_scale="relative")
+        >>> round(cfg.arrival_radius - cfg.start_radius, 6)
+        1.5
+        """
+        if self.goal_distance_scale == "relative":
+            return self.goal_radius + self.start_radius
+        return self.goal_radius
 
 
 #: ``SwarmConfig.init_radius``'s default (``init_density`` requires it unchanged).

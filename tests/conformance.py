@@ -220,7 +220,7 @@ def _undecidable(core: SwarmNavCore, margin: float) -> str | None:
     if n > 1 and ((radius > 0) & (radius < 1e3 * np.finfo(np.float32).eps * scale)).any():
         return "an agent at the centroid to float32's precision (no radial direction)"
     gd = np.linalg.norm(goal[:, None, :] - x, axis=-1)
-    if (np.abs(gd - cfg.goal_radius) < tol).any():
+    if (np.abs(gd - cfg.arrival_radius) < tol).any():
         return "an agent at the goal radius"
     if n > 1:
         rho = np.linalg.norm(x[:, :, None] - x[:, None, :], axis=-1)

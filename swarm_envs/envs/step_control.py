@@ -9,7 +9,7 @@ when the env is built, with the reason.
 - Piecewise model: its rates do not depend on the state, so every step needs the same
   substeps (:func:`~swarm_envs.envs.dynamics.piecewise_substeps`).
 - Social potential model: the start. The agents start uniform in a ball of radius
-  ``R = init_radius``, so the agent at its centre feels, on average,
+  ``R = start_radius`` (``init_radius``, or from ``init_density``), so the agent at its centre feels, on average,
   ``Σ_j κ(ρ_ij) ≈ (N − 1) E[κ(ρ)]`` with ``ρ`` uniform in the ball (and the same for
   the alignment rate); the Gershgorin rates of :func:`~swarm_envs.physics.
   social_potential.pair_rates` from these sums give the substeps an average start
@@ -59,7 +59,7 @@ def start_substeps(cfg: SwarmConfig) -> int:
         return piecewise_substeps(cfg)
     if cfg.dynamics != "social_potential":
         return 1
-    p, n, R, d = cfg.physics, cfg.n_agents - 1, cfg.init_radius, cfg.dim
+    p, n, R, d = cfg.physics, cfg.n_agents - 1, cfg.start_radius, cfg.dim
     kappa = n * (
         p.C_r / p.l_r**2 * ball_mean_decay(R, p.l_r, d)
         + p.C_a / p.l_a**2 * ball_mean_decay(R, p.l_a, d)
@@ -83,12 +83,12 @@ def check_step_control(cfg: SwarmConfig) -> None:
         what = "every step of the piecewise model (its stiffness is fixed by its parameters)"
     else:
         what = (
-            f"an average start of {cfg.n_agents} agents in a ball of init_radius="
-            f"{cfg.init_radius:g}"
+            f"an average start of {cfg.n_agents} agents in a ball of radius "
+            f"{cfg.start_radius:g} (init_radius or init_density)"
         )
     raise ValueError(
         f"predictably unstable config: {what} needs about {needed} substeps of dt={cfg.dt:g} "
         f"for a stable integration, more than max_substeps={cfg.max_substeps}. Raise "
-        f"max_substeps, lower dt, start less dense (init_radius), or soften the physics "
+        f"max_substeps, lower dt, start less dense (init_radius or init_density), or soften the physics "
         f"(docs/models.md §7)"
     )

@@ -120,7 +120,7 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
     const REAL C_o = (REAL)P->physics_C_o;
     const REAL beta = (REAL)P->physics_beta, C_g = (REAL)P->physics_C_g;
     const REAL l_g = (REAL)P->physics_l_g;
-    const REAL goal_radius = (REAL)P->goal_radius;
+    const REAL goal_radius = (REAL)P->arrival_radius;
     const REAL collision_radius = (REAL)P->collision_radius;
     const REAL goal_scale = (REAL)P->obs_goal_scale, vel_scale = (REAL)P->obs_velocity_scale;
     const REAL inv_nbr_scale = (REAL)(1.0 / P->obs_neighbor_scale);
