@@ -123,6 +123,8 @@ def field_strategies(dynamics: tuple[str, ...] = ("social_potential",)) -> dict[
         "on_unstable": st.just("truncate"),
         "dynamics": st.sampled_from(dynamics),
         "init_radius": _real(0.3, 4.0),
+        "init_density": st.one_of(st.none(), _real(0.2, 3.0)),
+        "goal_distance_scale": st.sampled_from(("absolute", "relative")),
         "init_speed": _real(0.0, 1.0),
         "goal_distance_min": _real(0.0, 6.0),
         "goal_distance_max": _real(0.0, 6.0),  # added to the minimum
@@ -166,8 +168,11 @@ def configs(draw: Any, dynamics: tuple[str, ...] = ("social_potential",)) -> Swa
             fields[name] = draw(strategy)
     fields["goal_distance_max"] += fields["goal_distance_min"]
     if fields["dynamics"] == "lagrangian":
+        fields["init_density"] = None  # its start checks read init_radius
         fields["lagrangian"] = {"r": 0.01}  # bins small enough for any start radius
         fields["init_radius"] = max(fields["init_radius"], 0.1 * fields["n_agents"])
+    if fields["init_density"] is not None:
+        fields.pop("init_radius")  # one of the two sets the start radius
     return config_from_mapping(SwarmConfig, fields)
 
 

@@ -201,11 +201,12 @@ def test_undefined_measures_are_null_and_shown_as_a_dash(tmp_path):
 
 
 def test_unstable_episodes_are_truncated_and_counted():
-    cfg = SwarmConfig(n_agents=3, dt=1.0, max_substeps=2, max_steps=20, on_unstable="truncate")
+    # an average start fits the cap (3 substeps), but the passive swarm contracts
+    cfg = SwarmConfig(n_agents=3, dt=1.0, max_substeps=3, max_steps=20, on_unstable="truncate")
     b = run_episodes(ZeroController(cfg), cfg, 2, seed=0)
     assert b.unstable.tolist() == [True, True] and not b.success.any()
     assert np.all(b.integrated == b.lengths - 1)  # the unstable step was undone
-    assert np.all(b.substeps == 2.0 * b.integrated)
+    assert np.all(b.integrated <= b.substeps) and np.all(b.substeps <= 3.0 * b.integrated)
     with pytest.raises(SwarmUnstableError, match="on_unstable='truncate'"):
         run_episodes(ZeroController(cfg), replace(cfg, on_unstable="raise"), 2, seed=0)
 

@@ -113,6 +113,10 @@ DEFAULT_CUTOFF_SPEED = 1.0
 #: the step's guard catches.
 MAX_SPAN = 2**24
 
+#: The smallest pair-search radius: a swarm within ``MAX_SPAN`` of the origin then spans
+#: fewer cells than a cell list holds.
+MIN_SEARCH_RADIUS = 0.25
+
 __all__ = [
     "DEFAULT_CUTOFF_SPEED",
     "DEFAULT_CUTOFF_TOL",
@@ -372,9 +376,11 @@ class SparseSwarmNavCore(SwarmNavCore):
             return out
         cfg, p = self.cfg, self.cfg.physics
         b, N, d = x.shape
-        sums = compiled_pairs.swarm_pair_sums(
-            x, velocity, p, max(self.cutoff, cfg.collision_radius), cfg.collision_radius
-        )
+        # The search radius is at least MIN_SEARCH_RADIUS: a tinier cut-off (physics with
+        # no interaction, no collision radius) would ask for more cells than a grid holds;
+        # the pairs it adds beyond r_c only make the sums more exact.
+        radius = max(self.cutoff, cfg.collision_radius, MIN_SEARCH_RADIUS)
+        sums = compiled_pairs.swarm_pair_sums(x, velocity, p, radius, cfg.collision_radius)
         assert sums.kappa is not None and sums.damping is not None
         force = sums.force.astype(self.dtype, copy=False)
         kappa, damping = sums.kappa, sums.damping
