@@ -9,12 +9,13 @@ when the env is built, with the reason.
 - Piecewise model: its rates do not depend on the state, so every step needs the same
   substeps (:func:`~swarm_envs.envs.dynamics.piecewise_substeps`).
 - Social potential model: the start. The agents start uniform in a ball of radius
-  ``R = start_radius`` (``init_radius``, or from ``init_density``), so the agent at its centre feels, on average,
-  ``Σ_j κ(ρ_ij) ≈ (N − 1) E[κ(ρ)]`` with ``ρ`` uniform in the ball (and the same for
-  the alignment rate); the Gershgorin rates of :func:`~swarm_envs.physics.
-  social_potential.pair_rates` from these sums give the substeps an average start
-  needs (:func:`start_substeps`). A config whose average start already needs more than
-  ``max_substeps`` is refused; dissipation alone (``γ ≥ β/m``) is part of it.
+  ``R = start_radius`` (``init_radius``, or from ``init_density``), so the agent at
+  its centre feels, on average, ``Σ_j κ(ρ_ij) ≈ (N − 1) E[κ(ρ)]`` with ``ρ`` uniform
+  in the ball (and the same for the alignment rate); the Gershgorin rates of
+  :func:`~swarm_envs.physics.social_potential.pair_rates` from these sums give the
+  substeps an average start needs (:func:`start_substeps`). A config whose average
+  start already needs more than ``max_substeps`` is refused; dissipation alone
+  (``γ ≥ β/m``) is part of it.
 - The zone model is a discrete-time model (its turn per step is part of the model) and
   the Lagrangian model has its own safe substep: nothing to predict.
 """
@@ -89,6 +90,6 @@ def check_step_control(cfg: SwarmConfig) -> None:
     raise ValueError(
         f"predictably unstable config: {what} needs about {needed} substeps of dt={cfg.dt:g} "
         f"for a stable integration, more than max_substeps={cfg.max_substeps}. Raise "
-        f"max_substeps, lower dt, start less dense (init_radius or init_density), or soften the physics "
-        f"(docs/models.md §7)"
+        f"max_substeps, lower dt, start less dense (init_radius or init_density), or soften "
+        f"the physics (docs/models.md §7)"
     )
