@@ -297,10 +297,16 @@ def substep_counts(cfg: SwarmConfig, batch: int, steps: int) -> np.ndarray:
 
 @pytest.mark.parametrize("integrator", ["semi_implicit_euler", "velocity_verlet"])
 @pytest.mark.parametrize("goal_in_physics", [False, True])
-def test_follows_the_dense_substeps(integrator: str, goal_in_physics: bool) -> None:
+@pytest.mark.parametrize("pair_pass", ["auto", "numpy"])
+def test_follows_the_dense_substeps(
+    integrator: str, goal_in_physics: bool, pair_pass: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """A config that needs several substeps per step, different ones per swarm: the
     sparse core takes the dense core's substeps and follows its trajectory (no pair
-    dropped), through a partial reset."""
+    dropped), through a partial reset; with the compiled pair pass where numba imports,
+    and with the numpy one."""
+    if pair_pass == "numpy":
+        monkeypatch.setenv("SWARM_ENVS_NUMBA", "0")
     cfg = SwarmConfig(
         n_agents=40,
         dt=0.3,
