@@ -39,10 +39,10 @@ for both parameter sets (``--regime-physics``), N = 10 … ``--max-n`` (or ``--s
 the dense core below :data:`~swarm_envs.envs.sparse_core.SPARSE_MIN_AGENTS`, the sparse
 core from there), the passive swarm (zero actions) for ``--regime-steps`` steps of
 ``dt = 0.1``: its state at the end (as above), the mean and largest substeps per step,
-the seconds per step, and the outcome: a run that raises ``SwarmUnstableError`` (``on_unstable="raise"``,
-the default) is reported with the step and the message, one that exceeds
-``--regime-wall`` seconds stops there and says so; the state is then that of its last
-completed step.
+the seconds per step, and the outcome: a run that raises ``SwarmUnstableError``
+(``on_unstable="raise"``, the default) is reported with the step and the message, one
+that exceeds ``--regime-wall`` seconds stops there and says so; the state is then that
+of its last completed step.
 
 ``--kdtree``: also time the neighbour work alone (all pairs within ``r_c`` plus the
 k nearest neighbours) with the numpy cell list and with ``scipy.spatial.cKDTree``
