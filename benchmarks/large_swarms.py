@@ -40,9 +40,9 @@ the dense core below :data:`~swarm_envs.envs.sparse_core.SPARSE_MIN_AGENTS`, the
 core from there), the passive swarm (zero actions) for ``--regime-steps`` steps of
 ``dt = 0.1``: its state at the end (as above), the mean and largest substeps per step,
 the seconds per step, and the outcome: a run that raises ``SwarmUnstableError``
-(``on_unstable="raise"``, the default) is reported with the step and the message, one that exceeds
-``--regime-wall`` seconds stops there and says so; the state is then that of its last
-completed step.
+(``on_unstable="raise"``, the default) is reported with the step and the message, one
+that exceeds ``--regime-wall`` seconds stops there and says so; the state is then that
+of its last completed step.
 
 ``--kdtree``: also time the neighbour work alone (all pairs within ``r_c`` plus the
 k nearest neighbours) with the numpy cell list and with ``scipy.spatial.cKDTree``

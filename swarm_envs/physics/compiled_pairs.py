@@ -1,10 +1,14 @@
 """The cell list's two hot loops compiled with numba, when numba imports: the cut-off pair
-pass (:func:`cell_pair_sums`) and the k-nearest round (:func:`knearest_round`).
+pass (:func:`cell_pair_sums`) and the k-nearest round (:func:`knearest_round`); and
+:func:`swarm_pair_sums`, the sparse core's pass over a batch of swarms (this pass, or
+the numpy one without numba).
 
 :func:`cell_pair_sums` gives exactly what feeding every chunk of
 :meth:`swarm_envs.physics.neighbors.CellList.iter_pairs` to a
-:class:`swarm_envs.physics.cutoff.PairAccumulator` gives (the forces, pair potential and
-close pairs of every unordered pair within the radius), to float64 round-off. Both apply
+:class:`swarm_envs.physics.pair_sums.PairAccumulator` gives (the forces, pair potential,
+close pairs and, with ``rates``, each point's sums of the step-size rule's rates
+:func:`~swarm_envs.physics.social_potential.rate_law`, over every unordered pair within
+the radius), to float64 round-off. Both apply
 the one pair law, :func:`swarm_envs.physics.social_potential.pair_law` (``docs/models.md``
 §1, eqs. 9–11): the numpy pass to chunks of candidates (about 40 array passes over
 65,536 candidates at a time, bound by memory traffic), this one to each candidate once,
@@ -22,14 +26,17 @@ may come in another order (the numpy round's ``argpartition`` breaks such ties
 arbitrarily too).
 
 In :func:`cell_pair_sums` the points are split into :data:`BLOCKS` blocks of consecutive
-sorted positions, each summed into its own buffer by whichever thread takes it
-(``numba.prange``), and the buffers are added in block order: the result does not
-depend on the number of threads. Both loops are ``O(M)`` in the number of points ``M``
-at bounded density (``O(M)`` candidates of the cell runs, each visited once).
+sorted positions, each summed by whichever thread takes it (``numba.prange``) into its
+own window of a buffer (the positions from its first point to the farthest run end of
+its points: about ``M`` columns in all plus the blocks' overlaps), and the windows are
+added in block order: the result does not depend on the number of threads. Both loops
+are ``O(M)`` in the number of points ``M`` at bounded density (``O(M)`` candidates of
+the cell runs, each visited once).
 Without numba (it is optional: ``pip install swarm-envs[fast]``) :data:`AVAILABLE` is
 false and the callers keep the numpy pass; ``SWARM_ENVS_NUMBA=0`` forces that too.
 The first call compiles (cached on disk by numba where it can write; the pair kernel's
-cache entry is keyed on ``pair_law``'s code too, so a change of the law recompiles).
+cache entry is keyed on the code of ``pair_law`` and ``rate_law`` too, so a change of
+either law recompiles).
 Calls are serialised by a lock (numba's fallback threading layer, workqueue, does not
 allow concurrent parallel calls). Its OpenMP layer is not fork-safe: processes that use
 the sparse core after a fork should be started with ``spawn`` or ``forkserver`` (as
