@@ -70,8 +70,8 @@ def unstable_message(
     if cfg.dynamics == "social_potential":
         hint += (
             ", use fewer agents or an H-stable parameter set (physics with C_r/C_a * "
-            "(l_r/l_a)^2 > 1, e.g. SocialPotentialParams.large_swarm()), or start less "
-            "dense (init_radius)"
+            "(l_r/l_a)^d > 1 in d dimensions, e.g. SocialPotentialParams.large_swarm()), "
+            "or start less dense (init_radius or init_density)"
         )
     return (
         f"unstable step ({where}, {cfg.n_agents} agents, dynamics={cfg.dynamics!r}): {cause}. "
