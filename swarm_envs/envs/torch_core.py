@@ -10,16 +10,25 @@ same seed and actions give the same starts, and the same observations, rewards a
 statistics as the numpy core to floating-point tolerance.
 
 The passive force of the current state is carried from one step to the next, so each
-step evaluates the pairs once. A reset (or assigning ``x``, ``v`` or ``goal``)
-re-evaluates the same function with the integration switched off, so the observations,
+step evaluates the pairs once; so is the stable substep ``h*`` of the step-size control
+(computed in the same pass; :mod:`swarm_envs.physics.integrators`). When every swarm's
+``h*`` allows the whole ``dt`` in one substep, the step is that one fused call. Otherwise
+the substeps run through a second compiled function (update, force and ``h*`` only;
+:func:`~swarm_envs.envs.torch_step.build_substep`), each swarm its own count, with one
+check of a ``(B,)`` flag on the host per substep, and the fused function then measures
+the new state without moving it. The substep counts, the cap ``max_substeps`` and the
+unstable guard (``on_unstable``) are the numpy core's.
+
+A reset (or assigning ``x``, ``v`` or ``goal``) re-evaluates the same function with the integration switched off, so the observations,
 statistics and carried force always describe the current state. A reset of a few swarms
 (at most :attr:`TorchSwarmNavCore.reset_batch`, 1/16 of a batch of 64 or more) evaluates
 them alone, through the same function compiled for that sub-batch: in a VecEnv some
 swarm ends on most steps.
 
-Compile time: the constructor makes the first (compiling) call, on the all-zero state,
-and stores its wall time in :attr:`TorchSwarmNavCore.compile_seconds`; steps never
-compile. Shapes are static: the function is compiled for this core's ``(batch, N, d)``.
+Compile time: the constructor makes the first (compiling) calls of both functions, on
+the all-zero state, and stores their wall time in
+:attr:`TorchSwarmNavCore.compile_seconds`; steps never compile. Shapes are static: the
+functions are compiled for this core's ``(batch, N, d)``.
 
 Host and device: actions arrive as numpy (or as a torch tensor, kept on the device),
 state stays on ``device``; per step the ``(B, S)`` statistics and the rewards come back,
@@ -28,6 +37,9 @@ copying; from a GPU into page-locked memory). The starts are drawn on the host w
 numpy generator, as every core draws them, then moved to the device. On a GPU the
 compiled step is captured once as a CUDA graph (:class:`~swarm_envs._runtime.
 torch_compile.CudaGraphed`) and replayed each step: one launch instead of one per kernel.
+The substep function runs compiled but not captured (its count varies from step to
+step), and the state before a step is kept for the unstable guard (the graph's inputs,
+or a copy when substeps follow).
 """
 
 from __future__ import annotations
@@ -41,14 +53,18 @@ import torch
 from swarm_envs._runtime.torch_compile import CudaGraphed, MaybeCompiled
 from swarm_envs.envs.common import (
     NON_FINITE_ACTIONS,
+    SwarmUnstableError,
     check_actions,
     check_batch,
     check_dtype,
     draw_starts,
+    unstable_message,
+    unstable_swarms,
     wide_dtypes,
 )
 from swarm_envs.envs.task import STAT_KEYS, observation_size
-from swarm_envs.envs.torch_step import build_advance
+from swarm_envs.envs.torch_step import PACKED_KEYS, build_advance, build_substep
+from swarm_envs.physics.integrators import substep_plan
 
 __all__ = ["PARTIAL_RESET_MIN_BATCH", "TorchSwarmNavCore", "partial_reset_batch"]
 
@@ -60,6 +76,12 @@ PARTIAL_RESET_MIN_BATCH = 64
 #: Pair evaluations per step (``B·N²``) up to which the compiled CPU step runs on one
 #: thread: below it the threads' synchronisation costs more than they share.
 SINGLE_THREAD_PAIRS = 8192
+
+#: Columns of the packed row: the stable substep, and the statistics a reset zeroes for
+#: every swarm (as the numpy core's measure of a reset does).
+_H_STABLE = PACKED_KEYS.index("h_stable")
+_SUBSTEPS = STAT_KEYS.index("substeps")
+_UNSTABLE = STAT_KEYS.index("unstable")
 
 
 def partial_reset_batch(batch: int) -> int | None:
@@ -149,21 +171,30 @@ class TorchSwarmNavCore:
         # State component first, (d, B, N): the layout the fused step vectorises.
         self._x, self._v, self._f = zeros(d, B, N), zeros(d, B, N), zeros(d, B, N)
         self._goal = zeros(B, d)
-        S = len(STAT_KEYS)
-        self._prev, self._start = zeros(B, S), zeros(B, S)
+        P = len(PACKED_KEYS)
+        self._prev, self._start = zeros(B, P), zeros(B, P)
         self._no_action = zeros(B, N, d)
         self._move_all = torch.ones(B, dtype=torch.bool, device=self.device)
         self._move_none = torch.zeros(B, dtype=torch.bool, device=self.device)
+        self._one_each, self._none_each = self._zeros(B) + 1.0, zeros(B)
+        # The substeps statistic of the current state (the last step's count, 0 after a
+        # reset), and the swarms its step truncated as unstable (host indices, or None).
+        self._counted = self._none_each
+        self._flagged: np.ndarray | None = None
         self._compile_request = compile
         self._advance = self._build(self.batch, compile, "TorchSwarmNavCore.step")
+        self._substep = self._build(
+            self.batch, self._advance.compiled, "TorchSwarmNavCore.substep", build_substep
+        )
         self._obs = torch.empty(0)
         self._obs_given = False  # observe() handed out the current observations
         self._obs_shared = False  # observe_tensor() did
         self._packed = torch.empty(0)
-        self._packed_host: np.ndarray = np.empty((0, S))
+        self._packed_host: np.ndarray = np.empty((0, P))
         self._reward = torch.empty(0)
         self._graphed: CudaGraphed | None = None
         self._measure(warmup=True)
+        self._substep.warmup(*self._substep_args(self._no_action))
         if self.device.type == "cuda" and self._advance.compiled:
             # One replay instead of a launch per kernel (captured here, never in a step).
             self._graphed = CudaGraphed(self._advance, self._args(self._no_action, self._move_none))
@@ -189,8 +220,11 @@ class TorchSwarmNavCore:
             return f"supports integrator='semi_implicit_euler' only, got {cfg.integrator!r}"
         return None
 
-    def _build(self, batch: int, compile: bool | str, name: str) -> MaybeCompiled:
-        """The fused function for ``batch`` swarms, compiled or plain.
+    def _build(
+        self, batch: int, compile: bool | str, name: str, build: Any = build_advance
+    ) -> MaybeCompiled:
+        """The fused function (or, with ``build=build_substep``, the substep function)
+        for ``batch`` swarms, compiled or plain.
 
         The neighbour indices come from ``nearest_neighbors``, always in range: no bound
         checks on the gathers. On the CPU a small step (at most
@@ -200,12 +234,12 @@ class TorchSwarmNavCore:
         if self.device.type == "cpu" and batch * self.cfg.n_agents**2 <= SINGLE_THREAD_PAIRS:
             options["cpp.threads"] = 1
         return MaybeCompiled(
-            build_advance(self.cfg),
+            build(self.cfg),
             compile=compile,
             device=self.device,
             name=name,
             options=options,
-            key=("TorchSwarmNavCore", repr(self.cfg), batch, str(self.dtype), str(self.device)),
+            key=(name, repr(self.cfg), batch, str(self.dtype), str(self.device)),
         )
 
     # ------------------------------------------------------------------ helpers
@@ -225,18 +259,31 @@ class TorchSwarmNavCore:
     @property
     def compile_seconds(self) -> float | None:
         """Wall time of the constructor's first calls (the compile time when compiled):
-        the step's function, plus the partial reset's when there is one."""
+        the step's function and the substep function, plus the partial reset's when
+        there is one."""
         seconds = self._advance.compile_seconds
-        part = self._advance_part
-        if seconds is not None and part is not None and part.compile_seconds is not None:
-            seconds += part.compile_seconds
+        for other in (self._substep, self._advance_part):
+            if seconds is not None and other is not None and other.compile_seconds is not None:
+                seconds += other.compile_seconds
         return seconds
 
     def _args(self, a: torch.Tensor, move: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """The fused function's arguments for the whole batch."""
-        return (self._x, self._v, self._f, self._goal, a, move, self._prev, self._start)
+        return (
+            self._x,
+            self._v,
+            self._f,
+            self._goal,
+            a,
+            move,
+            self._counted,
+            self._prev,
+            self._start,
+        )
 
     def _run(self, a: torch.Tensor, move: torch.Tensor, warmup: bool = False) -> None:
+        """The fused function on the whole batch; the swarms :attr:`_flagged` keep their
+        ``unstable`` mark."""
         args = self._args(a, move)
         if self._graphed is not None:
             # The graph's outputs are overwritten by its next replay: the state is only
@@ -246,6 +293,9 @@ class TorchSwarmNavCore:
         else:
             out = self._advance.warmup(*args) if warmup else self._advance(*args)
             self._x, self._v, self._f, self._obs, self._packed, self._reward, _ = out
+        if self._flagged is not None:  # a fresh tensor (or the graph's output's copy)
+            rows = torch.as_tensor(self._flagged, device=self.device)
+            self._packed[rows, _UNSTABLE] = 1.0
         self._packed_host = self._packed.cpu().numpy()
         self._obs_given = self._obs_shared = False
 
@@ -263,6 +313,7 @@ class TorchSwarmNavCore:
             self._goal[rows],
             self._no_action[:n],
             self._move_none[:n],
+            self._none_each[:n],
             self._prev[rows],
             self._start[rows],
         )
@@ -271,7 +322,9 @@ class TorchSwarmNavCore:
         """:meth:`_measure` for swarms ``rows`` (at most :attr:`reset_batch`) only.
 
         The rows are padded to ``reset_batch`` with copies of the first; the results of
-        the real ones are written into the force, observations and statistics.
+        the real ones are written into the force, observations and statistics; the
+        ``substeps`` and ``unstable`` statistics of every swarm become 0, as a reset's
+        measure of the whole batch makes them.
         """
         assert self._advance_part is not None and self.reset_batch is not None
         n = rows.shape[0]
@@ -283,7 +336,9 @@ class TorchSwarmNavCore:
             self._obs = self._obs.clone()
             self._obs_given = self._obs_shared = False
         self._obs[rows] = obs[:n]
-        self._packed = self._packed.index_put((rows,), packed[:n])
+        self._packed = self._packed.index_put((rows,), packed[:n])  # a new tensor
+        self._packed[:, _SUBSTEPS] = 0.0
+        self._packed[:, _UNSTABLE] = 0.0
         self._packed_host = self._packed.cpu().numpy()
 
     # ------------------------------------------------------------------ reset
@@ -295,6 +350,7 @@ class TorchSwarmNavCore:
             return
         x, v, goal = draw_starts(self.cfg, rng, idx.size)
         self.t[idx] = 0
+        self._counted, self._flagged = self._none_each, None
         # Out of place: the old tensors may share memory with arrays handed out.
         rows = torch.as_tensor(idx, device=self.device)
         self._x = self._put(self._x, rows, x)
@@ -355,15 +411,108 @@ class TorchSwarmNavCore:
             ``(reward (B,), terminated (B,), truncated (B,), stats)`` as numpy arrays,
             ``stats`` mapping each of ``STAT_KEYS`` to a ``(B,)`` array.
         """
+        cfg, B = self.cfg, self.batch
         a = self._actions(actions)
-        self._run(a, self._move_all)
-        self._prev = self._packed
+        plan = self._first_plan()
+        self._flagged = None
+        if plan is None or cfg.max_substeps == 1:
+            # Every swarm in one substep of dt (with max_substeps = 1 also those that
+            # need more: past the cap, marked): the fused step alone.
+            before = (self._x, self._v)
+            self._counted = self._one_each
+            self._run(a, self._move_all)
+            if self._graphed is not None:  # its outputs were overwritten, not its inputs
+                before = self._graphed.inputs[0], self._graphed.inputs[1]
+            if plan is None:
+                over, needed = np.zeros(B, dtype=bool), np.ones(B)
+            else:
+                over, needed = plan > 1, plan
+        else:
+            before = (self._x, self._v)
+            if self._graphed is not None:  # graph outputs: the measure below overwrites
+                before = before[0].clone(), before[1].clone()
+            over, needed = self._substeps(a)
+            self._run(a, self._move_none)  # measure the new state, substeps counted
         self.t += 1
         stats = self.stats()
+        bad = unstable_swarms(stats, over)
+        if bad.any():
+            stats = self._unstable(a, bad, before, stats, needed)
+        self._prev = self._packed
         reward = self._reward.cpu().numpy().astype(np.float64)
         success = stats["success"].astype(bool)
-        truncated = (self.t >= self.cfg.max_steps) & ~success
+        truncated = (self.t >= cfg.max_steps) & ~success
+        if bad.any():
+            reward[bad], success[bad], truncated[bad] = 0.0, False, True
         return reward, success, truncated, stats
+
+    def _first_plan(self) -> np.ndarray | None:
+        """``None`` when every swarm takes the whole ``dt`` in one substep (its carried
+        ``h*`` allows it; the common case, decided by one comparison), else the substeps
+        each needs ``(B,)`` (:func:`~swarm_envs.physics.integrators.substep_plan`)."""
+        dt = np.float64(self.cfg.dt)
+        h_stable = self._packed_host[:, _H_STABLE]
+        if not (h_stable < dt).any():  # h* >= dt: one substep (exactly, in float64)
+            return None
+        n, _ = substep_plan(np.full(self.batch, dt), h_stable.astype(np.float64))
+        return n if (n > 1).any() else None
+
+    def _substep_args(self, a: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """The substep function's arguments at the start of a step with actions ``a``."""
+        B, device, wide = self.batch, self.device, torch.float64
+        return (
+            self._x,
+            self._v,
+            self._f,
+            self._packed[:, _H_STABLE].contiguous(),
+            self._goal,
+            a,
+            torch.full((B,), self.cfg.dt, dtype=wide, device=device),
+            torch.zeros(B, dtype=wide, device=device),
+            torch.zeros(B, dtype=torch.bool, device=device),
+            torch.zeros(B, dtype=wide, device=device),
+        )
+
+    def _substeps(self, a: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+        """Take the step's substeps, every swarm until its ``dt`` is spent (at most
+        ``max_substeps``); sets the state and :attr:`_counted`, and returns ``(over_cap,
+        needed)`` per swarm on the host, as the numpy core counts them."""
+        x, v, f, h, _, _, remaining, used, over, needed = self._substep_args(a)
+        for _ in range(self.cfg.max_substeps):
+            x, v, f, h, remaining, used, over, needed = self._substep(
+                x, v, f, h, self._goal, a, remaining, used, over, needed
+            )
+            if not bool((remaining > 0).any()):
+                break
+        else:  # the cap spends every swarm's time in at most max_substeps
+            raise RuntimeError("substeps left after max_substeps substeps")
+        self._x, self._v, self._f = x, v, f
+        self._counted = used.to(self._tdtype)
+        counts = torch.stack([over.to(needed.dtype), needed]).cpu().numpy()
+        return counts[0] > 0, counts[1]
+
+    def _unstable(
+        self,
+        a: torch.Tensor,
+        bad: np.ndarray,
+        before: tuple[torch.Tensor, torch.Tensor],
+        stats: dict[str, np.ndarray],
+        needed: np.ndarray,
+    ) -> dict[str, np.ndarray]:
+        """Raise :class:`~swarm_envs.envs.common.SwarmUnstableError`, or (``on_unstable=
+        "truncate"``) put the swarms ``bad`` back to their state ``before`` the step,
+        re-measured and marked ``unstable``; returns the statistics then."""
+        cfg = self.cfg
+        if cfg.on_unstable == "raise":
+            raise SwarmUnstableError(unstable_message(cfg, stats, bad, needed, self.t))
+        idx = np.flatnonzero(bad)
+        rows = torch.as_tensor(idx, device=self.device)
+        self._x, self._v = self._x.clone(), self._v.clone()  # out of place, as a reset
+        self._x[:, rows], self._v[:, rows] = before[0][:, rows], before[1][:, rows]
+        self._counted = self._counted.index_put((rows,), self._none_each[rows])  # undone
+        self._flagged = idx
+        self._run(a, self._move_none)
+        return self.stats()
 
     # ------------------------------------------------------------------ views
     def stats(self) -> dict[str, np.ndarray]:
@@ -463,9 +612,10 @@ class TorchSwarmNavCore:
             "device": str(self.device),
             "compile": self._compile_request,
             "t": self.t.copy(),
+            "flagged": self._flagged,
             "tensors": {
                 name: getattr(self, name).detach().cpu()
-                for name in ("_x", "_v", "_goal", "_prev", "_start")
+                for name in ("_x", "_v", "_goal", "_prev", "_start", "_counted")
             },
         }
 
@@ -473,7 +623,7 @@ class TorchSwarmNavCore:
         self.__init__(  # type: ignore[misc]
             state["cfg"], state["batch"], state["dtype"], state["device"], state["compile"]
         )
-        self.t = state["t"]
+        self.t, self._flagged = state["t"], state["flagged"]
         for name, tensor in state["tensors"].items():
             setattr(self, name, tensor.to(self.device))
         self._measure()

@@ -6,6 +6,14 @@ runs (through ``torch.compile`` where it can, plain otherwise; see
 core, on tensors: the Euler update and the pair law of :mod:`swarm_envs.physics`, and the
 statistics, observation and reward of :mod:`swarm_envs.envs.task`. What is torch's own
 here is how the k nearest neighbours are found (:func:`nearest_neighbors`).
+
+Step-size control (:mod:`swarm_envs.physics.integrators`): the fused step also computes
+the stable substep ``h*`` of the new state (the rates of
+:func:`~swarm_envs.physics.social_potential.pair_rates`, in the same pair loop as the
+force) and returns it as the last column of its packed row, after the statistics
+(:data:`PACKED_KEYS`). A step whose swarms all fit in one substep is that one fused call;
+otherwise :func:`build_substep` takes the substeps, each swarm its own, and the fused
+function measures the result without moving it.
 """
 
 from __future__ import annotations
@@ -27,10 +35,20 @@ from swarm_envs.envs.task import (
     statistics,
 )
 from swarm_envs.physics import kinetic_energy
-from swarm_envs.physics.integrators import euler_update
-from swarm_envs.physics.social_potential import goal_terms, pair_geometry, pair_terms
+from swarm_envs.physics.integrators import euler_update, stable_substep, substep_plan
+from swarm_envs.physics.social_potential import (
+    PairGeometry,
+    goal_terms,
+    pair_geometry,
+    pair_rates,
+    pair_terms,
+)
 
-__all__ = ["build_advance", "nearest_neighbors"]
+__all__ = ["PACKED_KEYS", "build_advance", "build_substep", "nearest_neighbors"]
+
+#: The columns of the fused step's packed row per swarm: the statistics (``STAT_KEYS``),
+#: then the stable substep ``h*`` of the state (``"h_stable"``).
+PACKED_KEYS = (*STAT_KEYS, "h_stable")
 
 
 def nearest_neighbors(rho: torch.Tensor, k: int) -> tuple[torch.Tensor, torch.Tensor]:
@@ -81,31 +99,63 @@ def _by_rank(planes: list[torch.Tensor]) -> torch.Tensor:
     return torch.stack(planes, dim=0).permute(1, 2, 0)
 
 
+def _passive(
+    geo: PairGeometry,
+    xs: list[torch.Tensor],
+    vs: list[torch.Tensor],
+    goal: torch.Tensor,
+    cfg: Any,
+    energy: bool,
+) -> tuple[list[torch.Tensor], torch.Tensor | None, torch.Tensor, torch.Tensor]:
+    """The passive force at ``(x, v)`` per component, the pair energy (``None`` without
+    ``energy``), and the goal sink's potential and distances per agent
+    (:func:`~swarm_envs.physics.social_potential.goal_terms`), for the numpy core's
+    semi-implicit Euler force."""
+    p = cfg.physics
+    fs, pairs = pair_terms(geo, vs, p, energy=energy)
+    if p.beta > 0:
+        fs = [fc - p.beta * vc for fc, vc in zip(fs, vs, strict=True)]
+    sink, potential, goal_distance = goal_terms(xs, p, goal)
+    if cfg.goal_in_physics and p.C_g > 0:
+        fs = [fc + gc for fc, gc in zip(fs, sink, strict=True)]
+    return fs, pairs, potential, goal_distance
+
+
+def _stable(geo: PairGeometry, cfg: Any) -> torch.Tensor:
+    """The stable substep ``h*`` ``(B,)`` of the state of ``geo`` (the shared rule)."""
+    p = cfg.physics
+    omega2, gamma = pair_rates(geo, p, sink=cfg.goal_in_physics and p.C_g > 0)
+    return stable_substep(omega2, gamma, torch)
+
+
 def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
     """The fused SwarmNav step for config ``cfg`` (social potential, semi-implicit Euler).
 
-    ``advance(x, v, f, goal, a, move, prev, start)`` with positions, velocities and the
-    passive force at ``(x, v)`` stored component first, ``(d, B, N)``, so that every
-    per-agent quantity is a contiguous ``(B, N)`` plane (the layout on which a compiler
-    vectorises the pair loop); goals ``(B, d)``; actions ``a`` ``(B, N, d)`` clipped to
-    [−1, 1]; ``move`` ``(B,)`` bool (false: keep that swarm's state, only measure it);
-    ``prev`` and ``start`` ``(B, S)``: the previous step's and the episode start's
-    statistics in the order of ``STAT_KEYS``. Returns ``(x', v', f' (d, B, N), obs (B, N,
-    obs_dim) float32, stats (B, S), reward (B,), ρ (B, N, N))``; the distances (``inf`` on
-    the diagonal) are returned only so that a compiler stores them once (callers drop
-    them).
+    ``advance(x, v, f, goal, a, move, substeps, prev, start)`` with positions, velocities
+    and the passive force at ``(x, v)`` stored component first, ``(d, B, N)``, so that
+    every per-agent quantity is a contiguous ``(B, N)`` plane (the layout on which a
+    compiler vectorises the pair loop); goals ``(B, d)``; actions ``a`` ``(B, N, d)``
+    clipped to [−1, 1]; ``move`` ``(B,)`` bool (false: keep that swarm's state, only
+    measure it); ``substeps`` ``(B,)``: the ``substeps`` statistic to report (the step's
+    count, 0 after a reset); ``prev`` and ``start`` ``(B, P)``: the previous step's and
+    the episode start's packed rows (:data:`PACKED_KEYS`). Returns ``(x', v', f' (d, B,
+    N), obs (B, N, obs_dim) float32, packed (B, P), reward (B,), ρ (B, N, N))``; the
+    distances (``inf`` on the diagonal) are returned only so that a compiler stores them
+    once (callers drop them).
 
-    The step: ``v' = v + dt (f + u_max a)/m``, ``x' = x + dt v'``; then one pass over
-    the pairs of ``(x', v')`` gives the passive force carried into the next step and the
-    pair energy (:func:`~swarm_envs.physics.social_potential.pair_terms`); the ranked
-    neighbours come from the distances; the statistics, observation and reward are the
-    shared definitions.
+    The step, one substep of the whole ``dt`` (the caller takes this path when every
+    swarm's stable substep allows it): ``v' = v + dt (f + u_max a)/m``, ``x' = x + dt v'``;
+    then one pass over the pairs of ``(x', v')`` gives the passive force carried into the
+    next step, the pair energy (:func:`~swarm_envs.physics.social_potential.pair_terms`)
+    and the rates of the stable substep ``h*``
+    (:func:`~swarm_envs.physics.social_potential.pair_rates`); the ranked neighbours come
+    from the distances; the statistics, observation and reward are the shared
+    definitions.
     """
     xp = torch_namespace()
     p = cfg.physics
     N, d = cfg.n_agents, cfg.dim
     k_rank = ranked_neighbors(cfg)
-    physics_goal = cfg.goal_in_physics and p.C_g > 0
 
     def unpack(packed: torch.Tensor) -> dict[str, torch.Tensor]:
         return {key: packed[:, i] for i, key in enumerate(STAT_KEYS)}
@@ -117,6 +167,7 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
         goal: torch.Tensor,
         a: torch.Tensor,
         move: torch.Tensor,
+        substeps: torch.Tensor,
         prev: torch.Tensor,
         start: torch.Tensor,
     ) -> tuple[torch.Tensor, ...]:
@@ -134,12 +185,8 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
         x_new, v_new = torch.stack(xs), torch.stack(vs)
         xs, vs = list(x_new.unbind(0)), list(v_new.unbind(0))
         geo = pair_geometry(xs)
-        fs, pairs = pair_terms(geo, vs, p)
-        if p.beta > 0:
-            fs = [fc - p.beta * vc for fc, vc in zip(fs, vs, strict=True)]
-        sink, potential, goal_distance = goal_terms(xs, p, goal)
-        if physics_goal:
-            fs = [fc + gc for fc, gc in zip(fs, sink, strict=True)]
+        fs, pairs, potential, goal_distance = _passive(geo, xs, vs, goal, cfg, energy=True)
+        h_stable = _stable(geo, cfg)
         xn, vn = x_new.permute(1, 2, 0), v_new.permute(1, 2, 0)
         energy = kinetic_energy(vn, p) + pairs
         if p.C_g > 0:  # the energy statistic includes the sink whenever it exists
@@ -154,9 +201,10 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
         else:
             near, nearest = None, torch.zeros(B, 1, dtype=x.dtype, device=x.device)
 
-        frame = Frame(xn, vn, goal, goal_distance, nearest, close, energy)
+        frame = Frame(xn, vn, goal, goal_distance, nearest, close, energy, substeps)
         stats = statistics(frame, cfg, xp)
-        packed = torch.stack([xp.astype(stats[key], x) for key in STAT_KEYS], dim=-1)
+        columns = [xp.astype(stats[key], x) for key in STAT_KEYS]
+        packed = torch.stack([*columns, h_stable.to(x.dtype)], dim=-1)
         obs = observation(xn, vn, goal, near, cfg, xp)
         effort = (a * a).sum((-2, -1))
         inputs = RewardInputs(stats, unpack(prev), unpack(start), effort, N, xp)
@@ -166,3 +214,63 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
         return x_new, v_new, torch.stack(fs), obs, packed, r, rho
 
     return advance
+
+
+def build_substep(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
+    """One substep of the step-size control for every swarm with time left, batched.
+
+    ``substep(x, v, f, h_stable, goal, a, remaining, used, over, needed)``: the state
+    and force as in :func:`build_advance` (``(d, B, N)``), the stable substep ``h*`` of
+    the state ``(B,)``, goals, actions; then per swarm, float64 ``(B,)``: the time left
+    of the step, the substeps taken, whether it needed more than ``cfg.max_substeps``
+    (bool) and how many it needed at least. Returns ``(x', v', f', h*', remaining, used,
+    over, needed)`` advanced by one substep: each swarm
+    with time left plans its substeps from its own ``h*``
+    (:func:`~swarm_envs.physics.integrators.substep_plan`; past the cap, the time left in
+    the substeps left, and marked ``over``), takes one Euler substep ``h`` with the
+    passive force ``f`` and the control, and the force and ``h*`` of the new state are
+    computed (for every swarm: a swarm without time left keeps its state, and its force
+    is measured anew by the fused step after the last substep). No statistics, no
+    observations: the semantics of the numpy core's
+    :meth:`~swarm_envs.envs.dynamics.SocialPotentialDynamics.step`, one substep per call.
+    """
+    p = cfg.physics
+    d, cap = cfg.dim, float(cfg.max_substeps)
+
+    def substep(
+        x: torch.Tensor,
+        v: torch.Tensor,
+        f: torch.Tensor,
+        h_stable: torch.Tensor,
+        goal: torch.Tensor,
+        a: torch.Tensor,
+        remaining: torch.Tensor,
+        used: torch.Tensor,
+        over: torch.Tensor,
+        needed: torch.Tensor,
+    ) -> tuple[torch.Tensor, ...]:
+        active = remaining > 0
+        n, h = substep_plan(remaining, h_stable.to(remaining.dtype), torch)
+        needed = torch.where(active, torch.maximum(needed, used + n), needed)
+        left = torch.clamp(cap - used, min=1.0)
+        late = active & (n > cap - used)
+        over = over | late
+        h = torch.where(late, remaining / left, h)
+        n = torch.where(late, left, n)
+        step = h.to(x.dtype)[:, None]
+        keep = active[:, None]
+        xs, vs = [], []
+        for c in range(d):
+            xc, vc = euler_update(x[c], v[c], f[c] + cfg.u_max * a[..., c], step, p.m)
+            xs.append(torch.where(keep, xc, x[c]))
+            vs.append(torch.where(keep, vc, v[c]))
+        used = used + active.to(used.dtype)
+        remaining = torch.where(active & (n > 1), remaining - h, 0.0)
+        x_new, v_new = torch.stack(xs), torch.stack(vs)
+        xs, vs = list(x_new.unbind(0)), list(v_new.unbind(0))
+        geo = pair_geometry(xs)
+        fs, _, _, _ = _passive(geo, xs, vs, goal, cfg, energy=False)
+        h_new = _stable(geo, cfg).to(x.dtype)
+        return x_new, v_new, torch.stack(fs), h_new, remaining, used, over, needed
+
+    return substep
