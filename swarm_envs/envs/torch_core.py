@@ -19,11 +19,12 @@ check of a ``(B,)`` flag on the host per substep, and the fused function then me
 the new state without moving it. The substep counts, the cap ``max_substeps`` and the
 unstable guard (``on_unstable``) are the numpy core's.
 
-A reset (or assigning ``x``, ``v`` or ``goal``) re-evaluates the same function with the integration switched off, so the observations,
-statistics and carried force always describe the current state. A reset of a few swarms
-(at most :attr:`TorchSwarmNavCore.reset_batch`, 1/16 of a batch of 64 or more) evaluates
-them alone, through the same function compiled for that sub-batch: in a VecEnv some
-swarm ends on most steps.
+A reset (or assigning ``x``, ``v`` or ``goal``) re-evaluates the same function with the
+integration switched off, so the observations, statistics and carried force always
+describe the current state. A reset of a few swarms (at most
+:attr:`TorchSwarmNavCore.reset_batch`, 1/16 of a batch of 64 or more) evaluates them
+alone, through the same function compiled for that sub-batch: in a VecEnv some swarm
+ends on most steps.
 
 Compile time: the constructor makes the first (compiling) calls of both functions, on
 the all-zero state, and stores their wall time in
@@ -80,6 +81,7 @@ SINGLE_THREAD_PAIRS = 8192
 #: Columns of the packed row: the stable substep, and the statistics a reset zeroes for
 #: every swarm (as the numpy core's measure of a reset does).
 _H_STABLE = PACKED_KEYS.index("h_stable")
+_H_GUARD = PACKED_KEYS.index("h_guard")
 _SUBSTEPS = STAT_KEYS.index("substeps")
 _UNSTABLE = STAT_KEYS.index("unstable")
 
@@ -191,6 +193,7 @@ class TorchSwarmNavCore:
         self._obs_shared = False  # observe_tensor() did
         self._packed = torch.empty(0)
         self._packed_host: np.ndarray = np.empty((0, P))
+        self._calm = True
         self._reward = torch.empty(0)
         self._graphed: CudaGraphed | None = None
         self._measure(warmup=True)
@@ -296,8 +299,15 @@ class TorchSwarmNavCore:
         if self._flagged is not None:  # a fresh tensor (or the graph's output's copy)
             rows = torch.as_tensor(self._flagged, device=self.device)
             self._packed[rows, _UNSTABLE] = 1.0
-        self._packed_host = self._packed.cpu().numpy()
+        self._host_packed()
         self._obs_given = self._obs_shared = False
+
+    def _host_packed(self) -> None:
+        """Copy the packed rows to the host, and note whether every swarm's state is
+        finite and allows the whole ``dt`` in one substep (:attr:`_calm`)."""
+        self._packed_host = self._packed.cpu().numpy()
+        dt = np.float64(self.cfg.dt)  # NaN (a non-finite state) compares False
+        self._calm = bool((self._packed_host[:, _H_GUARD] >= dt).all())
 
     def _measure(self, warmup: bool = False) -> None:
         """Observations, statistics and passive force of the current state (no step)."""
@@ -339,7 +349,7 @@ class TorchSwarmNavCore:
         self._packed = self._packed.index_put((rows,), packed[:n])  # a new tensor
         self._packed[:, _SUBSTEPS] = 0.0
         self._packed[:, _UNSTABLE] = 0.0
-        self._packed_host = self._packed.cpu().numpy()
+        self._host_packed()
 
     # ------------------------------------------------------------------ reset
     def reset(self, rng: np.random.Generator, which: np.ndarray | None = None) -> None:
@@ -415,6 +425,7 @@ class TorchSwarmNavCore:
         a = self._actions(actions)
         plan = self._first_plan()
         self._flagged = None
+        over: np.ndarray | None = None  # None: no swarm over the cap
         if plan is None or cfg.max_substeps == 1:
             # Every swarm in one substep of dt (with max_substeps = 1 also those that
             # need more: past the cap, marked): the fused step alone.
@@ -423,10 +434,8 @@ class TorchSwarmNavCore:
             self._run(a, self._move_all)
             if self._graphed is not None:  # its outputs were overwritten, not its inputs
                 before = self._graphed.inputs[0], self._graphed.inputs[1]
-            if plan is None:
-                over, needed = np.zeros(B, dtype=bool), np.ones(B)
-            else:
-                over, needed = plan > 1, plan
+            needed = np.ones(B) if plan is None else plan
+            over = None if plan is None else plan > 1
         else:
             before = (self._x, self._v)
             if self._graphed is not None:  # graph outputs: the measure below overwrites
@@ -435,14 +444,18 @@ class TorchSwarmNavCore:
             self._run(a, self._move_none)  # measure the new state, substeps counted
         self.t += 1
         stats = self.stats()
-        bad = unstable_swarms(stats, over)
-        if bad.any():
-            stats = self._unstable(a, bad, before, stats, needed)
+        bad = None
+        if over is not None or not self._calm:  # else every state is finite
+            bad = unstable_swarms(stats, np.zeros(B, dtype=bool) if over is None else over)
+            if bad.any():
+                stats = self._unstable(a, bad, before, stats, needed)
+            else:
+                bad = None
         self._prev = self._packed
         reward = self._reward.cpu().numpy().astype(np.float64)
         success = stats["success"].astype(bool)
         truncated = (self.t >= cfg.max_steps) & ~success
-        if bad.any():
+        if bad is not None:
             reward[bad], success[bad], truncated[bad] = 0.0, False, True
         return reward, success, truncated, stats
 
@@ -450,11 +463,10 @@ class TorchSwarmNavCore:
         """``None`` when every swarm takes the whole ``dt`` in one substep (its carried
         ``h*`` allows it; the common case, decided by one comparison), else the substeps
         each needs ``(B,)`` (:func:`~swarm_envs.physics.integrators.substep_plan`)."""
-        dt = np.float64(self.cfg.dt)
-        h_stable = self._packed_host[:, _H_STABLE]
-        if not (h_stable < dt).any():  # h* >= dt: one substep (exactly, in float64)
+        if self._calm:  # every h* >= dt: one substep (exactly, compared in float64)
             return None
-        n, _ = substep_plan(np.full(self.batch, dt), h_stable.astype(np.float64))
+        h_stable = self._packed_host[:, _H_STABLE].astype(np.float64)
+        n, _ = substep_plan(np.full(self.batch, self.cfg.dt), h_stable)
         return n if (n > 1).any() else None
 
     def _substep_args(self, a: torch.Tensor) -> tuple[torch.Tensor, ...]:

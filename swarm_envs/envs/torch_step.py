@@ -10,10 +10,10 @@ here is how the k nearest neighbours are found (:func:`nearest_neighbors`).
 Step-size control (:mod:`swarm_envs.physics.integrators`): the fused step also computes
 the stable substep ``h*`` of the new state (the rates of
 :func:`~swarm_envs.physics.social_potential.pair_rates`, in the same pair loop as the
-force) and returns it as the last column of its packed row, after the statistics
-(:data:`PACKED_KEYS`). A step whose swarms all fit in one substep is that one fused call;
-otherwise :func:`build_substep` takes the substeps, each swarm its own, and the fused
-function measures the result without moving it.
+force) and returns it in its packed row after the statistics (:data:`PACKED_KEYS`). A
+step whose swarms all fit in one substep is that one fused call; otherwise
+:func:`build_substep` takes the substeps, each swarm its own, and the fused function
+measures the result without moving it.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from typing import Any
 import torch
 
 from swarm_envs._array import torch_namespace
+from swarm_envs.envs.common import FINITE_KEYS
 from swarm_envs.envs.task import (
     STAT_KEYS,
     Frame,
@@ -47,8 +48,11 @@ from swarm_envs.physics.social_potential import (
 __all__ = ["PACKED_KEYS", "build_advance", "build_substep", "nearest_neighbors"]
 
 #: The columns of the fused step's packed row per swarm: the statistics (``STAT_KEYS``),
-#: then the stable substep ``h*`` of the state (``"h_stable"``).
-PACKED_KEYS = (*STAT_KEYS, "h_stable")
+#: the stable substep ``h*`` of the state (``"h_stable"``), and ``h*`` where the state is
+#: finite (:data:`~swarm_envs.envs.common.FINITE_KEYS`), NaN where not (``"h_guard"``):
+#: ``h_guard ≥ dt`` for every swarm says at once that the next step takes one substep
+#: each and that this one went stable, the host's only check in the common case.
+PACKED_KEYS = (*STAT_KEYS, "h_stable", "h_guard")
 
 
 def nearest_neighbors(rho: torch.Tensor, k: int) -> tuple[torch.Tensor, torch.Tensor]:
@@ -204,7 +208,11 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
         frame = Frame(xn, vn, goal, goal_distance, nearest, close, energy, substeps)
         stats = statistics(frame, cfg, xp)
         columns = [xp.astype(stats[key], x) for key in STAT_KEYS]
-        packed = torch.stack([*columns, h_stable.to(x.dtype)], dim=-1)
+        finite = torch.isfinite(columns[STAT_KEYS.index(FINITE_KEYS[0])])
+        for key in FINITE_KEYS[1:]:
+            finite = finite & torch.isfinite(columns[STAT_KEYS.index(key)])
+        guard = torch.where(finite, h_stable, math.nan)
+        packed = torch.stack([*columns, h_stable, guard], dim=-1)
         obs = observation(xn, vn, goal, near, cfg, xp)
         effort = (a * a).sum((-2, -1))
         inputs = RewardInputs(stats, unpack(prev), unpack(start), effort, N, xp)
