@@ -14,10 +14,10 @@ step evaluates the pairs once; so is the stable substep ``h*`` of the step-size 
 (computed in the same pass; :mod:`swarm_envs.physics.integrators`). When every swarm's
 ``h*`` allows the whole ``dt`` in one substep, the step is that one fused call. Otherwise
 the substeps run through a second compiled function (update, force and ``h*`` only;
-:func:`~swarm_envs.envs.torch_step.build_substep`), each swarm its own count, with one
-check of a ``(B,)`` flag on the host per substep, and the fused function then measures
-the new state without moving it. The substep counts, the cap ``max_substeps`` and the
-unstable guard (``on_unstable``) are the numpy core's.
+:func:`~swarm_envs.envs.torch_step.build_substep`), each swarm its own count, and the
+fused function then measures the new state without moving it
+(:mod:`swarm_envs.envs.torch_substeps`). The substep counts, the cap ``max_substeps`` and
+the unstable guard (``on_unstable``) are the numpy core's.
 
 A reset (or assigning ``x``, ``v`` or ``goal``) re-evaluates the same function with the
 integration switched off, so the observations, statistics and carried force always
@@ -54,18 +54,15 @@ import torch
 from swarm_envs._runtime.torch_compile import CudaGraphed, MaybeCompiled
 from swarm_envs.envs.common import (
     NON_FINITE_ACTIONS,
-    SwarmUnstableError,
     check_actions,
     check_batch,
     check_dtype,
     draw_starts,
-    unstable_message,
-    unstable_swarms,
     wide_dtypes,
 )
 from swarm_envs.envs.task import STAT_KEYS, observation_size
 from swarm_envs.envs.torch_step import PACKED_KEYS, build_advance, build_substep
-from swarm_envs.physics.integrators import substep_plan
+from swarm_envs.envs.torch_substeps import SUBSTEPS, UNSTABLE, SubstepControl
 
 __all__ = ["PARTIAL_RESET_MIN_BATCH", "TorchSwarmNavCore", "partial_reset_batch"]
 
@@ -77,13 +74,6 @@ PARTIAL_RESET_MIN_BATCH = 64
 #: Pair evaluations per step (``B·N²``) up to which the compiled CPU step runs on one
 #: thread: below it the threads' synchronisation costs more than they share.
 SINGLE_THREAD_PAIRS = 8192
-
-#: Columns of the packed row: the stable substep, and the statistics a reset zeroes for
-#: every swarm (as the numpy core's measure of a reset does).
-_H_STABLE = PACKED_KEYS.index("h_stable")
-_H_GUARD = PACKED_KEYS.index("h_guard")
-_SUBSTEPS = STAT_KEYS.index("substeps")
-_UNSTABLE = STAT_KEYS.index("unstable")
 
 
 def partial_reset_batch(batch: int) -> int | None:
@@ -113,7 +103,7 @@ def _device(device: Any) -> torch.device:
     return dev
 
 
-class TorchSwarmNavCore:
+class TorchSwarmNavCore(SubstepControl):
     """State and dynamics of ``batch`` independent SwarmNav swarms, in torch.
 
     A :class:`~swarm_envs.envs.protocol.Core` (numpy in, numpy out) for
@@ -298,16 +288,9 @@ class TorchSwarmNavCore:
             self._x, self._v, self._f, self._obs, self._packed, self._reward, _ = out
         if self._flagged is not None:  # a fresh tensor (or the graph's output's copy)
             rows = torch.as_tensor(self._flagged, device=self.device)
-            self._packed[rows, _UNSTABLE] = 1.0
+            self._packed[rows, UNSTABLE] = 1.0
         self._host_packed()
         self._obs_given = self._obs_shared = False
-
-    def _host_packed(self) -> None:
-        """Copy the packed rows to the host, and note whether every swarm's state is
-        finite and allows the whole ``dt`` in one substep (:attr:`_calm`)."""
-        self._packed_host = self._packed.cpu().numpy()
-        dt = np.float64(self.cfg.dt)  # NaN (a non-finite state) compares False
-        self._calm = bool((self._packed_host[:, _H_GUARD] >= dt).all())
 
     def _measure(self, warmup: bool = False) -> None:
         """Observations, statistics and passive force of the current state (no step)."""
@@ -347,8 +330,8 @@ class TorchSwarmNavCore:
             self._obs_given = self._obs_shared = False
         self._obs[rows] = obs[:n]
         self._packed = self._packed.index_put((rows,), packed[:n])  # a new tensor
-        self._packed[:, _SUBSTEPS] = 0.0
-        self._packed[:, _UNSTABLE] = 0.0
+        self._packed[:, SUBSTEPS] = 0.0
+        self._packed[:, UNSTABLE] = 0.0
         self._host_packed()
 
     # ------------------------------------------------------------------ reset
@@ -421,110 +404,17 @@ class TorchSwarmNavCore:
             ``(reward (B,), terminated (B,), truncated (B,), stats)`` as numpy arrays,
             ``stats`` mapping each of ``STAT_KEYS`` to a ``(B,)`` array.
         """
-        cfg, B = self.cfg, self.batch
         a = self._actions(actions)
-        plan = self._first_plan()
-        self._flagged = None
-        over: np.ndarray | None = None  # None: no swarm over the cap
-        if plan is None or cfg.max_substeps == 1:
-            # Every swarm in one substep of dt (with max_substeps = 1 also those that
-            # need more: past the cap, marked): the fused step alone.
-            before = (self._x, self._v)
-            self._counted = self._one_each
-            self._run(a, self._move_all)
-            if self._graphed is not None:  # its outputs were overwritten, not its inputs
-                before = self._graphed.inputs[0], self._graphed.inputs[1]
-            needed = np.ones(B) if plan is None else plan
-            over = None if plan is None else plan > 1
-        else:
-            before = (self._x, self._v)
-            if self._graphed is not None:  # graph outputs: the measure below overwrites
-                before = before[0].clone(), before[1].clone()
-            over, needed = self._substeps(a)
-            self._run(a, self._move_none)  # measure the new state, substeps counted
+        before, over, needed = self._integrate(a)
         self.t += 1
-        stats = self.stats()
-        bad = None
-        if over is not None or not self._calm:  # else every state is finite
-            bad = unstable_swarms(stats, np.zeros(B, dtype=bool) if over is None else over)
-            if bad.any():
-                stats = self._unstable(a, bad, before, stats, needed)
-            else:
-                bad = None
+        stats, bad = self._guard(a, self.stats(), before, over, needed)
         self._prev = self._packed
         reward = self._reward.cpu().numpy().astype(np.float64)
         success = stats["success"].astype(bool)
-        truncated = (self.t >= cfg.max_steps) & ~success
+        truncated = (self.t >= self.cfg.max_steps) & ~success
         if bad is not None:
             reward[bad], success[bad], truncated[bad] = 0.0, False, True
         return reward, success, truncated, stats
-
-    def _first_plan(self) -> np.ndarray | None:
-        """``None`` when every swarm takes the whole ``dt`` in one substep (its carried
-        ``h*`` allows it; the common case, decided by one comparison), else the substeps
-        each needs ``(B,)`` (:func:`~swarm_envs.physics.integrators.substep_plan`)."""
-        if self._calm:  # every h* >= dt: one substep (exactly, compared in float64)
-            return None
-        h_stable = self._packed_host[:, _H_STABLE].astype(np.float64)
-        n, _ = substep_plan(np.full(self.batch, self.cfg.dt), h_stable)
-        return n if (n > 1).any() else None
-
-    def _substep_args(self, a: torch.Tensor) -> tuple[torch.Tensor, ...]:
-        """The substep function's arguments at the start of a step with actions ``a``."""
-        B, device, wide = self.batch, self.device, torch.float64
-        return (
-            self._x,
-            self._v,
-            self._f,
-            self._packed[:, _H_STABLE].contiguous(),
-            self._goal,
-            a,
-            torch.full((B,), self.cfg.dt, dtype=wide, device=device),
-            torch.zeros(B, dtype=wide, device=device),
-            torch.zeros(B, dtype=torch.bool, device=device),
-            torch.zeros(B, dtype=wide, device=device),
-        )
-
-    def _substeps(self, a: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
-        """Take the step's substeps, every swarm until its ``dt`` is spent (at most
-        ``max_substeps``); sets the state and :attr:`_counted`, and returns ``(over_cap,
-        needed)`` per swarm on the host, as the numpy core counts them."""
-        x, v, f, h, _, _, remaining, used, over, needed = self._substep_args(a)
-        for _ in range(self.cfg.max_substeps):
-            x, v, f, h, remaining, used, over, needed = self._substep(
-                x, v, f, h, self._goal, a, remaining, used, over, needed
-            )
-            if not bool((remaining > 0).any()):
-                break
-        else:  # the cap spends every swarm's time in at most max_substeps
-            raise RuntimeError("substeps left after max_substeps substeps")
-        self._x, self._v, self._f = x, v, f
-        self._counted = used.to(self._tdtype)
-        counts = torch.stack([over.to(needed.dtype), needed]).cpu().numpy()
-        return counts[0] > 0, counts[1]
-
-    def _unstable(
-        self,
-        a: torch.Tensor,
-        bad: np.ndarray,
-        before: tuple[torch.Tensor, torch.Tensor],
-        stats: dict[str, np.ndarray],
-        needed: np.ndarray,
-    ) -> dict[str, np.ndarray]:
-        """Raise :class:`~swarm_envs.envs.common.SwarmUnstableError`, or (``on_unstable=
-        "truncate"``) put the swarms ``bad`` back to their state ``before`` the step,
-        re-measured and marked ``unstable``; returns the statistics then."""
-        cfg = self.cfg
-        if cfg.on_unstable == "raise":
-            raise SwarmUnstableError(unstable_message(cfg, stats, bad, needed, self.t))
-        idx = np.flatnonzero(bad)
-        rows = torch.as_tensor(idx, device=self.device)
-        self._x, self._v = self._x.clone(), self._v.clone()  # out of place, as a reset
-        self._x[:, rows], self._v[:, rows] = before[0][:, rows], before[1][:, rows]
-        self._counted = self._counted.index_put((rows,), self._none_each[rows])  # undone
-        self._flagged = idx
-        self._run(a, self._move_none)
-        return self.stats()
 
     # ------------------------------------------------------------------ views
     def stats(self) -> dict[str, np.ndarray]:

@@ -1,0 +1,187 @@
+"""The torch core's step-size control on the host: which path a step takes, the
+substep loop, and the unstable guard.
+
+:class:`SubstepControl` is a part of :class:`~swarm_envs.envs.torch_core.TorchSwarmNavCore`
+(its state, its compiled functions); the semantics are those of the numpy core
+(:meth:`~swarm_envs.envs.dynamics.SocialPotentialDynamics.step`,
+:meth:`~swarm_envs.envs.core.SwarmNavCore.step`):
+
+- the fused step returns, per swarm, the stable substep ``h*`` of the new state and
+  ``h*`` where that state is finite, NaN where not (``"h_guard"``,
+  :data:`~swarm_envs.envs.torch_step.PACKED_KEYS`); one comparison of that column with
+  ``dt`` on the host (:attr:`SubstepControl._calm`) says both that the step went stable
+  and that the next one takes the whole ``dt`` in one substep for every swarm: the
+  common case costs that comparison;
+- otherwise the next step plans each swarm's substeps
+  (:func:`~swarm_envs.physics.integrators.substep_plan`); if any swarm needs more than
+  one, the substep function (:func:`~swarm_envs.envs.torch_step.build_substep`) runs
+  until every swarm has spent its ``dt`` (one ``(B,)`` flag read on the host per
+  substep), and the fused function measures the new state without moving it;
+- after the step, :func:`~swarm_envs.envs.common.unstable_swarms` (skipped when the
+  comparison above passed and no swarm was over the cap): raise
+  :class:`~swarm_envs.envs.common.SwarmUnstableError`, or truncate those swarms at their
+  state before the step (``on_unstable``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+
+from swarm_envs.envs.common import SwarmUnstableError, unstable_message, unstable_swarms
+from swarm_envs.envs.task import STAT_KEYS
+from swarm_envs.envs.torch_step import PACKED_KEYS
+from swarm_envs.physics.integrators import substep_plan
+
+__all__ = ["SUBSTEPS", "UNSTABLE", "SubstepControl"]
+
+_H_STABLE = PACKED_KEYS.index("h_stable")
+_H_GUARD = PACKED_KEYS.index("h_guard")
+#: Columns of the ``substeps`` and ``unstable`` statistics in the packed row.
+SUBSTEPS = STAT_KEYS.index("substeps")
+UNSTABLE = STAT_KEYS.index("unstable")
+
+State = tuple[torch.Tensor, torch.Tensor]
+
+
+class SubstepControl:
+    """The step-size control of :class:`~swarm_envs.envs.torch_core.TorchSwarmNavCore`
+    (a base class of it; see the module docstring). It works on the core's state
+    (``_x, _v, _f`` ``(d, B, N)``, ``_goal``, the packed rows ``_packed`` and their host
+    copy), runs its functions (``_run``: the fused step on the whole batch; ``_substep``:
+    the substep function) and keeps ``_counted`` (the ``substeps`` statistic to report)
+    and ``_flagged`` (the swarms truncated as unstable) up to date."""
+
+    cfg: Any
+    batch: int
+    device: torch.device
+    _tdtype: torch.dtype
+    _x: torch.Tensor
+    _v: torch.Tensor
+    _f: torch.Tensor
+    _goal: torch.Tensor
+    _packed: torch.Tensor
+    _packed_host: np.ndarray
+    _counted: torch.Tensor
+    _flagged: np.ndarray | None
+    _calm: bool
+
+    def _host_packed(self) -> None:
+        """Copy the packed rows to the host, and note whether every swarm's state is
+        finite and allows the whole ``dt`` in one substep (:attr:`_calm`)."""
+        self._packed_host = self._packed.cpu().numpy()
+        dt = np.float64(self.cfg.dt)  # NaN (a non-finite state) compares False
+        self._calm = bool((self._packed_host[:, _H_GUARD] >= dt).all())
+
+    def _integrate(self, a: torch.Tensor) -> tuple[State, np.ndarray | None, np.ndarray]:
+        """Advance every swarm by ``dt`` with actions ``a`` and measure the new state.
+
+        Returns the state before the step (for the guard), where a swarm needed more
+        substeps than ``max_substeps`` (``None``: nowhere) and how many it needed.
+        """
+        cfg, B = self.cfg, self.batch
+        plan = self._first_plan()
+        self._flagged = None
+        if plan is None or cfg.max_substeps == 1:
+            # Every swarm in one substep of dt (with max_substeps = 1 also those that
+            # need more: past the cap, marked): the fused step alone.
+            before = (self._x, self._v)
+            self._counted = self._one_each
+            self._run(a, self._move_all)
+            if self._graphed is not None:  # its outputs were overwritten, not its inputs
+                before = self._graphed.inputs[0], self._graphed.inputs[1]
+            if plan is None:
+                return before, None, np.ones(B)
+            return before, plan > 1, plan
+        before = (self._x, self._v)
+        if self._graphed is not None:  # graph outputs: the measure below overwrites them
+            before = before[0].clone(), before[1].clone()
+        over, needed = self._substeps(a)
+        self._run(a, self._move_none)  # measure the new state, its substeps counted
+        return before, over, needed
+
+    def _guard(
+        self,
+        a: torch.Tensor,
+        stats: dict[str, np.ndarray],
+        before: State,
+        over: np.ndarray | None,
+        needed: np.ndarray,
+    ) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
+        """The unstable guard after a step: ``(stats, bad)``, the statistics (re-measured
+        when swarms were truncated) and the unstable swarms (``None``: none)."""
+        if over is None and self._calm:  # every state finite, none over the cap
+            return stats, None
+        bad = unstable_swarms(stats, np.zeros(self.batch, dtype=bool) if over is None else over)
+        if not bad.any():
+            return stats, None
+        return self._unstable(a, bad, before, stats, needed), bad
+
+    def _first_plan(self) -> np.ndarray | None:
+        """``None`` when every swarm takes the whole ``dt`` in one substep (its carried
+        ``h*`` allows it; the common case, decided by one comparison), else the substeps
+        each needs ``(B,)`` (:func:`~swarm_envs.physics.integrators.substep_plan`)."""
+        if self._calm:  # every h* >= dt: one substep (exactly, compared in float64)
+            return None
+        h_stable = self._packed_host[:, _H_STABLE].astype(np.float64)
+        n, _ = substep_plan(np.full(self.batch, self.cfg.dt), h_stable)
+        return n if (n > 1).any() else None
+
+    def _substep_args(self, a: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """The substep function's arguments at the start of a step with actions ``a``."""
+        B, device, wide = self.batch, self.device, torch.float64
+        return (
+            self._x,
+            self._v,
+            self._f,
+            self._packed[:, _H_STABLE].contiguous(),
+            self._goal,
+            a,
+            torch.full((B,), self.cfg.dt, dtype=wide, device=device),
+            torch.zeros(B, dtype=wide, device=device),
+            torch.zeros(B, dtype=torch.bool, device=device),
+            torch.zeros(B, dtype=wide, device=device),
+        )
+
+    def _substeps(self, a: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+        """Take the step's substeps, every swarm until its ``dt`` is spent (at most
+        ``max_substeps``); sets the state and :attr:`_counted`, and returns ``(over_cap,
+        needed)`` per swarm on the host, as the numpy core counts them."""
+        x, v, f, h, _, _, remaining, used, over, needed = self._substep_args(a)
+        for _ in range(self.cfg.max_substeps):
+            x, v, f, h, remaining, used, over, needed = self._substep(
+                x, v, f, h, self._goal, a, remaining, used, over, needed
+            )
+            if not bool((remaining > 0).any()):
+                break
+        else:  # the cap spends every swarm's time in at most max_substeps
+            raise RuntimeError("substeps left after max_substeps substeps")
+        self._x, self._v, self._f = x, v, f
+        self._counted = used.to(self._tdtype)
+        counts = torch.stack([over.to(needed.dtype), needed]).cpu().numpy()
+        return counts[0] > 0, counts[1]
+
+    def _unstable(
+        self,
+        a: torch.Tensor,
+        bad: np.ndarray,
+        before: State,
+        stats: dict[str, np.ndarray],
+        needed: np.ndarray,
+    ) -> dict[str, np.ndarray]:
+        """Raise :class:`~swarm_envs.envs.common.SwarmUnstableError`, or (``on_unstable=
+        "truncate"``) put the swarms ``bad`` back to their state ``before`` the step,
+        re-measured and marked ``unstable``; returns the statistics then."""
+        cfg = self.cfg
+        if cfg.on_unstable == "raise":
+            raise SwarmUnstableError(unstable_message(cfg, stats, bad, needed, self.t))
+        idx = np.flatnonzero(bad)
+        rows = torch.as_tensor(idx, device=self.device)
+        self._x, self._v = self._x.clone(), self._v.clone()  # out of place, as a reset
+        self._x[:, rows], self._v[:, rows] = before[0][:, rows], before[1][:, rows]
+        self._counted = self._counted.index_put((rows,), self._none_each[rows])  # undone
+        self._flagged = idx
+        self._run(a, self._move_none)
+        return self.stats()
