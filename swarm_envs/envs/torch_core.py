@@ -220,10 +220,17 @@ class TorchSwarmNavCore(SubstepControl):
         for ``batch`` swarms, compiled or plain.
 
         The neighbour indices come from ``nearest_neighbors``, always in range: no bound
-        checks on the gathers. On the CPU a small step (at most
+        checks on the gathers. The graph keeps the order of the Python code (no
+        ``reorder_for_locality``, which moves each computation next to its first use):
+        TorchInductor fuses only reductions that lie close in that order, and the pair
+        sums of the force, the energy and the stable substep's rates then share one loop
+        and its exponentials. On the CPU a small step (at most
         :data:`SINGLE_THREAD_PAIRS` pair evaluations) is generated for one thread.
         """
-        options: dict[str, Any] = {"assert_indirect_indexing": False}
+        options: dict[str, Any] = {
+            "assert_indirect_indexing": False,
+            "reorder_for_locality": False,
+        }
         if self.device.type == "cpu" and batch * self.cfg.n_agents**2 <= SINGLE_THREAD_PAIRS:
             options["cpp.threads"] = 1
         return MaybeCompiled(
