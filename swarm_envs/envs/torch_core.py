@@ -169,6 +169,7 @@ class TorchSwarmNavCore(SubstepControl):
         self._move_all = torch.ones(B, dtype=torch.bool, device=self.device)
         self._move_none = torch.zeros(B, dtype=torch.bool, device=self.device)
         self._one_each, self._none_each = self._zeros(B) + 1.0, zeros(B)
+        self._dt_each = zeros(B) + cfg.dt  # every swarm's substep when it takes one
         # The substeps statistic of the current state (the last step's count, 0 after a
         # reset), and the swarms its step truncated as unstable (host indices, or None).
         self._counted = self._none_each
@@ -187,7 +188,7 @@ class TorchSwarmNavCore(SubstepControl):
         self._reward = torch.empty(0)
         self._graphed: CudaGraphed | None = None
         self._measure(warmup=True)
-        self._substep.warmup(*self._substep_args(self._no_action))
+        self._substep.warmup(*self._substep_inputs(self._no_action, None))
         if self.device.type == "cuda" and self._advance.compiled:
             # One replay instead of a launch per kernel (captured here, never in a step).
             self._graphed = CudaGraphed(self._advance, self._args(self._no_action, self._move_none))
@@ -267,24 +268,34 @@ class TorchSwarmNavCore(SubstepControl):
                 seconds += other.compile_seconds
         return seconds
 
-    def _args(self, a: torch.Tensor, move: torch.Tensor) -> tuple[torch.Tensor, ...]:
-        """The fused function's arguments for the whole batch."""
+    def _args(
+        self, a: torch.Tensor, move: torch.Tensor, h: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, ...]:
+        """The fused function's arguments for the whole batch (``h``: each swarm's
+        substep, ``dt`` by default)."""
         return (
             self._x,
             self._v,
             self._f,
             self._goal,
             a,
+            self._dt_each if h is None else h,
             move,
             self._counted,
             self._prev,
             self._start,
         )
 
-    def _run(self, a: torch.Tensor, move: torch.Tensor, warmup: bool = False) -> None:
+    def _run(
+        self,
+        a: torch.Tensor,
+        move: torch.Tensor,
+        h: torch.Tensor | None = None,
+        warmup: bool = False,
+    ) -> None:
         """The fused function on the whole batch; the swarms :attr:`_flagged` keep their
         ``unstable`` mark."""
-        args = self._args(a, move)
+        args = self._args(a, move, h)
         if self._graphed is not None:
             # The graph's outputs are overwritten by its next replay: the state is only
             # read before then (or passed back in); what is kept or handed out is copied.
@@ -312,6 +323,7 @@ class TorchSwarmNavCore(SubstepControl):
             self._f[:, rows],
             self._goal[rows],
             self._no_action[:n],
+            self._dt_each[:n],
             self._move_none[:n],
             self._none_each[:n],
             self._prev[rows],

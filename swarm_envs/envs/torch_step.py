@@ -12,8 +12,9 @@ the stable substep ``h*`` of the new state (the rates of
 :func:`~swarm_envs.physics.social_potential.pair_rates`, in the same pair loop as the
 force) and returns it in its packed row after the statistics (:data:`PACKED_KEYS`). A
 step whose swarms all fit in one substep is that one fused call; otherwise
-:func:`build_substep` takes the substeps, each swarm its own, and the fused function
-measures the result without moving it.
+:func:`build_substep` takes the substeps but the last, each swarm its own count
+(:func:`plan_substep`), and the fused function takes each swarm's last one and measures
+the result.
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ from swarm_envs.physics.social_potential import (
     pair_terms,
 )
 
-__all__ = ["PACKED_KEYS", "build_advance", "build_substep", "nearest_neighbors"]
+__all__ = ["PACKED_KEYS", "build_advance", "build_substep", "nearest_neighbors", "plan_substep"]
 
 #: The columns of the fused step's packed row per swarm: the statistics (``STAT_KEYS``),
 #: the stable substep ``h*`` of the state (``"h_stable"``), and ``h*`` where the state is
@@ -135,23 +136,23 @@ def _stable(geo: PairGeometry, cfg: Any) -> torch.Tensor:
 def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
     """The fused SwarmNav step for config ``cfg`` (social potential, semi-implicit Euler).
 
-    ``advance(x, v, f, goal, a, move, substeps, prev, start)`` with positions, velocities
-    and the passive force at ``(x, v)`` stored component first, ``(d, B, N)``, so that
-    every per-agent quantity is a contiguous ``(B, N)`` plane (the layout on which a
-    compiler vectorises the pair loop); goals ``(B, d)``; actions ``a`` ``(B, N, d)``
-    clipped to [−1, 1]; ``move`` ``(B,)`` bool (false: keep that swarm's state, only
-    measure it); ``substeps`` ``(B,)``: the ``substeps`` statistic to report (the step's
-    count, 0 after a reset); ``prev`` and ``start`` ``(B, P)``: the previous step's and
-    the episode start's packed rows (:data:`PACKED_KEYS`). Returns ``(x', v', f' (d, B,
-    N), obs (B, N, obs_dim) float32, packed (B, P), reward (B,), ρ (B, N, N))``; the
+    ``advance(x, v, f, goal, a, h, move, substeps, prev, start)`` with positions,
+    velocities and the passive force at ``(x, v)`` stored component first, ``(d, B, N)``,
+    so that every per-agent quantity is a contiguous ``(B, N)`` plane (the layout on which
+    a compiler vectorises the pair loop); goals ``(B, d)``; actions ``a`` ``(B, N, d)``
+    clipped to [−1, 1]; ``h`` ``(B,)``: each swarm's (last) substep, ``dt`` when it takes
+    the step in one; ``move`` ``(B,)`` bool (false: keep that swarm's state, only measure
+    it); ``substeps`` ``(B,)``: the ``substeps`` statistic to report (the step's count, 0
+    after a reset); ``prev`` and ``start`` ``(B, P)``: the previous step's and the
+    episode start's packed rows (:data:`PACKED_KEYS`). Returns ``(x', v', f' (d, B, N),
+    obs (B, N, obs_dim) float32, packed (B, P), reward (B,), ρ (B, N, N))``; the
     distances (``inf`` on the diagonal) are returned only so that a compiler stores them
     once (callers drop them).
 
-    The step, one substep of the whole ``dt`` (the caller takes this path when every
-    swarm's stable substep allows it): ``v' = v + dt (f + u_max a)/m``, ``x' = x + dt v'``;
-    then one pass over the pairs of ``(x', v')`` gives the passive force carried into the
-    next step, the pair energy (:func:`~swarm_envs.physics.social_potential.pair_terms`)
-    and the rates of the stable substep ``h*``
+    The (last) substep: ``v' = v + h (f + u_max a)/m``, ``x' = x + h v'``; then one pass
+    over the pairs of ``(x', v')`` gives the passive force carried into the next step,
+    the pair energy (:func:`~swarm_envs.physics.social_potential.pair_terms`) and the
+    rates of the stable substep ``h*``
     (:func:`~swarm_envs.physics.social_potential.pair_rates`); the ranked neighbours come
     from the distances; the statistics, observation and reward are the shared
     definitions.
@@ -170,16 +171,17 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
         f: torch.Tensor,
         goal: torch.Tensor,
         a: torch.Tensor,
+        h: torch.Tensor,
         move: torch.Tensor,
         substeps: torch.Tensor,
         prev: torch.Tensor,
         start: torch.Tensor,
     ) -> tuple[torch.Tensor, ...]:
         B = x.shape[1]
-        keep = move[:, None]
+        keep, step = move[:, None], h[:, None]
         xs, vs = [], []
         for c in range(d):
-            xc, vc = euler_update(x[c], v[c], f[c] + cfg.u_max * a[..., c], cfg.dt, p.m)
+            xc, vc = euler_update(x[c], v[c], f[c] + cfg.u_max * a[..., c], step, p.m)
             xs.append(torch.where(keep, xc, x[c]))
             vs.append(torch.where(keep, vc, v[c]))
 
@@ -224,22 +226,43 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
     return advance
 
 
+def plan_substep(
+    remaining: Any, h_stable: Any, used: Any, cap: float, xp: Any
+) -> tuple[Any, Any, Any, Any]:
+    """The next substep of each swarm, as the numpy core plans it: ``(h, last, late,
+    wanted)`` per swarm from the time left of the step, the stable substep ``h*`` of the
+    state and the substeps taken (float64 arrays or tensors; ``xp``: ``np`` or ``torch``).
+
+    ``n, h`` from :func:`~swarm_envs.physics.integrators.substep_plan`; ``late`` where
+    ``n`` exceeds the substeps left under ``cap``: then ``h`` spreads the time left over
+    those (and the swarm is marked over the cap); ``last`` where that substep ends the
+    step (``n ≤ 1``; ``True`` too where no time is left, ``h = 0``); ``wanted = used +
+    n``, the substeps the swarm needs at least.
+    """
+    n, h = substep_plan(remaining, h_stable, xp)
+    left = cap - used
+    late = n > left
+    spread = xp.where(left > 1.0, left, 1.0)
+    h = xp.where(late, remaining / spread, h)
+    last = xp.where(late, spread, n) <= 1.0
+    return h, last, late, used + n
+
+
 def build_substep(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
     """One substep of the step-size control for every swarm with time left, batched.
 
-    ``substep(x, v, f, h_stable, goal, a, remaining, used, over, needed)``: the state
-    and force as in :func:`build_advance` (``(d, B, N)``), the stable substep ``h*`` of
-    the state ``(B,)``, goals, actions; then per swarm, float64 ``(B,)``: the time left
-    of the step, the substeps taken, whether it needed more than ``cfg.max_substeps``
-    (bool) and how many it needed at least. Returns ``(x', v', f', h*', remaining, used,
-    over, needed)`` advanced by one substep: each swarm
-    with time left plans its substeps from its own ``h*``
-    (:func:`~swarm_envs.physics.integrators.substep_plan`; past the cap, the time left in
-    the substeps left, and marked ``over``), takes one Euler substep ``h`` with the
-    passive force ``f`` and the control, and the force and ``h*`` of the new state are
-    computed (for every swarm: a swarm without time left keeps its state, and its force
-    is measured anew by the fused step after the last substep). No statistics, no
-    observations: the semantics of the numpy core's
+    ``substep(x, v, f, goal, a, h, last, remaining, used, over, needed)``: the state and
+    force as in :func:`build_advance` (``(d, B, N)``), goals, actions; then per swarm,
+    ``(B,)``: the substep ``h`` to take (float64, 0 where no time is left), whether it is
+    the swarm's last (bool), the time left of the step, the substeps taken, whether it
+    needed more than ``cfg.max_substeps`` (bool) and how many it needed at least
+    (float64). Each swarm with time left takes its Euler substep with the passive force
+    ``f`` and the control; the force and the stable substep ``h*`` of the new state are
+    computed (for every swarm: one without time left keeps its state), and the next
+    substep is planned (:func:`plan_substep`). Returns ``(x', v', f', h, last,
+    remaining, used, over, needed, more)``, the same advanced, with ``more`` a 0-d bool:
+    whether a swarm has a substep left that is not its last. No statistics, no
+    observations: the numpy core's
     :meth:`~swarm_envs.envs.dynamics.SocialPotentialDynamics.step`, one substep per call.
     """
     p = cfg.physics
@@ -249,36 +272,33 @@ def build_substep(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
         x: torch.Tensor,
         v: torch.Tensor,
         f: torch.Tensor,
-        h_stable: torch.Tensor,
         goal: torch.Tensor,
         a: torch.Tensor,
+        h: torch.Tensor,
+        last: torch.Tensor,
         remaining: torch.Tensor,
         used: torch.Tensor,
         over: torch.Tensor,
         needed: torch.Tensor,
     ) -> tuple[torch.Tensor, ...]:
         active = remaining > 0
-        n, h = substep_plan(remaining, h_stable.to(remaining.dtype), torch)
-        needed = torch.where(active, torch.maximum(needed, used + n), needed)
-        left = torch.clamp(cap - used, min=1.0)
-        late = active & (n > cap - used)
-        over = over | late
-        h = torch.where(late, remaining / left, h)
-        n = torch.where(late, left, n)
-        step = h.to(x.dtype)[:, None]
-        keep = active[:, None]
+        keep, step = active[:, None], h.to(x.dtype)[:, None]
         xs, vs = [], []
         for c in range(d):
             xc, vc = euler_update(x[c], v[c], f[c] + cfg.u_max * a[..., c], step, p.m)
             xs.append(torch.where(keep, xc, x[c]))
             vs.append(torch.where(keep, vc, v[c]))
         used = used + active.to(used.dtype)
-        remaining = torch.where(active & (n > 1), remaining - h, 0.0)
+        remaining = torch.where(active & ~last, remaining - h, 0.0)
         x_new, v_new = torch.stack(xs), torch.stack(vs)
         xs, vs = list(x_new.unbind(0)), list(v_new.unbind(0))
         geo = pair_geometry(xs)
         fs, _, _, _ = _passive(geo, xs, vs, goal, cfg, energy=False)
-        h_new = _stable(geo, cfg).to(x.dtype)
-        return x_new, v_new, torch.stack(fs), h_new, remaining, used, over, needed
+        h_stable = _stable(geo, cfg).to(remaining.dtype)
+        h, last, late, wanted = plan_substep(remaining, h_stable, used, cap, torch)
+        over = over | late
+        needed = torch.maximum(needed, wanted)
+        more = ((remaining > 0) & ~last).any()
+        return x_new, v_new, torch.stack(fs), h, last, remaining, used, over, needed, more
 
     return substep
