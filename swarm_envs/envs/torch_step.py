@@ -238,6 +238,13 @@ def plan_substep(
     those (and the swarm is marked over the cap); ``last`` where that substep ends the
     step (``n ≤ 1``; ``True`` too where no time is left, ``h = 0``); ``wanted = used +
     n``, the substeps the swarm needs at least.
+
+    >>> import numpy as np
+    >>> h, last, late, wanted = plan_substep(
+    ...     np.array([0.1, 0.1, 0.0]), np.array([0.2, 0.03, 1.0]), np.zeros(3), 3.0, np
+    ... )
+    >>> [round(float(t), 4) for t in h], last.tolist(), late.tolist(), wanted.tolist()
+    ([0.1, 0.0333, 0.0], [True, False, True], [False, True, False], [1.0, 4.0, 0.0])
     """
     n, h = substep_plan(remaining, h_stable, xp)
     left = cap - used
