@@ -170,6 +170,11 @@ class TorchSwarmNavCore(SubstepControl):
         self._move_none = torch.zeros(B, dtype=torch.bool, device=self.device)
         self._one_each, self._none_each = self._zeros(B) + 1.0, zeros(B)
         self._dt_each = zeros(B) + cfg.dt  # every swarm's substep when it takes one
+        wide = dict(dtype=torch.float64, device=self.device)
+        # A step's first time left, substeps taken and needed (float64; distinct tensors:
+        # the compiled substep function is specialised on which arguments alias).
+        self._wide_start = (torch.full((B,), cfg.dt, **wide), zeros(B).to(**wide))
+        self._wide_start += (zeros(B).to(**wide),)
         # The substeps statistic of the current state (the last step's count, 0 after a
         # reset), and the swarms its step truncated as unstable (host indices, or None).
         self._counted = self._none_each
@@ -188,7 +193,7 @@ class TorchSwarmNavCore(SubstepControl):
         self._reward = torch.empty(0)
         self._graphed: CudaGraphed | None = None
         self._measure(warmup=True)
-        self._substep.warmup(*self._substep_inputs(self._no_action, None))
+        self._substep.warmup(*self._substep_inputs(self._no_action))
         if self.device.type == "cuda" and self._advance.compiled:
             # One replay instead of a launch per kernel (captured here, never in a step).
             self._graphed = CudaGraphed(self._advance, self._args(self._no_action, self._move_none))

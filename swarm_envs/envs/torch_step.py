@@ -255,21 +255,24 @@ def plan_substep(
     return h, last, late, used + n
 
 
-def build_substep(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
+def build_substep(cfg: Any) -> Callable[..., tuple[Any, ...]]:
     """One substep of the step-size control for every swarm with time left, batched.
 
-    ``substep(x, v, f, goal, a, h, last, remaining, used, over, needed)``: the state and
-    force as in :func:`build_advance` (``(d, B, N)``), goals, actions; then per swarm,
-    ``(B,)``: the substep ``h`` to take (float64, 0 where no time is left), whether it is
-    the swarm's last (bool), the time left of the step, the substeps taken, whether it
-    needed more than ``cfg.max_substeps`` (bool) and how many it needed at least
-    (float64). Each swarm with time left takes its Euler substep with the passive force
-    ``f`` and the control; the force and the stable substep ``h*`` of the new state are
-    computed (for every swarm: one without time left keeps its state), and the next
-    substep is planned (:func:`plan_substep`). Returns ``(x', v', f', h, last,
-    remaining, used, over, needed, more)``, the same advanced, with ``more`` a 0-d bool:
-    whether a swarm has a substep left that is not its last. No statistics, no
-    observations: the numpy core's
+    ``substep(x, v, f, goal, a, h_stable, remaining, used, over, needed)``: the state
+    and force as in :func:`build_advance` (``(d, B, N)``), goals, actions; then per
+    swarm, ``(B,)``: the stable substep ``h*`` of the state (its dtype), the time left of
+    the step, the substeps taken, whether it needed more than ``cfg.max_substeps``
+    (bool) and how many it needed at least (float64). Each swarm with time left plans
+    its substep (:func:`plan_substep`) and takes it, an Euler substep with the passive
+    force ``f`` and the control; the force and ``h*`` of the new state are computed (for
+    every swarm: one without time left keeps its state).
+
+    Returns ``(x', v', f', h*', remaining, used, over, needed, more, last)``: the same
+    advanced; ``more``, a 0-d bool, whether a swarm's next substep is not its last; and
+    ``last``, each swarm's next substep planned for the fused step
+    (:func:`build_advance`'s ``h``, ``move`` and ``substeps``, in the state's dtype) with
+    the step's counts for the host ``stack([over, needed])`` once it is taken. No
+    statistics, no observations: the numpy core's
     :meth:`~swarm_envs.envs.dynamics.SocialPotentialDynamics.step`, one substep per call.
     """
     p = cfg.physics
@@ -281,13 +284,15 @@ def build_substep(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
         f: torch.Tensor,
         goal: torch.Tensor,
         a: torch.Tensor,
-        h: torch.Tensor,
-        last: torch.Tensor,
+        h_stable: torch.Tensor,
         remaining: torch.Tensor,
         used: torch.Tensor,
         over: torch.Tensor,
         needed: torch.Tensor,
-    ) -> tuple[torch.Tensor, ...]:
+    ) -> tuple[Any, ...]:
+        wide = remaining.dtype
+        h, last, late, wanted = plan_substep(remaining, h_stable.to(wide), used, cap, torch)
+        over, needed = over | late, torch.maximum(needed, wanted)
         active = remaining > 0
         keep, step = active[:, None], h.to(x.dtype)[:, None]
         xs, vs = [], []
@@ -295,17 +300,21 @@ def build_substep(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
             xc, vc = euler_update(x[c], v[c], f[c] + cfg.u_max * a[..., c], step, p.m)
             xs.append(torch.where(keep, xc, x[c]))
             vs.append(torch.where(keep, vc, v[c]))
-        used = used + active.to(used.dtype)
+        used = used + active.to(wide)
         remaining = torch.where(active & ~last, remaining - h, 0.0)
         x_new, v_new = torch.stack(xs), torch.stack(vs)
         xs, vs = list(x_new.unbind(0)), list(v_new.unbind(0))
         geo = pair_geometry(xs)
         fs, _, _, _ = _passive(geo, xs, vs, goal, cfg, energy=False)
-        h_stable = _stable(geo, cfg).to(remaining.dtype)
-        h, last, late, wanted = plan_substep(remaining, h_stable, used, cap, torch)
-        over = over | late
-        needed = torch.maximum(needed, wanted)
-        more = ((remaining > 0) & ~last).any()
-        return x_new, v_new, torch.stack(fs), h, last, remaining, used, over, needed, more
+        h_new = _stable(geo, cfg)
+        # The next substep, planned as the next call would plan it: for the fused step
+        # when it is every swarm's last.
+        h, last, late, wanted = plan_substep(remaining, h_new.to(wide), used, cap, torch)
+        left = remaining > 0
+        more = (left & ~last).any()
+        counts = torch.stack([(over | late).to(wide), torch.maximum(needed, wanted)])
+        final = (h.to(x.dtype), left, (used + left.to(wide)).to(x.dtype), counts)
+        f_new = torch.stack(fs)
+        return x_new, v_new, f_new, h_new, remaining, used, over, needed, more, final
 
     return substep

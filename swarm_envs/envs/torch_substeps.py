@@ -12,11 +12,11 @@ substep loop, and the unstable guard.
   ``dt`` on the host (:attr:`SubstepControl._calm`) says both that the step went stable
   and that the next one takes the whole ``dt`` in one substep for every swarm: the
   common case costs that comparison;
-- otherwise the next step plans each swarm's first substep
-  (:func:`~swarm_envs.envs.torch_step.plan_substep`); if some swarm needs more than
-  one, the substep function (:func:`~swarm_envs.envs.torch_step.build_substep`) takes
-  every swarm's substeps but its last (one flag read on the host per substep), and the
-  fused function takes the last ones and measures the new state;
+- otherwise the substep function (:func:`~swarm_envs.envs.torch_step.build_substep`)
+  plans and takes every swarm's substeps but its last
+  (:func:`~swarm_envs.envs.torch_step.plan_substep`; one flag read on the host per
+  substep), and the fused function takes the last ones and measures the new state (a
+  swarm that needed only one takes it in the substep function);
 - after the step, :func:`~swarm_envs.envs.common.unstable_swarms` (skipped when the
   comparison above passed and no swarm was over the cap): raise
   :class:`~swarm_envs.envs.common.SwarmUnstableError`, or truncate those swarms at their
@@ -25,14 +25,14 @@ substep loop, and the unstable guard.
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 import torch
 
 from swarm_envs.envs.common import SwarmUnstableError, unstable_message, unstable_swarms
 from swarm_envs.envs.task import STAT_KEYS
-from swarm_envs.envs.torch_step import PACKED_KEYS, plan_substep
+from swarm_envs.envs.torch_step import PACKED_KEYS
 
 __all__ = ["SUBSTEPS", "UNSTABLE", "SubstepControl"]
 
@@ -43,17 +43,6 @@ SUBSTEPS = STAT_KEYS.index("substeps")
 UNSTABLE = STAT_KEYS.index("unstable")
 
 State = tuple[torch.Tensor, torch.Tensor]
-
-
-class Plan(NamedTuple):
-    """The first substep of every swarm ``(B,)`` (:func:`~swarm_envs.envs.torch_step.
-    plan_substep` on the host): its length, whether it is the last, where the swarm is
-    over the cap, and how many substeps it needs at least."""
-
-    h: np.ndarray
-    last: np.ndarray
-    late: np.ndarray
-    wanted: np.ndarray
 
 
 class SubstepControl:
@@ -77,6 +66,7 @@ class SubstepControl:
     _counted: torch.Tensor
     _flagged: np.ndarray | None
     _calm: bool
+    _wide_start: tuple[torch.Tensor, ...]
 
     def _host_packed(self) -> None:
         """Copy the packed rows to the host, and note whether every swarm's state is
@@ -91,22 +81,17 @@ class SubstepControl:
         Returns the state before the step (for the guard), where a swarm needed more
         substeps than ``max_substeps`` (``None``: nowhere) and how many it needed.
         """
-        plan = self._first_plan()
         self._flagged = None
         before = (self._x, self._v)
-        if plan is None or plan.last.all():
-            # Every swarm in one substep of dt (with max_substeps = 1 also those that
-            # need more: past the cap, marked): the fused step alone.
+        if self._calm:  # every swarm takes dt in one substep: the fused step alone
             self._counted = self._one_each
             self._run(a, self._move_all)
             if self._graphed is not None:  # its outputs were overwritten, not its inputs
                 before = self._graphed.inputs[0], self._graphed.inputs[1]
-            if plan is None:
-                return before, None, np.ones(self.batch)
-            return before, plan.late, plan.wanted
+            return before, None, np.ones(self.batch)
         if self._graphed is not None:  # graph outputs: the last substep overwrites them
             before = before[0].clone(), before[1].clone()
-        over, needed = self._substeps(a, plan)
+        over, needed = self._substeps(a)
         return before, over, needed
 
     def _guard(
@@ -126,64 +111,35 @@ class SubstepControl:
             return stats, None
         return self._unstable(a, bad, before, stats, needed), bad
 
-    def _first_plan(self) -> Plan | None:
-        """``None`` when every swarm takes the whole ``dt`` in one substep (its carried
-        ``h*`` allows it; the common case, decided by one comparison), else each swarm's
-        first substep (:func:`~swarm_envs.envs.torch_step.plan_substep`)."""
-        if self._calm:  # every h* >= dt: one substep (exactly, compared in float64)
-            return None
-        h_stable = self._packed_host[:, _H_STABLE].astype(np.float64)
-        remaining, used = np.full(self.batch, self.cfg.dt), np.zeros(self.batch)
-        return Plan(*plan_substep(remaining, h_stable, used, self.cfg.max_substeps, np))
+    def _substep_inputs(self, a: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """The substep function's arguments for the first substep of a step with
+        actions ``a``."""
+        remaining, used, needed = self._wide_start  # never written: shared by the steps
+        no_swarm = torch.zeros(self.batch, dtype=torch.bool, device=self.device)
+        h_stable = self._packed[:, _H_STABLE].contiguous()
+        x, v, f, goal = self._x, self._v, self._f, self._goal
+        return (x, v, f, goal, a, h_stable, remaining, used, no_swarm, needed)
 
-    def _substep_inputs(self, a: torch.Tensor, plan: Plan | None) -> tuple[torch.Tensor, ...]:
-        """The substep function's arguments for the first substep of a step with actions
-        ``a`` (``plan=None``: every swarm at a substep of ``dt`` that is not its last)."""
-        B, device, wide = self.batch, self.device, torch.float64
-        if plan is None:
-            h = torch.full((B,), self.cfg.dt, dtype=wide, device=device)
-            last = over = torch.zeros(B, dtype=torch.bool, device=device)
-            needed = torch.ones(B, dtype=wide, device=device)
-        else:
-            h, last, over, needed = (
-                torch.as_tensor(part, device=device)
-                for part in (plan.h, plan.last, plan.late, plan.wanted)
-            )
-        return (
-            self._x,
-            self._v,
-            self._f,
-            self._goal,
-            a,
-            h,
-            last,
-            torch.full((B,), self.cfg.dt, dtype=wide, device=device),
-            torch.zeros(B, dtype=wide, device=device),
-            over,
-            needed,
-        )
-
-    def _substeps(self, a: torch.Tensor, plan: Plan) -> tuple[np.ndarray, np.ndarray]:
+    def _substeps(self, a: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
         """Take the step's substeps, every swarm until its ``dt`` is spent (at most
-        ``max_substeps``): all but each swarm's last through the substep function, the
-        last ones in the fused step, which measures the new state. Sets the state and
-        :attr:`_counted`; returns ``(over_cap, needed)`` per swarm on the host, as the
-        numpy core counts them."""
-        x, v, f, goal, _, h, last, remaining, used, over, needed = self._substep_inputs(a, plan)
+        ``max_substeps``): all but each swarm's last through the substep function (with
+        one host read per substep), the last ones in the fused step, which measures
+        the new state. Sets the state and :attr:`_counted`; returns ``(over_cap,
+        needed)`` per swarm on the host, as the numpy core counts them."""
+        x, v, f, goal, _, h_stable, remaining, used, over, needed = self._substep_inputs(a)
         for _ in range(self.cfg.max_substeps):
-            x, v, f, h, last, remaining, used, over, needed, more = self._substep(
-                x, v, f, goal, a, h, last, remaining, used, over, needed
+            x, v, f, h_stable, remaining, used, over, needed, more, last = self._substep(
+                x, v, f, goal, a, h_stable, remaining, used, over, needed
             )
-            if not bool(more):  # one host read per substep
+            if not bool(more):
                 break
         else:  # the cap leaves at most max_substeps - 1 substeps before the last
             raise RuntimeError("substeps left after max_substeps substeps")
-        move = remaining > 0  # the swarms with their last substep to take
+        h, move, self._counted, counts = last
         self._x, self._v, self._f = x, v, f
-        self._counted = (used + move.to(used.dtype)).to(self._tdtype)
-        self._run(a, move, h.to(self._tdtype))
-        counts = torch.stack([over.to(needed.dtype), needed]).cpu().numpy()
-        return counts[0] > 0, counts[1]
+        self._run(a, move, h)  # the last substeps, and the measure of every swarm
+        over_cap, needed = counts.cpu().numpy()
+        return over_cap > 0, needed
 
     def _unstable(
         self,
