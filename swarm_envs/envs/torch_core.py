@@ -166,10 +166,10 @@ class TorchSwarmNavCore(SubstepControl):
         P = len(PACKED_KEYS)
         self._prev, self._start = zeros(B, P), zeros(B, P)
         self._no_action = zeros(B, N, d)
-        self._move_all = torch.ones(B, dtype=torch.bool, device=self.device)
-        self._move_none = torch.zeros(B, dtype=torch.bool, device=self.device)
         self._one_each, self._none_each = self._zeros(B) + 1.0, zeros(B)
-        self._dt_each = zeros(B) + cfg.dt  # every swarm's substep when it takes one
+        # Every swarm's substep: dt when it takes the step in one, 0 to only measure it.
+        self._dt_each, self._no_step = zeros(B) + cfg.dt, zeros(B)
+        self._one_needed = np.ones(B)
         wide = dict(dtype=torch.float64, device=self.device)
         # A step's first time left, substeps taken and needed (float64; distinct tensors:
         # the compiled substep function is specialised on which arguments alias).
@@ -196,7 +196,7 @@ class TorchSwarmNavCore(SubstepControl):
         self._substep.warmup(*self._substep_inputs(self._no_action))
         if self.device.type == "cuda" and self._advance.compiled:
             # One replay instead of a launch per kernel (captured here, never in a step).
-            self._graphed = CudaGraphed(self._advance, self._args(self._no_action, self._move_none))
+            self._graphed = CudaGraphed(self._advance, self._args(self._no_action, self._no_step))
             self._measure()
         # Resets of a few swarms measure only those, through the same function compiled
         # for a sub-batch of `reset_batch` swarms (padded): in a VecEnv some swarm ends
@@ -273,19 +273,16 @@ class TorchSwarmNavCore(SubstepControl):
                 seconds += other.compile_seconds
         return seconds
 
-    def _args(
-        self, a: torch.Tensor, move: torch.Tensor, h: torch.Tensor | None = None
-    ) -> tuple[torch.Tensor, ...]:
+    def _args(self, a: torch.Tensor, h: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """The fused function's arguments for the whole batch (``h``: each swarm's
-        substep, ``dt`` by default)."""
+        substep, 0 to only measure it)."""
         return (
             self._x,
             self._v,
             self._f,
             self._goal,
             a,
-            self._dt_each if h is None else h,
-            move,
+            h,
             self._counted,
             self._prev,
             self._start,
@@ -294,13 +291,12 @@ class TorchSwarmNavCore(SubstepControl):
     def _run(
         self,
         a: torch.Tensor,
-        move: torch.Tensor,
-        h: torch.Tensor | None = None,
+        h: torch.Tensor,
         warmup: bool = False,
     ) -> None:
         """The fused function on the whole batch; the swarms :attr:`_flagged` keep their
         ``unstable`` mark."""
-        args = self._args(a, move, h)
+        args = self._args(a, h)
         if self._graphed is not None:
             # The graph's outputs are overwritten by its next replay: the state is only
             # read before then (or passed back in); what is kept or handed out is copied.
@@ -317,7 +313,7 @@ class TorchSwarmNavCore(SubstepControl):
 
     def _measure(self, warmup: bool = False) -> None:
         """Observations, statistics and passive force of the current state (no step)."""
-        self._run(self._no_action, self._move_none, warmup=warmup)
+        self._run(self._no_action, self._no_step, warmup=warmup)
 
     def _row_args(self, rows: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """The fused function's arguments for swarms ``rows`` only, measuring (no step)."""
@@ -328,8 +324,7 @@ class TorchSwarmNavCore(SubstepControl):
             self._f[:, rows],
             self._goal[rows],
             self._no_action[:n],
-            self._dt_each[:n],
-            self._move_none[:n],
+            self._no_step[:n],
             self._none_each[:n],
             self._prev[rows],
             self._start[rows],
@@ -356,7 +351,7 @@ class TorchSwarmNavCore(SubstepControl):
         self._packed = self._packed.index_put((rows,), packed[:n])  # a new tensor
         self._packed[:, SUBSTEPS] = 0.0
         self._packed[:, UNSTABLE] = 0.0
-        self._host_packed()
+        self._host_packed(whole=False)
 
     # ------------------------------------------------------------------ reset
     def reset(self, rng: np.random.Generator, which: np.ndarray | None = None) -> None:

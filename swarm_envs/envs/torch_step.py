@@ -49,11 +49,12 @@ from swarm_envs.physics.social_potential import (
 __all__ = ["PACKED_KEYS", "build_advance", "build_substep", "nearest_neighbors", "plan_substep"]
 
 #: The columns of the fused step's packed row per swarm: the statistics (``STAT_KEYS``),
-#: the stable substep ``h*`` of the state (``"h_stable"``), and ``h*`` where the state is
-#: finite (:data:`~swarm_envs.envs.common.FINITE_KEYS`), NaN where not (``"h_guard"``):
-#: ``h_guard ≥ dt`` for every swarm says at once that the next step takes one substep
-#: each and that this one went stable, the host's only check in the common case.
-PACKED_KEYS = (*STAT_KEYS, "h_stable", "h_guard")
+#: the stable substep ``h*`` of the state (``"h_stable"``), ``h*`` where the state is
+#: finite (:data:`~swarm_envs.envs.common.FINITE_KEYS`), NaN where not (``"h_guard"``),
+#: and 1 in every row where ``h_guard ≥ dt`` for every swarm of the batch (``"calm"``):
+#: that says at once that the next step takes one substep each and that this one went
+#: stable, the host's only check in the common case.
+PACKED_KEYS = (*STAT_KEYS, "h_stable", "h_guard", "calm")
 
 
 def nearest_neighbors(rho: torch.Tensor, k: int) -> tuple[torch.Tensor, torch.Tensor]:
@@ -136,18 +137,17 @@ def _stable(geo: PairGeometry, cfg: Any) -> torch.Tensor:
 def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
     """The fused SwarmNav step for config ``cfg`` (social potential, semi-implicit Euler).
 
-    ``advance(x, v, f, goal, a, h, move, substeps, prev, start)`` with positions,
-    velocities and the passive force at ``(x, v)`` stored component first, ``(d, B, N)``,
-    so that every per-agent quantity is a contiguous ``(B, N)`` plane (the layout on which
-    a compiler vectorises the pair loop); goals ``(B, d)``; actions ``a`` ``(B, N, d)``
+    ``advance(x, v, f, goal, a, h, substeps, prev, start)`` with positions, velocities
+    and the passive force at ``(x, v)`` stored component first, ``(d, B, N)``, so that
+    every per-agent quantity is a contiguous ``(B, N)`` plane (the layout on which a
+    compiler vectorises the pair loop); goals ``(B, d)``; actions ``a`` ``(B, N, d)``
     clipped to [−1, 1]; ``h`` ``(B,)``: each swarm's (last) substep, ``dt`` when it takes
-    the step in one; ``move`` ``(B,)`` bool (false: keep that swarm's state, only measure
-    it); ``substeps`` ``(B,)``: the ``substeps`` statistic to report (the step's count, 0
-    after a reset); ``prev`` and ``start`` ``(B, P)``: the previous step's and the
-    episode start's packed rows (:data:`PACKED_KEYS`). Returns ``(x', v', f' (d, B, N),
-    obs (B, N, obs_dim) float32, packed (B, P), reward (B,), ρ (B, N, N))``; the
-    distances (``inf`` on the diagonal) are returned only so that a compiler stores them
-    once (callers drop them).
+    the step in one, 0 to keep its state and only measure it; ``substeps`` ``(B,)``: the
+    ``substeps`` statistic to report (the step's count, 0 after a reset); ``prev`` and
+    ``start`` ``(B, P)``: the previous step's and the episode start's packed rows
+    (:data:`PACKED_KEYS`). Returns ``(x', v', f' (d, B, N), obs (B, N, obs_dim) float32,
+    packed (B, P), reward (B,), ρ (B, N, N))``; the distances (``inf`` on the diagonal)
+    are returned only so that a compiler stores them once (callers drop them).
 
     The (last) substep: ``v' = v + h (f + u_max a)/m``, ``x' = x + h v'``; then one pass
     over the pairs of ``(x', v')`` gives the passive force carried into the next step,
@@ -172,13 +172,12 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
         goal: torch.Tensor,
         a: torch.Tensor,
         h: torch.Tensor,
-        move: torch.Tensor,
         substeps: torch.Tensor,
         prev: torch.Tensor,
         start: torch.Tensor,
     ) -> tuple[torch.Tensor, ...]:
         B = x.shape[1]
-        keep, step = move[:, None], h[:, None]
+        keep, step = (h > 0)[:, None], h[:, None]
         xs, vs = [], []
         for c in range(d):
             xc, vc = euler_update(x[c], v[c], f[c] + cfg.u_max * a[..., c], step, p.m)
@@ -214,7 +213,8 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
         for key in FINITE_KEYS[1:]:
             finite = finite & torch.isfinite(columns[STAT_KEYS.index(key)])
         guard = torch.where(finite, h_stable, math.nan)
-        packed = torch.stack([*columns, h_stable, guard], dim=-1)
+        calm = (guard.to(torch.float64) >= cfg.dt).all().to(x.dtype).expand(B)
+        packed = torch.stack([*columns, h_stable, guard, calm], dim=-1)
         obs = observation(xn, vn, goal, near, cfg, xp)
         effort = (a * a).sum((-2, -1))
         inputs = RewardInputs(stats, unpack(prev), unpack(start), effort, N, xp)
@@ -270,7 +270,7 @@ def build_substep(cfg: Any) -> Callable[..., tuple[Any, ...]]:
     Returns ``(x', v', f', h*', remaining, used, over, needed, more, last)``: the same
     advanced; ``more``, a 0-d bool, whether a swarm's next substep is not its last; and
     ``last``, each swarm's next substep planned for the fused step
-    (:func:`build_advance`'s ``h``, ``move`` and ``substeps``, in the state's dtype) with
+    (:func:`build_advance`'s ``h`` and ``substeps``, in the state's dtype) with
     the step's counts for the host ``stack([over, needed])`` once it is taken. No
     statistics, no observations: the numpy core's
     :meth:`~swarm_envs.envs.dynamics.SocialPotentialDynamics.step`, one substep per call.
@@ -313,7 +313,7 @@ def build_substep(cfg: Any) -> Callable[..., tuple[Any, ...]]:
         left = remaining > 0
         more = (left & ~last).any()
         counts = torch.stack([(over | late).to(wide), torch.maximum(needed, wanted)])
-        final = (h.to(x.dtype), left, (used + left.to(wide)).to(x.dtype), counts)
+        final = (torch.where(left, h, 0.0).to(x.dtype), (used + left.to(wide)).to(x.dtype), counts)
         f_new = torch.stack(fs)
         return x_new, v_new, f_new, h_new, remaining, used, over, needed, more, final
 

@@ -38,6 +38,7 @@ __all__ = ["SUBSTEPS", "UNSTABLE", "SubstepControl"]
 
 _H_STABLE = PACKED_KEYS.index("h_stable")
 _H_GUARD = PACKED_KEYS.index("h_guard")
+_CALM = PACKED_KEYS.index("calm")
 #: Columns of the ``substeps`` and ``unstable`` statistics in the packed row.
 SUBSTEPS = STAT_KEYS.index("substeps")
 UNSTABLE = STAT_KEYS.index("unstable")
@@ -68,12 +69,16 @@ class SubstepControl:
     _calm: bool
     _wide_start: tuple[torch.Tensor, ...]
 
-    def _host_packed(self) -> None:
+    def _host_packed(self, whole: bool = True) -> None:
         """Copy the packed rows to the host, and note whether every swarm's state is
-        finite and allows the whole ``dt`` in one substep (:attr:`_calm`)."""
-        self._packed_host = self._packed.cpu().numpy()
-        dt = np.float64(self.cfg.dt)  # NaN (a non-finite state) compares False
-        self._calm = bool((self._packed_host[:, _H_GUARD] >= dt).all())
+        finite and allows the whole ``dt`` in one substep (:attr:`_calm`): the fused
+        step's verdict on the batch when it measured all of it (``whole``), else
+        recomputed from each row's ``h_guard``."""
+        packed = self._packed_host = self._packed.cpu().numpy()
+        if whole:
+            self._calm = bool(packed[0, _CALM])
+        else:  # NaN (a non-finite state) compares False
+            self._calm = bool((packed[:, _H_GUARD] >= np.float64(self.cfg.dt)).all())
 
     def _integrate(self, a: torch.Tensor) -> tuple[State, np.ndarray | None, np.ndarray]:
         """Advance every swarm by ``dt`` with actions ``a`` and measure the new state.
@@ -85,10 +90,10 @@ class SubstepControl:
         before = (self._x, self._v)
         if self._calm:  # every swarm takes dt in one substep: the fused step alone
             self._counted = self._one_each
-            self._run(a, self._move_all)
+            self._run(a, self._dt_each)
             if self._graphed is not None:  # its outputs were overwritten, not its inputs
                 before = self._graphed.inputs[0], self._graphed.inputs[1]
-            return before, None, np.ones(self.batch)
+            return before, None, self._one_needed
         if self._graphed is not None:  # graph outputs: the last substep overwrites them
             before = before[0].clone(), before[1].clone()
         over, needed = self._substeps(a)
@@ -135,9 +140,9 @@ class SubstepControl:
                 break
         else:  # the cap leaves at most max_substeps - 1 substeps before the last
             raise RuntimeError("substeps left after max_substeps substeps")
-        h, move, self._counted, counts = last
+        h, self._counted, counts = last
         self._x, self._v, self._f = x, v, f
-        self._run(a, move, h)  # the last substeps, and the measure of every swarm
+        self._run(a, h)  # the last substeps (h > 0), and the measure of every swarm
         over_cap, needed = counts.cpu().numpy()
         return over_cap > 0, needed
 
@@ -161,5 +166,5 @@ class SubstepControl:
         self._x[:, rows], self._v[:, rows] = before[0][:, rows], before[1][:, rows]
         self._counted = self._counted.index_put((rows,), self._none_each[rows])  # undone
         self._flagged = idx
-        self._run(a, self._move_none)
+        self._run(a, self._no_step)
         return self.stats()
