@@ -13,9 +13,9 @@ The passive force of the current state is carried from one step to the next, so 
 step evaluates the pairs once; so is the stable substep ``h*`` of the step-size control
 (computed in the same pass; :mod:`swarm_envs.physics.integrators`). When every swarm's
 ``h*`` allows the whole ``dt`` in one substep, the step is that one fused call. Otherwise
-the substeps run through a second compiled function (update, force and ``h*`` only;
-:func:`~swarm_envs.envs.torch_step.build_substep`), each swarm its own count, and the
-fused function then measures the new state without moving it
+each swarm's substeps but its last run through a second compiled function (update,
+force and ``h*`` only; :func:`~swarm_envs.envs.torch_step.build_substep`), each swarm its
+own count, and the fused function takes the last ones and measures the new state
 (:mod:`swarm_envs.envs.torch_substeps`). The substep counts, the cap ``max_substeps`` and
 the unstable guard (``on_unstable``) are the numpy core's.
 

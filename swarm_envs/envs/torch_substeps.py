@@ -7,11 +7,12 @@ substep loop, and the unstable guard.
 :meth:`~swarm_envs.envs.core.SwarmNavCore.step`):
 
 - the fused step returns, per swarm, the stable substep ``h*`` of the new state and
-  ``h*`` where that state is finite, NaN where not (``"h_guard"``,
-  :data:`~swarm_envs.envs.torch_step.PACKED_KEYS`); one comparison of that column with
-  ``dt`` on the host (:attr:`SubstepControl._calm`) says both that the step went stable
-  and that the next one takes the whole ``dt`` in one substep for every swarm: the
-  common case costs that comparison;
+  ``h*`` where that state is finite, NaN where not (``"h_guard"``), and whether that is
+  at least ``dt`` for the whole batch (``"calm"``;
+  :data:`~swarm_envs.envs.torch_step.PACKED_KEYS`). That one value, read on the host
+  (:attr:`SubstepControl._calm`), says both that the step went stable and that the
+  next one takes the whole ``dt`` in one substep for every swarm: the common case costs
+  that read;
 - otherwise the substep function (:func:`~swarm_envs.envs.torch_step.build_substep`)
   plans and takes every swarm's substeps but its last
   (:func:`~swarm_envs.envs.torch_step.plan_substep`; one flag read on the host per
