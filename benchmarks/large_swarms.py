@@ -1,25 +1,48 @@
-"""Seconds per full SwarmNav step vs N, dense core against sparse core, and the crossover N.
+"""Large swarms: seconds per SwarmNav step vs N (dense core against sparse core, and the
+crossover N), with the physical state of every timed run; and the regime table.
 
-Usage: ``python benchmarks/large_swarms.py [--dim 2] [--repeats 7] [--max-n 100000]
-[--dense-max 4000] [--kdtree] [--accuracy 2000] [--cutoff-tol 0.03]``
+Usage: ``python benchmarks/large_swarms.py [--dim 2] [--physics large_swarm]
+[--repeats 7] [--settle 1] [--max-n 100000] [--sizes N,...] [--dense-max 4000] [--kdtree]
+[--accuracy 2000] [--cutoff-tol 0.03] [--regime [--regime-steps 100] [--regime-wall 900]
+[--regime-dims 2,3] [--regime-physics navigation,large_swarm]]``
 
 The sparse core's pair pass is compiled with numba where it imports
 (:mod:`swarm_envs.physics.compiled_pairs`); ``SWARM_ENVS_NUMBA=0`` times the numpy pass
-instead. The header says which ran.
+instead. The header says which ran, and how many threads numba uses.
 
-A full step is ``core.step(actions)`` followed by ``core.observe()`` (what every env
-adapter does), for one swarm (B = 1, float64) with the default config except
-``init_radius``, which is scaled as ``1.5 (N / 10)^{1/d}``
-(:func:`swarm_envs.envs.sparse_core.density_preserving_radius`) so that every N starts
-at the density of the default N = 10 case; with the default radius, 100,000 agents
-would start 10^4 times denser. Random actions are drawn once per row (not timed).
-Each cell is the median (and the best) of ``--repeats`` single steps after one
-warm-up step; on a shared machine the medians are what a run sees.
+Scenarios (:func:`config`): ``--physics navigation`` is the default config (the
+paper's navigation set) started at the density of its N = 10 default (10 agents in a
+disc of radius 1.5, ``init_density`` 1.41 per unit area in 2-D, 0.71 per unit volume in
+3-D); ``--physics large_swarm`` is ``configs/env/large_swarm.yaml``
+(:meth:`SocialPotentialParams.large_swarm <swarm_envs.physics.SocialPotentialParams.large_swarm>`,
+``init_density`` 0.3). Either way every N starts at the same density.
 
-Rows: N = 100 … ``--max-n``; the dense core only up to ``--dense-max`` (its
-``(N, N)`` temporaries need about ``12 · 8 N²`` bytes). The crossover is then
-bisected (geometrically) between the largest N where the dense core wins and the
-smallest where the sparse core wins.
+Timing: a full step is ``core.step(actions)`` followed by ``core.observe()`` (what every
+env adapter does), for one swarm (B = 1, float64) with random actions drawn once per row
+(not timed). Each cell is the median (and the best) of ``--repeats`` single steps after
+``--settle`` untimed steps (default 1, the warm-up; the first steps of a random start
+can need more substeps than the settled swarm); on a shared machine the medians are
+what a run sees. Beside the time,
+each row reports the physical state of the sparse run at its end: the mean
+nearest-neighbour distance, the expanse (mean distance to the centroid), the energy
+drift per agent since the reset (``(E − E_0)/N``; dissipation makes it negative, a
+diverging integration positive) and the substeps per step; a run that raises
+:class:`~swarm_envs.envs.common.SwarmUnstableError` is reported as such.
+
+Rows: N = 100 … ``--max-n``; the dense core only up to ``--dense-max`` (its ``(N, N)``
+temporaries need about ``12 · 8 N²`` bytes). The crossover is then bisected
+(geometrically) between the largest N where the dense core wins and the smallest where
+the sparse core wins.
+
+``--regime``: instead of the timing table, the regime table of ``docs/large_swarms.md``:
+for both parameter sets (``--regime-physics``), N = 10 … ``--max-n`` (or ``--sizes``;
+the dense core below :data:`~swarm_envs.envs.sparse_core.SPARSE_MIN_AGENTS`, the sparse
+core from there), the passive swarm (zero actions) for ``--regime-steps`` steps of
+``dt = 0.1``: its state at the end (as above), the mean and largest substeps per step,
+the seconds per step, and the outcome: a run that raises ``SwarmUnstableError`` (``on_unstable="raise"``,
+the default) is reported with the step and the message, one that exceeds
+``--regime-wall`` seconds stops there and says so; the state is then that of its last
+completed step.
 
 ``--kdtree``: also time the neighbour work alone (all pairs within ``r_c`` plus the
 k nearest neighbours) with the numpy cell list and with ``scipy.spatial.cKDTree``
@@ -42,51 +65,122 @@ import platform
 import statistics
 import time
 from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 
 from swarm_envs import tune_allocator
-from swarm_envs.config import SwarmConfig
+from swarm_envs.config import SwarmConfig, load_swarm_config
+from swarm_envs.envs.common import SwarmUnstableError
 from swarm_envs.envs.core import SwarmNavCore
-from swarm_envs.envs.sparse_core import (
-    DEFAULT_CUTOFF_TOL,
-    SPARSE_MIN_AGENTS,
-    SparseSwarmNavCore,
-    density_preserving_radius,
-)
+from swarm_envs.envs.sparse_core import DEFAULT_CUTOFF_TOL, SPARSE_MIN_AGENTS, SparseSwarmNavCore
 from swarm_envs.physics import compiled_pairs, forces
 from swarm_envs.physics.cutoff import force_error_bound, sparse_forces
 from swarm_envs.physics.neighbors import CELL_MARGIN, REACH, CellList, knn, radius_pairs
 
 Core = type[SwarmNavCore] | type[SparseSwarmNavCore]
 
+#: The parameter sets a run can use (``--physics``).
+PHYSICS = ("navigation", "large_swarm")
 
-def config(n: int, dim: int) -> SwarmConfig:
-    """The default scenario with N agents at the default start density."""
-    return SwarmConfig(
-        n_agents=n, dim=dim, init_radius=density_preserving_radius(n, dim), max_steps=10**9
-    )
+_UNIT_BALL = {2: math.pi, 3: 4.0 * math.pi / 3.0}
+
+
+def config(n: int, dim: int, physics: str = "navigation") -> SwarmConfig:
+    """The scenario of ``physics`` (see the module docstring) with N agents."""
+    if physics == "large_swarm":
+        return load_swarm_config("large_swarm", {"n_agents": n, "dim": dim, "max_steps": 10**9})
+    density = 10 / (_UNIT_BALL[dim] * 1.5**dim)  # the default start: 10 agents in 1.5
+    return SwarmConfig(n_agents=n, dim=dim, init_density=density, max_steps=10**9)
 
 
 #: Keyword arguments of every SparseSwarmNavCore built here (set from the command line).
 SPARSE_KWARGS: dict[str, float] = {}
 
 
-def time_step(core_cls: Core, n: int, dim: int, repeats: int) -> tuple[float, float]:
-    """``(median, best)`` seconds of one full step (step + observe) of one swarm."""
+class RunState(NamedTuple):
+    """The physical state at the end of a run (see the module docstring)."""
+
+    nnd: float
+    expanse: float
+    drift: float  # (E − E_0) / N
+    substeps: float  # mean per step
+    max_substeps: float
+    steps: int  # steps completed
+    error: str | None  # why the run stopped early (SwarmUnstableError, wall limit)
+
+    def cells(self) -> str:
+        """The state (after the last completed step) as markdown table cells."""
+        return f"{self.nnd:.3f} | {self.expanse:.2f} | {self.drift:+.3f} | {self.substeps:.2f} |"
+
+    def outcome(self) -> str:
+        """``ok`` or why the run stopped early."""
+        return "ok" if self.error is None else self.error
+
+
+def make_core(core_cls: Core, cfg: SwarmConfig) -> SwarmNavCore:
+    """A core of ``core_cls`` for ``cfg``, reset with seed 0."""
     kwargs = SPARSE_KWARGS if core_cls is SparseSwarmNavCore else {}
-    core = core_cls(config(n, dim), **kwargs)
+    core = core_cls(cfg, **kwargs)
     core.reset(np.random.default_rng(0))
-    actions = np.random.default_rng(1).uniform(-1.0, 1.0, (1, n, dim))
-    core.step(actions)  # warm-up
-    core.observe()
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        core.step(actions)
+    return core
+
+
+def run_steps(
+    core: SwarmNavCore, actions: np.ndarray | None, steps: int, wall: float = math.inf
+) -> tuple[list[float], RunState]:
+    """Step ``core`` up to ``steps`` times (``actions`` ``None``: zero); the seconds of
+    each full step (step + observe) and the state at the end."""
+    n = core.cfg.n_agents
+    e0 = float(core.stats()["energy"][0])
+    a = np.zeros(core.x.shape) if actions is None else actions
+    times: list[float] = []
+    subs: list[float] = []
+    stats = core.stats()
+    error = None
+    start = time.perf_counter()
+    for _ in range(steps):
+        t0 = time.perf_counter()
+        try:
+            *_, stats = core.step(a)
+        except SwarmUnstableError as err:
+            error = f"SwarmUnstableError at step {len(times) + 1}: {str(err).split('. To fix')[0]}"
+            error = error.replace("|", "/")
+            break
         core.observe()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times), min(times)
+        times.append(time.perf_counter() - t0)
+        subs.append(float(stats["substeps"][0]))
+        if time.perf_counter() - start > wall:
+            error = f"stopped after {len(times)} steps ({wall:g} s wall limit)"
+            break
+    state = RunState(
+        float(stats["nearest_neighbor_distance"][0]),
+        float(stats["expanse"][0]),
+        (float(stats["energy"][0]) - e0) / n,
+        float(np.mean(subs)) if subs else math.nan,
+        float(np.max(subs)) if subs else math.nan,
+        len(times),
+        error,
+    )
+    return times, state
+
+
+#: Steps run before the timed ones (``--settle``; the first is the warm-up).
+SETTLE = [1]
+
+
+def time_step(
+    core_cls: Core, n: int, dim: int, repeats: int, physics: str = "navigation"
+) -> tuple[float, float, RunState]:
+    """``(median, best)`` seconds of one full step (step + observe) of one swarm, after
+    ``--settle`` steps (at least the warm-up), and the run's state at its end."""
+    core = make_core(core_cls, config(n, dim, physics))
+    actions = np.random.default_rng(1).uniform(-1.0, 1.0, (1, n, dim))
+    settle = SETTLE[0]
+    times, state = run_steps(core, actions, repeats + settle)
+    if len(times) <= settle:
+        return math.nan, math.nan, state
+    return statistics.median(times[settle:]), min(times[settle:]), state
 
 
 def time_call(fn: Callable[[], object], repeats: int) -> float:
@@ -100,14 +194,13 @@ def time_call(fn: Callable[[], object], repeats: int) -> float:
     return statistics.median(times)
 
 
-def neighbour_work(n: int, dim: int, repeats: int) -> tuple[float, float | None, int]:
+def neighbour_work(n: int, dim: int, repeats: int, physics: str) -> tuple[float, float | None, int]:
     """Seconds of the neighbour work (pairs within r_c + k nearest) with both methods.
 
     Returns ``(cell list, cKDTree or None, pairs)``.
     """
-    cfg = config(n, dim)
-    core = SparseSwarmNavCore(cfg, **SPARSE_KWARGS)
-    core.reset(np.random.default_rng(0))
+    cfg = config(n, dim, physics)
+    core = make_core(SparseSwarmNavCore, cfg)
     x = core.x[0]
     r_c, k = core.cutoff, max(cfg.n_neighbors, 1)
 
@@ -132,12 +225,12 @@ def neighbour_work(n: int, dim: int, repeats: int) -> tuple[float, float | None,
     return ours, time_call(tree, repeats), pairs
 
 
-def crossover(dim: int, lo: int, hi: int, repeats: int) -> int:
+def crossover(dim: int, lo: int, hi: int, repeats: int, physics: str) -> int:
     """Bisect (geometrically) the N where the sparse core starts to win, in ``(lo, hi]``."""
     while hi > lo * 1.15 and hi - lo > 8:
         mid = round(math.sqrt(lo * hi))
-        dense = time_step(SwarmNavCore, mid, dim, repeats)[0]
-        sparse = time_step(SparseSwarmNavCore, mid, dim, repeats)[0]
+        dense = time_step(SwarmNavCore, mid, dim, repeats, physics)[0]
+        sparse = time_step(SparseSwarmNavCore, mid, dim, repeats, physics)[0]
         print(f"  bisect N = {mid}: dense {dense * 1e3:.2f} ms, sparse {sparse * 1e3:.2f} ms")
         if sparse < dense:
             hi = mid
@@ -146,9 +239,9 @@ def crossover(dim: int, lo: int, hi: int, repeats: int) -> int:
     return hi
 
 
-def accuracy(n: int, dim: int, cutoff_tol: float) -> None:
+def accuracy(n: int, dim: int, cutoff_tol: float, physics: str) -> None:
     """Largest per-agent force error of the cut-off vs its bound, at N agents."""
-    cfg = config(n, dim)
+    cfg = config(n, dim, physics)
     for policy in ("zero", "random"):
         core = SparseSwarmNavCore(cfg, cutoff_tol=cutoff_tol)
         core.reset(np.random.default_rng(0))
@@ -165,8 +258,7 @@ def accuracy(n: int, dim: int, cutoff_tol: float) -> None:
             # agent holds at most n ω_d ρ^d others; the smallest such n here.
             rho = np.sqrt(((x[0, :, None, :] - x[0, None, :, :]) ** 2).sum(-1))
             rho.sort(axis=-1)
-            ball = math.pi if dim == 2 else 4.0 * math.pi / 3.0
-            at = ball * np.maximum(rho[:, 1:], core.cutoff) ** dim
+            at = _UNIT_BALL[dim] * np.maximum(rho[:, 1:], core.cutoff) ** dim
             density = float((np.arange(1, n) / at).max())
             speed = float(np.linalg.norm(v[0, :, None, :] - v[0, None, :, :], axis=-1).max())
             bound = force_error_bound(
@@ -179,43 +271,107 @@ def accuracy(n: int, dim: int, cutoff_tol: float) -> None:
             )
 
 
+def regime(
+    dims: list[int],
+    max_n: int,
+    steps: int,
+    wall: float,
+    sizes: list[int] | None = None,
+    physics_sets: tuple[str, ...] = PHYSICS,
+) -> None:
+    """The regime table (see the module docstring)."""
+    print(
+        f"passive swarms (zero actions), {steps} steps of dt = 0.1 from the reset (seed 0); "
+        f"dense core below N = {SPARSE_MIN_AGENTS}, sparse core from there"
+    )
+    print()
+    head = "| physics | d | N | start radius | NND | expanse | (E − E0)/N | substeps/step "
+    head += "| max substeps | s/step | outcome |"
+    print(head)
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
+    sizes = [n for n in (10, 100, 1000, 10_000, 100_000) if n <= max_n] if not sizes else sizes
+    for physics in physics_sets:
+        for dim in dims:
+            for n in sizes:
+                cfg = config(n, dim, physics)
+                cls = SparseSwarmNavCore if n >= SPARSE_MIN_AGENTS else SwarmNavCore
+                times, state = run_steps(make_core(cls, cfg), None, steps, wall)
+                per_step = statistics.median(times) if times else math.nan
+                line = f"| {physics} | {dim} | {n:,} | {cfg.start_radius:.1f} | {state.cells()}"
+                line += f" {state.max_substeps:.0f} | {per_step:.4f} | {state.outcome()} |"
+                print(line, flush=True)
+
+
+def header(args: argparse.Namespace) -> None:
+    print(f"glibc heap tuning (swarm_envs.tune_allocator) active: {tune_allocator()}")
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores; numpy {np.__version__}")
+    if compiled_pairs.numba_enabled():
+        import numba
+
+        pair_pass = f"compiled (numba {importlib.metadata.version('numba')}, "
+        pair_pass += f"{numba.config.NUMBA_NUM_THREADS} threads)"
+    else:
+        pair_pass = "numpy (numba missing, or SWARM_ENVS_NUMBA=0)"
+    print(f"sparse pair pass: {pair_pass}")
+    for physics in PHYSICS:
+        probe = SparseSwarmNavCore(config(10, args.dim, physics), **SPARSE_KWARGS)
+        p = probe.cfg.physics
+        print(
+            f"{physics}: C·l² = {p.h_stability:.3g}, C·l³ = {p.h_stability_3d:.3g}; cut-off "
+            f"r_c = {probe.cutoff:.3f} (cutoff_tol {probe.cutoff_tol}, cutoff_speed "
+            f"{probe.cutoff_speed}); init_density {probe.cfg.init_density:.3g} (d = {args.dim})"
+        )
+    print(f"SPARSE_MIN_AGENTS = {SPARSE_MIN_AGENTS}")
+    print()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--dim", type=int, default=2, choices=(2, 3))
+    parser.add_argument("--physics", default="navigation", choices=PHYSICS)
     parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--settle", type=int, default=1, help="untimed steps first (>= 1)")
     parser.add_argument("--max-n", type=int, default=100_000)
+    parser.add_argument("--sizes", default="", help="comma-separated N (default: 100 … --max-n)")
     parser.add_argument("--dense-max", type=int, default=4000)
     parser.add_argument("--kdtree", action="store_true")
     parser.add_argument("--accuracy", type=int, default=0, metavar="N")
     parser.add_argument("--cutoff-tol", type=float, default=DEFAULT_CUTOFF_TOL)
+    parser.add_argument("--regime", action="store_true")
+    parser.add_argument("--regime-dims", default="2,3")
+    parser.add_argument("--regime-steps", type=int, default=100)
+    parser.add_argument("--regime-physics", default=",".join(PHYSICS))
+    parser.add_argument("--regime-wall", type=float, default=900.0)
     args = parser.parse_args()
-    print(f"glibc heap tuning (swarm_envs.tune_allocator) active: {tune_allocator()}")
-    print(f"machine: {platform.machine()}, {os.cpu_count()} cores; numpy {np.__version__}")
-    dim, reps = args.dim, args.repeats
     SPARSE_KWARGS["cutoff_tol"] = args.cutoff_tol
-    probe = SparseSwarmNavCore(config(10, dim), **SPARSE_KWARGS)
+    SETTLE[0] = max(1, args.settle)
+    header(args)
+    if args.regime:
+        dims = [int(d) for d in args.regime_dims.split(",")]
+        sizes = [int(n) for n in args.sizes.split(",")] if args.sizes else None
+        physics_sets = tuple(args.regime_physics.split(","))
+        regime(dims, args.max_n, args.regime_steps, args.regime_wall, sizes, physics_sets)
+        return
+    dim, reps, physics = args.dim, args.repeats, args.physics
     print(
-        f"d = {dim}; cut-off r_c = {probe.cutoff:.3f} (cutoff_tol {probe.cutoff_tol}, "
-        f"cutoff_speed {probe.cutoff_speed}); SPARSE_MIN_AGENTS = {SPARSE_MIN_AGENTS}"
+        f"timing: physics {physics}, d = {dim}, {SETTLE[0]} untimed steps, then {reps} timed; "
+        "the state columns are the sparse run's (substeps/step over all its steps)"
     )
-    if compiled_pairs.numba_enabled():
-        pair_pass = f"compiled (numba {importlib.metadata.version('numba')})"
-    else:
-        pair_pass = "numpy (numba missing, or SWARM_ENVS_NUMBA=0)"
-    print(f"sparse pair pass: {pair_pass}")
     print()
-    head = "| N | init_radius | dense s/step (median) | sparse s/step (median) | dense best | "
-    head += "sparse best | dense / sparse |"
+    head = "| N | start radius | dense s/step (median) | sparse s/step (median) | dense best | "
+    head += "sparse best | dense / sparse | NND | expanse | (E − E0)/N | substeps/step |"
     if args.kdtree:
         head += " pairs/agent | neighbours: cell list s | cKDTree s |"
     print(head)
     print("|" + "---:|" * (head.count("|") - 1))
     sizes = [n for n in (100, 300, 1000, 3000, 10_000, 30_000, 100_000) if n <= args.max_n]
+    if args.sizes:
+        sizes = [int(n) for n in args.sizes.split(",")]
     winner: dict[int, str] = {}
     for n in sizes:
-        sparse = time_step(SparseSwarmNavCore, n, dim, reps)
-        dense = time_step(SwarmNavCore, n, dim, reps) if n <= args.dense_max else None
-        line = f"| {n:,} | {density_preserving_radius(n, dim):.1f} | "
+        sparse = time_step(SparseSwarmNavCore, n, dim, reps, physics)
+        dense = time_step(SwarmNavCore, n, dim, reps, physics) if n <= args.dense_max else None
+        line = f"| {n:,} | {config(n, dim, physics).start_radius:.1f} | "
         if dense is None:
             line += f"— | {sparse[0]:.4f} | — | {sparse[1]:.4f} | — |"
         else:
@@ -224,8 +380,9 @@ def main() -> None:
                 f"{dense[0] / sparse[0]:.1f} |"
             )
             winner[n] = "sparse" if sparse[0] < dense[0] else "dense"
+        line += f" {sparse[2].cells()}"
         if args.kdtree:
-            ours, tree, pairs = neighbour_work(n, dim, reps)
+            ours, tree, pairs = neighbour_work(n, dim, reps, physics)
             line += f" {pairs / n:.0f} | {ours:.4f} | {'—' if tree is None else f'{tree:.4f}'} |"
         print(line, flush=True)
     print()
@@ -234,7 +391,7 @@ def main() -> None:
     if hi is None:
         print("the dense core won at the largest measured N: no crossover below --dense-max")
     else:
-        n_cross = crossover(dim, lo, hi, max(reps, 15))
+        n_cross = crossover(dim, lo, hi, max(reps, 15), physics)
         print(f"crossover: the sparse core wins from about N = {n_cross} (d = {dim})")
     if args.accuracy:
         print()
@@ -245,7 +402,7 @@ def main() -> None:
             "| max |v_i − v_j| | density n | bound |"
         )
         print("|---|---:|---:|---:|---:|---:|---:|---:|")
-        accuracy(args.accuracy, dim, args.cutoff_tol)
+        accuracy(args.accuracy, dim, args.cutoff_tol, physics)
 
 
 if __name__ == "__main__":

@@ -6,9 +6,10 @@ builds :class:`~swarm_envs.envs.swarm_nav.SwarmNavEnv`, ``gym.make_vec`` the bat
 episode length is the config's ``max_steps`` alone: the env truncates itself there, and
 no ``max_episode_steps`` (``TimeLimit``) is registered. The import also makes the envs'
 OpenMP users safe in processes forked afterwards (:mod:`swarm_envs._runtime.fork`).
-:func:`tune_allocator` is an explicit, process-wide speed-up of glibc's heap for long
-runs (the command-line tools call it; ``SWARM_ENVS_TUNE_ALLOCATOR=1`` applies it at
-import).
+:class:`SwarmUnstableError` is what a step that goes unstable raises
+(``SwarmConfig.on_unstable``). :func:`tune_allocator` is an explicit, process-wide
+speed-up of glibc's heap for long runs (the command-line tools call it;
+``SWARM_ENVS_TUNE_ALLOCATOR=1`` applies it at import).
 """
 
 import os
@@ -35,5 +36,6 @@ if os.environ.get("SWARM_ENVS_TUNE_ALLOCATOR", "").strip() == "1":
     tune_allocator()
 
 from swarm_envs import swarm_nav_v0  # noqa: E402
+from swarm_envs.envs.common import SwarmUnstableError  # noqa: E402
 
-__all__ = ["ENV_ID", "__version__", "swarm_nav_v0", "tune_allocator"]
+__all__ = ["ENV_ID", "SwarmUnstableError", "__version__", "swarm_nav_v0", "tune_allocator"]

@@ -51,6 +51,12 @@ BACKENDS = ("auto", "numpy", "sparse", "native", "torch")
 #: What a step that goes unstable does (``SwarmConfig.on_unstable``).
 ON_UNSTABLE = ("raise", "truncate")
 
+#: Where the goal distances are measured from (``SwarmConfig.goal_distance_scale``).
+GOAL_DISTANCE_SCALES = ("absolute", "relative")
+
+#: Volume of the unit ball by dimension (start radius from a density).
+_UNIT_BALL = {2: math.pi, 3: 4.0 * math.pi / 3.0}
+
 #: Where the shipped YAML files live: ``configs/`` at the repository root, which the
 #: package holds as ``swarm_envs/configs`` (a symbolic link in the repository, the files
 #: themselves in an installed wheel), so named configs resolve after any install.
@@ -129,7 +135,7 @@ class SwarmConfig:
     """Integration time step (the paper gives none; chosen and documented)."""
     integrator: str = "semi_implicit_euler"
     """One of ``swarm_envs.physics.INTEGRATORS``."""
-    max_substeps: int = 100
+    max_substeps: int = 1000
     """Step-size control: each step of ``dt`` is integrated in as many equal substeps as
     the state's stiffness needs for a stable step (``docs/models.md`` §7), at most this
     many; ``info["substeps"]`` reports the count. A state that needs more is unstable
@@ -151,15 +157,32 @@ class SwarmConfig:
     """Lagrangian gradient model parameters (``dynamics="lagrangian"``); array-valued
     fields must match ``n_agents``."""
     init_radius: float = 1.5
-    """Agents start uniformly in a disc (ball) of this radius around the origin."""
+    """Agents start uniformly in a disc (ball) of this radius around the origin (unless
+    ``init_density`` is set; see :attr:`start_radius`)."""
+    init_density: float | None = None
+    """Start density in agents per unit area (``d = 2``) or volume (``d = 3``), ``> 0``;
+    ``None``: start in ``init_radius``. Set, the start radius is
+    ``R = (N / (ω_d n))^{1/d}`` (``ω_2 = π``, ``ω_3 = 4π/3``; :attr:`start_radius`), so
+    that every ``N`` starts at this density: ``R ∝ N^{1/d}``. ``init_radius`` must then
+    keep its default (give one of the two); not with ``dynamics="lagrangian"``, whose
+    start checks read ``init_radius``."""
     init_speed: float = 0.1
     """Initial velocities uniform in a disc (ball) of this speed."""
     goal_distance_min: float = 8.0
-    """Goal placed at a random bearing, at a distance drawn uniformly from [min, max]."""
+    """Goal placed at a random bearing, at a distance drawn uniformly from [min, max]
+    (measured as ``goal_distance_scale`` says)."""
     goal_distance_max: float = 12.0
     """Upper end of the goal distance range, ``≥ goal_distance_min``."""
+    goal_distance_scale: str = "absolute"
+    """Where the goal distances are measured from, one of :data:`GOAL_DISTANCE_SCALES`:
+    ``"absolute"`` from the origin (the centre of the start disc), ``"relative"`` from
+    the edge of the start disc, so the goal lies ``start_radius + U[min, max]`` from the
+    origin: ``goal_distance_min/max`` keep their meaning (how far the nearest agents
+    must travel) at every ``N``."""
     goal_radius: float = 1.5
-    """An agent within this distance of the goal has arrived."""
+    """An agent within this distance of the goal has arrived; with
+    ``goal_distance_scale="relative"`` within ``goal_radius + start_radius``, so that a
+    swarm of any ``N`` fits inside (:attr:`arrival_radius`)."""
     success_fraction: float = 1.0
     """Fraction of agents that must have arrived (at once) for success, in (0, 1]."""
     max_steps: int = 400
@@ -248,6 +271,28 @@ class SwarmConfig:
         }
         for name, bounds in reals.items():
             object.__setattr__(self, name, check_real(owner, name, getattr(self, name), **bounds))
+        if self.init_density is not None:
+            object.__setattr__(
+                self,
+                "init_density",
+                check_real(owner, "init_density", self.init_density, low=0.0, low_inclusive=False),
+            )
+            if self.init_radius != _INIT_RADIUS_DEFAULT:
+                raise ValueError(
+                    f"{owner}.init_density ({self.init_density!r}) and init_radius "
+                    f"({self.init_radius!r}) are both set: give one (init_density sets the "
+                    "start radius from N; set init_density to None to start in init_radius)"
+                )
+            if self.dynamics == "lagrangian":
+                raise ValueError(
+                    f"{owner}.init_density must be None with dynamics='lagrangian' (its "
+                    f"start checks read init_radius), got {self.init_density!r}"
+                )
+        if self.goal_distance_scale not in GOAL_DISTANCE_SCALES:
+            raise ValueError(
+                f"{owner}.goal_distance_scale must be one of {GOAL_DISTANCE_SCALES}, got "
+                f"{self.goal_distance_scale!r}"
+            )
         if self.goal_distance_max < self.goal_distance_min:
             raise ValueError(
                 f"{owner}.goal_distance_max ({self.goal_distance_max}) must be >= "
@@ -264,6 +309,41 @@ class SwarmConfig:
                     f"this radius with non-overlapping bins (lagrangian.r), got "
                     f"{self.init_radius!r}"
                 )
+
+    @property
+    def start_radius(self) -> float:
+        """The radius of the start disc (ball): ``init_radius``, or with ``init_density``
+        set, ``(N / (ω_d · init_density))^{1/d}``.
+
+        >>> SwarmConfig().start_radius
+        1.5
+        >>> cfg = SwarmConfig(n_agents=100_000, init_density=10 / (math.pi * 1.5**2))
+        >>> round(cfg.start_radius, 6)  # 10 agents in a disc of 1.5, scaled to 100,000
+        150.0
+        """
+        if self.init_density is None:
+            return self.init_radius
+        return (self.n_agents / (_UNIT_BALL[self.dim] * self.init_density)) ** (1.0 / self.dim)
+
+    @property
+    def arrival_radius(self) -> float:
+        """The distance from the goal within which an agent has arrived: ``goal_radius``,
+        or with ``goal_distance_scale="relative"``, ``goal_radius + start_radius`` (the
+        goal region grows with the swarm as the goal distance does).
+
+        >>> SwarmConfig().arrival_radius
+        1.5
+        >>> cfg = SwarmConfig(n_agents=1000, init_density=0.3, goal_distance_scale="relative")
+        >>> round(cfg.arrival_radius - cfg.start_radius, 6)
+        1.5
+        """
+        if self.goal_distance_scale == "relative":
+            return self.goal_radius + self.start_radius
+        return self.goal_radius
+
+
+#: ``SwarmConfig.init_radius``'s default (``init_density`` requires it unchanged).
+_INIT_RADIUS_DEFAULT = next(f.default for f in fields(SwarmConfig) if f.name == "init_radius")
 
 
 def lagrangian_min_init_radius(params: LagrangianParams, n_agents: int, dim: int) -> float:
@@ -435,6 +515,7 @@ __all__ = [
     "BACKENDS",
     "CONFIG_ROOT",
     "DYNAMICS",
+    "GOAL_DISTANCE_SCALES",
     "ON_UNSTABLE",
     "RewardWeights",
     "SwarmConfig",

@@ -274,7 +274,10 @@ def _paper_reference(env: SwarmNavEnv, steps: int) -> tuple[np.ndarray, np.ndarr
 # The comparison stops during the transit, before the swarm packs into the goal: there
 # close encounters amplify any difference exponentially (measured: round-off of 1e-14
 # grows to 1e-7 within 40 steps after arrival), which is chaos, not a discrepancy.
-STEPS = 100
+# The env's step is one integration step when the step-size rule asks for one: at
+# dt = 0.03 it does for this swarm throughout (checked on every step below).
+STEPS = 330
+DT = 0.03
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -285,7 +288,7 @@ def test_env_plus_controller_is_the_papers_navigating_swarm_exactly(seed):
     sink in the physics; the two differ only in summation order and in
     ``u_max · (F / u_max)`` round-off, ~1e-16 per step.
     """
-    env = SwarmNavEnv(config=NAV, max_steps=10 * STEPS)
+    env = SwarmNavEnv(config=NAV, max_steps=10 * STEPS, dt=DT)
     env.reset(seed=seed)
     ctrl = PotentialFieldController(env)
     xs_ref, vs_ref = _paper_reference(env, STEPS)
@@ -293,7 +296,8 @@ def test_env_plus_controller_is_the_papers_navigating_swarm_exactly(seed):
     for t in range(STEPS):
         action = ctrl.action_from_offset(core.goal[0] - core.x[0])  # float64, exact state
         assert np.all(np.linalg.norm(action, axis=-1) <= 1.0)  # never clipped
-        env.step(action.reshape(-1))
+        _, _, _, _, info = env.step(action.reshape(-1))
+        assert info["substeps"] == 1
         np.testing.assert_allclose(core.x[0], xs_ref[t + 1], rtol=0, atol=1e-9)
         np.testing.assert_allclose(core.v[0], vs_ref[t + 1], rtol=0, atol=1e-9)
     # the swarm really travelled (this is not a trivial comparison)
@@ -306,10 +310,11 @@ def test_env_plus_controller_through_float32_observations():
     The observed offset carries float32 round-off (relative 2^-24 ≈ 6e-8), and so do the
     float32 actions: the control force is off by at most ~2 · 6e-8 · C_g/l_g ≈ 4e-7 per
     step. With dissipation β = 1 a constant force error δF shifts the velocity by at most
-    δF/β and the position by at most δF/β · t ≈ 4e-7 · 10 s = 4e-6 over 100 steps (if
-    all errors added coherently; measured ~1e-8, as they are random). Tolerance 1e-5.
+    δF/β and the position by at most δF/β · t ≈ 4e-7 · 10 s = 4e-6 over the STEPS · DT
+    ≈ 10 s compared (if all errors added coherently; measured ~1e-8, as they are random).
+    Tolerance 1e-5.
     """
-    env = SwarmNavEnv(config=NAV, max_steps=10 * STEPS)
+    env = SwarmNavEnv(config=NAV, max_steps=10 * STEPS, dt=DT)
     obs, _ = env.reset(seed=0)
     ctrl = PotentialFieldController(env)
     xs_ref, _ = _paper_reference(env, STEPS)

@@ -64,25 +64,38 @@ def test_every_backend_runs_the_default_and_the_navigation_configs(variant):
         assert check(variant, cfg) == []
 
 
-#: Configs whose steps need several substeps, a different count per swarm (64 agents of
-#: the default physics, or a dt five times the default), or more than the cap.
-SUBSTEP_CONFIGS = {
-    "n64": SwarmConfig(n_agents=64),
-    "long_dt": SwarmConfig(n_agents=10, dt=0.5),
-    "cap_truncates": SwarmConfig(n_agents=10, dt=0.5, max_substeps=3, on_unstable="truncate"),
-}
+#: Configs whose steps take several substeps, and one with a cap that some steps exceed
+#: (their episodes truncated and reset, as the VecEnv resets them).
+SUBSTEP_CONFIGS = (
+    SwarmConfig(n_agents=24, dt=0.3),
+    SwarmConfig(n_agents=10, dt=0.5, dim=3, goal_in_physics=True),
+    SwarmConfig(n_agents=10, dt=0.5, max_substeps=4, on_unstable="truncate"),
+)
 
 
-@pytest.mark.parametrize("name", list(SUBSTEP_CONFIGS))
+@pytest.mark.parametrize(
+    "variant", [v for v in VARIANTS if v.backend == "native"], ids=lambda v: v.name
+)
+def test_the_c_step_matches_the_reference_through_substeps_and_the_cap(variant):
+    for cfg in SUBSTEP_CONFIGS:
+        if variant.unsupported(cfg):
+            pytest.skip(f"C step unavailable: {variant.unsupported(cfg)}")
+        assert check(variant, cfg) == [], cfg
+
+
+#: The torch core through the same configs, and 64 agents of the default physics (a
+#: different count per swarm). In float32 the comparison stops where two neighbours tie
+#: to that precision, at once in a swarm this dense: tests/test_torch_core.py compares
+#: float32 with the numpy core in float32.
+TORCH_SUBSTEP_CONFIGS = (*SUBSTEP_CONFIGS, SwarmConfig(n_agents=64))
+
+
 @pytest.mark.parametrize(
     "variant", [v for v in VARIANTS if v.backend == "torch"], ids=lambda v: v.name
 )
-def test_torch_matches_the_reference_with_substeps(variant, name):
-    # The drawn configs (dt <= 0.1, mild physics) rarely need a second substep. In
-    # float32 the comparison stops where two neighbours tie to that precision, soon in
-    # a dense swarm (n64: at once); tests/test_torch_core.py compares float32 with the
-    # numpy core in float32 over whole rollouts.
-    assert check(variant, SUBSTEP_CONFIGS[name]) == []
+def test_the_torch_core_matches_the_reference_through_substeps_and_the_cap(variant):
+    for cfg in TORCH_SUBSTEP_CONFIGS:
+        assert check(variant, cfg) == [], cfg
 
 
 @SETTINGS

@@ -20,9 +20,16 @@ from swarm_envs.physics.cutoff import (
     pair_sums,
     sparse_energy,
     sparse_forces,
+    swarm_rates,
 )
-from swarm_envs.physics.neighbors import radius_pairs
-from swarm_envs.physics.social_potential import RHO_FLOOR, pair_law
+from swarm_envs.physics.neighbors import CELL_MARGIN, REACH, CellList, radius_pairs
+from swarm_envs.physics.social_potential import (
+    RHO_FLOOR,
+    pair_geometry,
+    pair_law,
+    pair_rates,
+    rate_law,
+)
 
 PARAMS = [
     SocialPotentialParams(),
@@ -263,6 +270,88 @@ def test_pair_accumulator_applies_pair_law(
     np.testing.assert_allclose(out.force, ref.force, rtol=0, atol=1e-12 * scale)
     np.testing.assert_allclose(out.potential, ref.potential, rtol=1e-12, atol=1e-12)
     np.testing.assert_array_equal(out.close, ref.close)
+
+
+PARAMS_RATES = [*PARAMS, SocialPotentialParams.large_swarm()]
+
+
+@pytest.mark.parametrize("d", [2, 3])
+@pytest.mark.parametrize("params", PARAMS_RATES)
+@pytest.mark.parametrize("sink", [False, True])
+def test_rate_sums_over_every_pair_give_the_dense_rates(
+    d: int, params: SocialPotentialParams, sink: bool
+) -> None:
+    """The step-size rule's rates summed over a pair list (numpy pass, chunked, either
+    orientation) equal the dense ``pair_rates`` when every pair is listed, and each
+    row's sums equal rate_law summed over its pairs one at a time."""
+    rng = np.random.default_rng(d)
+    B, N = 2, 30
+    x = rng.uniform(-2.0, 2.0, (B, N, d))
+    x[1, 3] = x[1, 7]  # coincident agents: κ(0), w(0)
+    i, j = all_pairs(x)
+    flip = rng.random(i.size) < 0.5
+    i, j = np.where(flip, j, i), np.where(flip, i, j)
+    flat = x.reshape(-1, d)
+    sums = pair_sums(flat, None, params, i, j, rates=True)
+    assert sums.kappa is not None and sums.damping is not None
+    kappa = np.zeros(B * N)
+    damping = np.zeros(B * N)
+    for a, b in zip(i.tolist(), j.tolist(), strict=True):
+        rho = math.sqrt(float(((flat[b] - flat[a]) ** 2).sum()))
+        k, w = rate_law(rho, *(getattr(params, f) for f in RATE_FIELDS), math.exp)
+        kappa[[a, b]] += k
+        damping[[a, b]] += 0.0 if w is None else w
+    np.testing.assert_allclose(sums.kappa, kappa, rtol=1e-12)
+    np.testing.assert_allclose(sums.damping, damping, rtol=1e-12, atol=1e-15)
+    omega2, gamma = swarm_rates(
+        sums.kappa.reshape(B, N), sums.damping.reshape(B, N), params, sink=sink
+    )
+    dense_omega2, dense_gamma = pair_rates(pair_geometry(x), params, sink=sink)
+    np.testing.assert_allclose(omega2, dense_omega2, rtol=1e-12)
+    np.testing.assert_allclose(gamma, dense_gamma, rtol=1e-12)
+    assert pair_sums(flat, None, params, i, j).kappa is None  # only when asked for
+
+
+RATE_FIELDS = ("C_a", "C_r", "l_a", "l_r", "C_o", "l_o")
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_rate_sums_drop_the_pairs_beyond_the_radius(d: int) -> None:
+    """Over the cell list's pairs within a radius, the rates (like the force) count only
+    the pairs inside it, and the compiled pass (where numba imports) sums the same as
+    the numpy pass."""
+    from swarm_envs.physics import compiled_pairs
+
+    p = SocialPotentialParams.large_swarm()
+    rng = np.random.default_rng(5 + d)
+    B, N, radius = 2, 200, 2.5
+    x = rng.uniform(-5.0, 5.0, (B, N, d))
+    cells = CellList.build(x, radius * (1.0 + CELL_MARGIN) / REACH, REACH)
+    groups = cells.order // N
+    acc = PairAccumulator(p, B * N, None, groups=groups, n_groups=B, rates=True)
+    for chunk in cells.iter_pairs(radius):
+        acc.add(*chunk)
+    got = acc.result(d)
+    assert got.kappa is not None and got.damping is not None
+    kappa = np.zeros((B, N))  # by brute force, per agent of each swarm
+    damping = np.zeros((B, N))
+    for b in range(B):
+        rho = np.linalg.norm(x[b, :, None] - x[b, None], axis=-1)
+        inside = (rho <= radius) & ~np.eye(N, dtype=bool)
+        k, w = rate_law(rho, *(getattr(p, f) for f in RATE_FIELDS), np.exp)
+        kappa[b] = np.where(inside, k, 0.0).sum(axis=-1)
+        damping[b] = np.where(inside, w, 0.0).sum(axis=-1)
+        assert 0 < inside.sum() < N * (N - 1)  # some pairs dropped, some kept
+    np.testing.assert_allclose(got.kappa, kappa.ravel()[cells.order], rtol=1e-12)
+    np.testing.assert_allclose(got.damping, damping.ravel()[cells.order], rtol=1e-12)
+    if compiled_pairs.numba_enabled():
+        fast = compiled_pairs.cell_pair_sums(
+            cells, radius, p, None, groups=groups, n_groups=B, rates=True
+        )
+        assert fast.kappa is not None and fast.damping is not None
+        np.testing.assert_allclose(fast.kappa, got.kappa, rtol=1e-12)
+        np.testing.assert_allclose(fast.damping, got.damping, rtol=1e-12)
+        assert compiled_pairs.cell_pair_sums(cells, radius, p, None).kappa is None
 
 
 def test_invalid_input_raises() -> None:

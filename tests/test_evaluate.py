@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import gymnasium
@@ -15,6 +16,7 @@ from agents import PotentialFieldController, RandomController, ZeroController
 from swarm_envs import swarm_nav_v0
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs import observation_size
+from swarm_envs.envs.common import SwarmUnstableError
 from train.cli_eval import main
 from train.evaluate import (
     CURVE_KEYS,
@@ -174,6 +176,38 @@ def test_evaluate_accepts_an_env_and_writes_outputs(tmp_path, cfg):
     assert (tmp_path / "curves.png").stat().st_size > 0
     assert (tmp_path / "episode0_potential.gif").stat().st_size > 0
     assert "| potential | 100% |" in format_table(res)
+
+
+def test_undefined_measures_are_null_and_shown_as_a_dash(tmp_path):
+    cfg = SwarmConfig(n_agents=3, max_steps=5)  # nothing reaches a goal 8-12 away in 5 steps
+    res = evaluate_policies(
+        {"zero": ZeroController(cfg)}, cfg, 2, 0, out_dir=tmp_path, progress=False, gif=False
+    )
+    zero = res["policies"]["zero"]
+    assert zero["success_rate"] == 0.0 and zero["mean_time_to_goal"] is None
+    assert zero["std_time_to_goal"] is None and zero["unstable_episodes"] == 0
+    assert zero["mean_substeps"] == 1.0  # slow and sparse: one substep per step
+
+    def refuse(name):
+        raise AssertionError(f"results.json holds {name}")
+
+    written = json.loads((tmp_path / "results.json").read_text(), parse_constant=refuse)
+    assert written["policies"]["zero"]["mean_time_to_goal"] is None
+    row = next(line for line in format_table(res).splitlines() if line.startswith("| zero"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert cells[0] == "zero" and cells[1] == "0%" and cells[3] == "—"
+    assert cells[-2:] == ["0", "1.0"]  # unstable episodes, substeps per step
+    assert "| — |" in (tmp_path / "summary.md").read_text()
+
+
+def test_unstable_episodes_are_truncated_and_counted():
+    cfg = SwarmConfig(n_agents=3, dt=1.0, max_substeps=2, max_steps=20, on_unstable="truncate")
+    b = run_episodes(ZeroController(cfg), cfg, 2, seed=0)
+    assert b.unstable.tolist() == [True, True] and not b.success.any()
+    assert np.all(b.integrated == b.lengths - 1)  # the unstable step was undone
+    assert np.all(b.substeps == 2.0 * b.integrated)
+    with pytest.raises(SwarmUnstableError, match="on_unstable='truncate'"):
+        run_episodes(ZeroController(cfg), replace(cfg, on_unstable="raise"), 2, seed=0)
 
 
 # --------------------------------------------------------------------------- CLI

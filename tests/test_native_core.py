@@ -4,8 +4,10 @@ Its agreement with the shared definitions over every config field is the conform
 suite's (tests/test_conformance.py). Here: what is particular to the C step — resets of a
 few swarms measured alone and in place, results independent of the thread count,
 actions checked in C, the inlined float32 exponential, coincident agents, ties in the
-neighbour ranking, pickling, the generated contract, the build cache and the fallbacks
-(no compiler, a failing build, more neighbours than the kernel ranks).
+neighbour ranking, pickling, the step-size control (substeps, the cap in both modes of
+``on_unstable``, a non-finite state) against the numpy core, also in the portable build,
+the generated contract, the build cache and the fallbacks (no compiler, a failing build,
+more neighbours than the kernel ranks).
 """
 
 from __future__ import annotations
@@ -20,9 +22,11 @@ from helpers import CORE_TOL
 
 from swarm_envs import swarm_nav_v0
 from swarm_envs.config import SwarmConfig, load_swarm_config
+from swarm_envs.envs.common import SwarmUnstableError
 from swarm_envs.envs.core import SwarmNavCore
 from swarm_envs.envs.native import NativeSwarmNavCore, build, contract, native_support
 from swarm_envs.envs.native.build import resolve_native
+from swarm_envs.physics import SocialPotentialParams
 
 SUPPORTED, WHY = native_support()
 needs_native = pytest.mark.skipif(not SUPPORTED, reason=f"C step unavailable: {WHY}")
@@ -52,8 +56,8 @@ def test_resets_measure_exactly_the_reset_swarms_in_place(monkeypatch, dtype):
     monkeypatch.setattr(
         core,
         "_call",
-        lambda a, move, obs, rows: (
-            calls.append(64 if rows is None else rows.size) or inner(a, move, obs, rows)
+        lambda a, move, obs, rows, **kw: (
+            calls.append(64 if rows is None else rows.size) or inner(a, move, obs, rows, **kw)
         ),
     )
     rng, ref_rng = np.random.default_rng(4), np.random.default_rng(4)
@@ -97,10 +101,11 @@ def test_observations_handed_out_keep_their_values():
 
 @needs_native
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
-def test_results_do_not_depend_on_the_thread_count(dtype):
+@pytest.mark.parametrize("dt", [0.1, 0.5], ids=["one-substep", "substeps"])
+def test_results_do_not_depend_on_the_thread_count(dtype, dt):
     import torch  # the kernel runs on torch's OpenMP pool once torch is loaded
 
-    cfg = SwarmConfig(n_agents=9, dim=3)
+    cfg = SwarmConfig(n_agents=9, dim=3, dt=dt)
     a = np.random.default_rng(2).uniform(-1, 1, (11, 9, 3))
     threads = torch.get_num_threads()
     outs = []
@@ -109,9 +114,11 @@ def test_results_do_not_depend_on_the_thread_count(dtype):
             torch.set_num_threads(n)
             core = NativeSwarmNavCore(cfg, batch=11, dtype=dtype)
             core.reset(np.random.default_rng(1))
-            outs.append((core.step(a)[0], core.observe(), core.x))
+            reward, _, _, stats = core.step(a)
+            outs.append((reward, core.observe(), core.x, stats["substeps"]))
     finally:
         torch.set_num_threads(threads)
+    assert (outs[0][3] > 1).any() == (dt == 0.5)
     for out in outs[1:]:
         for ours, ref in zip(out, outs[0], strict=True):
             assert np.array_equal(ours, ref)
@@ -245,6 +252,209 @@ def test_too_many_neighbours_are_refused_with_the_reason(recwarn):
     with pytest.warns(UserWarning, match="backend 'native' cannot run this config"):
         env = swarm_nav_v0.parallel_env(**{**dataclasses.asdict(cfg), "backend": "native"})
     assert env.core.backend == "numpy"
+
+
+# --------------------------------------------------------------------------- step-size control
+
+#: Configs whose steps take several substeps: the navigation physics in a dense swarm, a
+#: long control period, 3-D, no alignment with equal decay lengths, the passive sink.
+SUBSTEP_CONFIGS = {
+    "n64": SwarmConfig(n_agents=64),
+    "dt0.5": SwarmConfig(n_agents=10, dt=0.5),
+    "3d": SwarmConfig(n_agents=7, dim=3, dt=0.4),
+    "plain-morse": SwarmConfig(
+        n_agents=20,
+        dt=0.5,
+        physics=SocialPotentialParams(C_o=0.0, l_a=0.5, l_r=0.5, C_r=3.0, beta=2.0),
+    ),
+    "sink": SwarmConfig(n_agents=20, dt=0.3, goal_in_physics=True),
+}
+#: The stable substeps h* carried by both cores agree to this (float32: the sums of the
+#: rates are rounded in another order; the counts must still agree in these rollouts).
+H_RTOL = {np.float32: 1e-4, np.float64: 1e-12}
+
+
+@needs_native
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_the_substep_rule_in_c_is_the_python_rule(dtype):
+    # stable_substep in the state's dtype (float32: to rounding, the C compiler may fuse
+    # a multiply-add) and substep_plan in float64 (exactly: the same operations), over
+    # decades of rates, the edge cases (0, inf, NaN) and ratios at an integer up to the
+    # 1e-9 slack and just past it.
+    from swarm_envs.physics.integrators import STEP_SAFETY, stable_substep, substep_plan
+
+    lib = build.load_library().lib
+    rng = np.random.default_rng(0)
+    inf, nan = np.inf, np.nan
+    omega2 = np.concatenate([10 ** rng.uniform(-6, 8, 4000), [0, 0, inf, 1, nan, 0, inf, 2]])
+    gamma = np.concatenate([10 ** rng.uniform(-6, 4, 4000), [0, 1, 0, inf, 0, nan, inf, 3]])
+    omega2[:1000] = 0.0  # damping alone
+    gamma[1000:2000] = 0.0  # stiffness alone
+    omega2, gamma = omega2.astype(dtype), gamma.astype(dtype)
+    h = np.empty(omega2.size)
+    ptr = ctypes.c_void_p
+    fn = getattr(lib, f"fused_stable_substep_{np.dtype(dtype).name.replace('float', 'f')}")
+    fn.restype = None
+    fn.argtypes = [ptr, ptr, ptr, ctypes.c_int64]
+    fn(omega2.ctypes.data, gamma.ctypes.data, h.ctypes.data, h.size)
+    want = stable_substep(omega2, gamma).astype(np.float64)
+    rtol = 1e-6 if dtype == np.float32 else 1e-15
+    np.testing.assert_allclose(h, want, rtol=rtol, atol=0)
+    edge_cases = [inf, 2.0 * STEP_SAFETY, 0.0, 0.0, inf, inf, 0.0]
+    np.testing.assert_allclose(h[-8:-1], edge_cases, rtol=1e-7)
+    np.testing.assert_array_equal(h[-8:-1], want[-8:-1])
+
+    k = rng.integers(1, 200, 3000).astype(np.float64)
+    tau = rng.uniform(0.001, 2.0, 3000)
+    hs = np.concatenate([tau[:1000] / k[:1000], rng.uniform(1e-4, 3.0, 2000)])
+    hs[:300] *= 1 + 1e-10  # within the slack: k substeps
+    hs[300:600] *= 1 - 1e-10  # within the slack the other way: still k
+    hs[600:900] *= 1 - 1e-8  # past it: k + 1
+    tau = np.concatenate([tau, [0.0, 0.5, 0.5, 0.5, 0.0, 1e-300]])
+    hs = np.concatenate([hs, [0.1, 0.0, inf, 1e-300, 0.0, 1.0]])
+    n, h = np.empty_like(tau), np.empty_like(tau)
+    plan = lib.fused_substep_plan
+    plan.restype = None
+    plan.argtypes = [ptr, ptr, ptr, ptr, ctypes.c_int64]
+    plan(tau.ctypes.data, hs.ctypes.data, n.ctypes.data, h.ctypes.data, tau.size)
+    want_n, want_h = substep_plan(tau, hs)
+    assert np.array_equal(n, want_n) and np.array_equal(h, want_h)
+    assert np.array_equal(n[:600], k[:600]) and np.array_equal(n[600:900], k[600:900] + 1)
+    edge = n[-6:].tolist()
+    assert edge[:3] == [0.0, inf, 1.0] and edge[3] > 1e299 and edge[4:] == [0.0, 1.0]
+    assert h[-6] == h[-5] == h[-2] == 0.0 and h[-4] == 0.5
+
+
+def _assert_same_step(got: tuple, want: tuple, core, ref, dtype) -> None:
+    """One step's results, state and observations: the C step's against numpy's."""
+    tol = CORE_TOL[dtype]
+    np.testing.assert_allclose(got[0], want[0], **tol, err_msg="reward")
+    np.testing.assert_array_equal(got[1], want[1], err_msg="terminated")
+    np.testing.assert_array_equal(got[2], want[2], err_msg="truncated")
+    np.testing.assert_array_equal(got[3]["substeps"], want[3]["substeps"])
+    np.testing.assert_array_equal(got[3]["unstable"], want[3]["unstable"])
+    for key, value in got[3].items():
+        np.testing.assert_allclose(value, want[3][key], **tol, err_msg=key)
+    np.testing.assert_allclose(core.x, ref.x, **tol, err_msg="x")
+    np.testing.assert_allclose(core.v, ref.v, **tol, err_msg="v")
+    np.testing.assert_allclose(core.observe(), ref.observe(), **tol, err_msg="observations")
+
+
+@needs_native
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize(
+    ("name", "arch"),
+    [(name, None) for name in SUBSTEP_CONFIGS] + [("n64", "x86-64-v3"), ("3d", "x86-64-v3")],
+    ids=lambda v: v or "native",
+)
+def test_substeps_match_the_numpy_core(monkeypatch, name, arch, dtype):
+    # Every swarm plans its own substeps from the stable substep it carries: the same
+    # counts, states, statistics and rewards as the numpy core, step after step; the
+    # count is 0 after a reset (of all swarms or some, as the numpy core reports it).
+    if arch is not None:  # the portable build: no AVX-512 branches
+        monkeypatch.setenv(build.ARCH_ENV, arch)
+    cfg = SUBSTEP_CONFIGS[name]
+    B, N, d = 4, cfg.n_agents, cfg.dim
+    core, ref = NativeSwarmNavCore(cfg, B, dtype), SwarmNavCore(cfg, B, dtype)
+    rng, ref_rng = np.random.default_rng(0), np.random.default_rng(0)
+    core.reset(rng)
+    ref.reset(ref_rng)
+    assert (core.stats()["substeps"] == 0).all()
+    counts = []
+    for a in np.random.default_rng(1).uniform(-1, 1, (8, B, N, d)).astype(dtype):
+        got, want = core.step(a), ref.step(a)
+        _assert_same_step(got, want, core, ref, dtype)
+        np.testing.assert_allclose(core._h, ref.dynamics._h_stable, rtol=H_RTOL[dtype])
+        counts.append(got[3]["substeps"])
+    assert (np.array(counts) >= 1).all() and np.max(counts) > 1
+    which = np.arange(B) < 2
+    core.reset(rng, which=which)
+    ref.reset(ref_rng, which=which)
+    # the swarms reset took no step yet; the others keep their last step's count
+    np.testing.assert_array_equal(core.stats()["substeps"], ref.stats()["substeps"])
+    assert (core.stats()["substeps"][which] == 0).all()
+    assert (core.stats()["substeps"][~which] == counts[-1][~which]).all()
+    np.testing.assert_allclose(core.observe(), ref.observe(), **CORE_TOL[dtype])
+
+
+def _cap_rollout(cfg: SwarmConfig, dtype, steps: int = 14):
+    """The C step's and the numpy core's step results side by side, the swarms whose
+    episode ended reset as the VecEnv resets them (an error ends the rollout)."""
+    B, N, d = 4, cfg.n_agents, cfg.dim
+    core, ref = NativeSwarmNavCore(cfg, B, dtype), SwarmNavCore(cfg, B, dtype)
+    rng, ref_rng = np.random.default_rng(0), np.random.default_rng(0)
+    core.reset(rng)
+    ref.reset(ref_rng)
+    for a in np.random.default_rng(1).uniform(-1, 1, (steps, B, N, d)).astype(dtype):
+        before = core.x
+        got, want = core.step(a), ref.step(a)
+        yield core, ref, before, got, want
+        ended = got[1] | got[2]
+        core.reset(rng, which=ended)
+        ref.reset(ref_rng, which=ended)
+
+
+@needs_native
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_a_step_over_the_cap_raises_as_in_the_numpy_core(dtype):
+    # max_substeps = 2 where the steps need 3 or more: the first step raises, naming the
+    # swarm, the substeps it needed and the keys to change, in both cores alike.
+    cfg = SwarmConfig(n_agents=10, dt=0.5, max_substeps=2)
+    core, ref = NativeSwarmNavCore(cfg, 4, dtype), SwarmNavCore(cfg, 4, dtype)
+    core.reset(np.random.default_rng(0))
+    ref.reset(np.random.default_rng(0))
+    a = np.random.default_rng(1).uniform(-1, 1, (4, 10, 2)).astype(dtype)
+    with pytest.raises(SwarmUnstableError) as err:
+        core.step(a)
+    with pytest.raises(SwarmUnstableError) as ref_err:
+        ref.step(a)
+    assert str(err.value) == str(ref_err.value)
+    assert "swarm 0 of 4, step 1" in str(err.value)
+    assert "more than max_substeps=2" in str(err.value)
+
+
+@needs_native
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_a_step_over_the_cap_is_undone_as_in_the_numpy_core(dtype):
+    # on_unstable="truncate" with a cap that some steps of some swarms exceed: those
+    # swarms go back to their state before the step (re-measured: substeps 0, unstable
+    # 1, reward 0, truncated), the others step on; the same as the numpy core.
+    cfg = SwarmConfig(n_agents=10, dt=0.5, max_substeps=4, on_unstable="truncate")
+    undone = stepped = 0
+    for core, ref, before, got, want in _cap_rollout(cfg, dtype):
+        _assert_same_step(got, want, core, ref, dtype)
+        bad = got[3]["unstable"] == 1.0
+        undone += bad.sum()
+        stepped += (~bad).sum()
+        assert np.array_equal(core.x[bad], before[bad])
+        assert (got[0][bad] == 0).all() and got[2][bad].all() and not got[1][bad].any()
+        assert (got[3]["substeps"][bad] == 0).all() and (got[3]["substeps"][~bad] >= 1).all()
+    assert undone > 0 and stepped > 0
+
+
+@needs_native
+@pytest.mark.parametrize("mode", ["raise", "truncate"])
+def test_a_non_finite_state_is_unstable_as_in_the_numpy_core(mode):
+    # A NaN velocity in swarm 1 (within the cap): its step is unstable for the
+    # finiteness of the statistics; the other swarms are sound.
+    cfg = SwarmConfig(n_agents=6, on_unstable=mode)
+    x = np.random.default_rng(0).uniform(-2, 2, (3, 6, 2))
+    v = np.zeros((3, 6, 2))
+    v[1, 2, 0] = np.nan
+    results = []
+    for core in (NativeSwarmNavCore(cfg, batch=3), SwarmNavCore(cfg, batch=3)):
+        core.reset(np.random.default_rng(0))
+        _set_state(core, x, v)
+        if mode == "raise":
+            with pytest.raises(SwarmUnstableError, match=r"swarm 1 of 3.*NaN or infinite") as err:
+                core.step(np.zeros((3, 6, 2)))
+            results.append(str(err.value))
+        else:
+            reward, _, truncated, stats = core.step(np.zeros((3, 6, 2)))
+            assert stats["unstable"].tolist() == [0.0, 1.0, 0.0]
+            assert truncated.tolist() == [False, True, False] and reward[1] == 0
+            results.append(np.isnan(core.v).any(axis=(1, 2)).tolist())
+    assert results[0] == results[1]
 
 
 # --------------------------------------------------------------------------- contract

@@ -10,6 +10,7 @@ import pytest
 
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs import sparse_core
+from swarm_envs.envs.common import SwarmUnstableError
 from swarm_envs.envs.core import OBS_BOUND, STAT_KEYS, SwarmNavCore
 from swarm_envs.envs.sparse_core import (
     DEFAULT_CUTOFF_SPEED,
@@ -18,7 +19,7 @@ from swarm_envs.envs.sparse_core import (
     SparseSwarmNavCore,
     density_preserving_radius,
 )
-from swarm_envs.physics import forces
+from swarm_envs.physics import SocialPotentialParams, forces
 from swarm_envs.physics.cutoff import cutoff_radius, force_error_bound
 
 TINY = 1e-12  # cut-off tolerance at which no pair of a small swarm is dropped
@@ -281,3 +282,112 @@ def test_look_ahead_neighbour_search_changes_nothing(monkeypatch) -> None:
     core._start_knn()  # in flight, as between the pair pass and the statistics of a step
     clone = pickle.loads(pickle.dumps(core))
     np.testing.assert_array_equal(clone.observe(), core.observe())
+
+
+# --------------------------------------------------------------------------- step-size control
+
+
+def substep_counts(cfg: SwarmConfig, batch: int, steps: int) -> np.ndarray:
+    """The dense core's substeps per step and swarm ``(steps, B)`` (the reference)."""
+    core = SwarmNavCore(cfg, batch=batch)
+    core.reset(np.random.default_rng(0))
+    a = np.random.default_rng(1).uniform(-1.0, 1.0, (batch, cfg.n_agents, cfg.dim))
+    return np.array([core.step(a)[3]["substeps"] for _ in range(steps)])
+
+
+@pytest.mark.parametrize("integrator", ["semi_implicit_euler", "velocity_verlet"])
+@pytest.mark.parametrize("goal_in_physics", [False, True])
+def test_follows_the_dense_substeps(integrator: str, goal_in_physics: bool) -> None:
+    """A config that needs several substeps per step, different ones per swarm: the
+    sparse core takes the dense core's substeps and follows its trajectory (no pair
+    dropped), through a partial reset."""
+    cfg = SwarmConfig(
+        n_agents=40,
+        dt=0.3,
+        integrator=integrator,
+        goal_in_physics=goal_in_physics,
+        init_radius=1.2,
+    )
+    counts = substep_counts(cfg, batch=3, steps=12)
+    assert counts.min() >= 3 and len(np.unique(counts)) > 1  # several, and they vary
+    assert run_both(cfg, batch=3, steps=12, cutoff_tol=TINY) < 1e-9
+
+
+def test_substeps_at_the_default_cutoff_within_its_error() -> None:
+    """The H-stable preset at its start (close pairs: several substeps), default cut-off:
+    one step from the same state takes the dense core's substeps, and the velocities
+    differ by at most what the dropped forces can give over ``dt``."""
+    n = 300
+    cfg = SwarmConfig(
+        n_agents=n, physics=SocialPotentialParams.large_swarm(), init_density=0.6, dt=0.2
+    )
+    dense, sparse = SwarmNavCore(cfg), SparseSwarmNavCore(cfg)
+    dense.reset(np.random.default_rng(4))
+    sparse.reset(np.random.default_rng(4))
+    x = dense.x[0]  # the density hypothesis of the bound: n ω ρ² ≥ agents within ρ ≥ r_c
+    rho = np.sort(np.linalg.norm(x[:, None] - x[None], axis=-1), axis=-1)[:, 1:]
+    density = float((np.arange(1, n) / (np.pi * np.maximum(rho, sparse.cutoff) ** 2)).max())
+    a = np.random.default_rng(5).uniform(-1, 1, (1, n, 2))
+    out_d, out_s = dense.step(a), sparse.step(a)
+    assert out_d[3]["substeps"][0] >= 2
+    np.testing.assert_array_equal(out_s[3]["substeps"], out_d[3]["substeps"])
+    # The largest relative speed of the step (its end) bounds the alignment's speed.
+    w = float(np.linalg.norm(dense.v[0, :, None] - dense.v[0, None], axis=-1).max())
+    bound = force_error_bound(
+        cfg.physics, sparse.cutoff, speed=w, n_agents=n, density=density, dim=2
+    )
+    err = np.linalg.norm(sparse.v - dense.v, axis=-1).max()
+    assert 0 < err <= cfg.dt * bound / cfg.physics.m
+
+
+def test_unstable_step_raises_or_truncates_like_the_dense_core() -> None:
+    """More substeps needed than max_substeps: SwarmUnstableError naming the cap, or
+    (truncate) that swarm put back to its state before the step, as the dense core."""
+    base = SwarmConfig(n_agents=30, init_radius=0.3, dt=0.2, max_substeps=2)
+    core = SparseSwarmNavCore(base, batch=2)
+    core.reset(np.random.default_rng(0))
+    with pytest.raises(SwarmUnstableError, match="max_substeps=2"):
+        core.step(np.zeros((2, 30, 2)))
+    cfg = dataclasses.replace(base, on_unstable="truncate")
+    assert run_both(cfg, batch=2, steps=3, cutoff_tol=TINY) < 1e-9
+    core = SparseSwarmNavCore(cfg, batch=2)
+    core.reset(np.random.default_rng(0))
+    x0, v0 = core.x.copy(), core.v.copy()
+    reward, terminated, truncated, stats = core.step(np.zeros((2, 30, 2)))
+    np.testing.assert_array_equal(stats["unstable"], [1.0, 1.0])
+    np.testing.assert_array_equal(stats["substeps"], [0.0, 0.0])
+    assert truncated.all() and not terminated.any() and (reward == 0).all()
+    np.testing.assert_array_equal(core.x, x0)
+    np.testing.assert_array_equal(core.v, v0)
+
+
+@pytest.mark.parametrize("on_unstable", ["raise", "truncate"])
+@pytest.mark.parametrize("speed", [1e150, np.nan])
+def test_diverged_state_is_caught_without_a_neighbour_search(
+    on_unstable: str, speed: float
+) -> None:
+    """A swarm that diverges (far beyond MAX_SPAN, or NaN): SwarmUnstableError, or
+    truncated and put back; the other swarm steps on as if alone, and the cell list
+    never sees the diverged one."""
+    cfg = SwarmConfig(n_agents=20, on_unstable=on_unstable, max_substeps=1)
+    core = SparseSwarmNavCore(cfg, batch=2)
+    core.reset(np.random.default_rng(0))
+    core.v[1, 0] = speed
+    x0, v0 = core.x.copy(), core.v.copy()
+    a = np.zeros((2, 20, 2))
+    if on_unstable == "raise":
+        with pytest.raises(SwarmUnstableError, match="NaN or infinite"):
+            core.step(a)
+        return
+    *_, truncated, stats = core.step(a)
+    np.testing.assert_array_equal(stats["unstable"], [0.0, 1.0])
+    np.testing.assert_array_equal(truncated, [False, True])
+    np.testing.assert_array_equal(core.x[1], x0[1])
+    np.testing.assert_array_equal(core.v[1], v0[1])
+    assert np.isfinite(core.observe()[0]).all()  # swarm 1 keeps the state it was given
+    ref = SparseSwarmNavCore(cfg, batch=1)  # swarm 0 as if alone
+    ref.reset(np.random.default_rng(0))
+    ref.x[0], ref.v[0], ref.goal[0] = x0[0], v0[0], core.goal[0]
+    ref._after_reset(np.arange(1), np.random.default_rng(0))
+    ref.step(a[:1])
+    np.testing.assert_allclose(core.x[0], ref.x[0], rtol=0, atol=1e-12)

@@ -5,6 +5,8 @@ Usage::
     swarm-eval --env swarm_envs/SwarmNav-v0 [--config configs/env/paper_navigation.yaml] \\
         --policies potential zero random [path/to/model.zip ...] [runs/x_rllib/checkpoint] \\
         --episodes 20 --seed 0 --out runs/eval
+    swarm-eval --policies runs/ppo/model.zip analytic zero \\
+        --n-agents 10 31 100 300 1000 --episodes 20 --out runs/eval_sizes
 
 Policies are built-in names (``potential``, ``informed``, ``goal_force``,
 ``lyapunov``, ``zero``, ``random``, see :data:`agents.CONTROLLERS`; and ``analytic``,
@@ -20,21 +22,41 @@ backend), recorded in ``results.json`` as ``backend``. A model trained by ``swar
 records its env: evaluating it where the dynamics, the observation layout or scales, or
 ``u_max`` differ prints a one-line warning (``swarm-eval: warning: ...``).
 
+Size transfer: ``--n-agents 10 31 100 300 1000`` evaluates every policy unchanged at
+each swarm size (the config otherwise as given) and writes ``results.json``,
+``summary.md`` (one table row per policy and N), ``transfer.csv`` and ``transfer.png``
+(success rate, return, time to goal and collisions against N) instead of the curves and
+GIFs (:mod:`train.evaluate.transfer`). Only shared per-agent policies transfer: a
+model trained on the Gymnasium env (whole-swarm observation) is refused. ``--set
+n_agents=...`` does not combine with ``--n-agents``.
+
+Unstable steps (step-size control): unless the config file or a ``--set`` names
+``on_unstable``, the episodes run with ``on_unstable="truncate"``, so an episode whose
+step goes unstable ends there and is counted in the ``unstable`` column (with
+``on_unstable=raise`` such a step stops the evaluation with exit status 2). The tables
+also report the mean integration substeps per step. ``results.json`` never holds NaN or
+infinity: an undefined measure (the time to goal without a success) is ``null``, ``—``
+in the tables.
+
 ``--out`` must be new or empty; ``--overwrite`` removes an earlier evaluation's files
 there first (``results.json``, ``summary.md``, ``curves.png``, the GIFs, a demo's
-``report.md``) and keeps anything else, such as a run's ``model.zip``.
+``report.md``, ``transfer.csv``, ``transfer.png``) and keeps anything else, such as a
+run's ``model.zip``.
 
 Exit status: 0 on success; 2 with one line on stderr for a bad flag (``--seed`` outside
 [0, 2**32 - 1], ``--episodes`` < 1, an unavailable ``--device``, ...), an unknown
 policy name, a missing or unreadable model file, a model whose spaces do not fit the
-env (with what it was trained on), an env ``device`` that is unavailable or needs
-another backend, an unknown env id, a bad config (YAML syntax included) or an ``--out`` that is a
-file or holds files (without ``--overwrite``); 130 on Ctrl-C.
+env (with what it was trained on), a central policy with ``--n-agents``, an env
+``device`` that is unavailable or needs another backend, an unknown env id, a bad config
+(YAML syntax included, or one not valid at a size of ``--n-agents``), an unstable step
+with ``on_unstable=raise``, or an ``--out`` that is a file or holds files (without
+``--overwrite``); 130 on Ctrl-C.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import warnings
 from collections.abc import Sequence
@@ -53,7 +75,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = OneLineParser(
         prog=PROG,
         description="Evaluate policies (analytic controllers, SB3 models) on the same seeded "
-        "SwarmNav episodes; write results.json, summary.md, curves.png and GIFs.",
+        "SwarmNav episodes; write results.json, summary.md, curves.png and GIFs (with "
+        "--n-agents: at several swarm sizes, transfer.csv and transfer.png).",
     )
     p.add_argument("--env", default=ENV_ID, help=f"Gymnasium env id (default {ENV_ID})")
     p.add_argument(
@@ -71,6 +94,15 @@ def build_parser() -> argparse.ArgumentParser:
         "repeatable",
     )
     p.add_argument("--max-steps", type=int, default=None, help="override max_steps")
+    p.add_argument(
+        "--n-agents",
+        type=int,
+        nargs="+",
+        default=None,
+        metavar="N",
+        help="size transfer: evaluate every policy unchanged at each of these swarm sizes "
+        "(shared per-agent policies only); writes transfer.csv and transfer.png",
+    )
     p.add_argument(
         "--policies",
         nargs="+",
@@ -183,10 +215,39 @@ def _unique(name: str, taken: set[str]) -> str:
     return out
 
 
-def _load_policies(specs: Sequence[str], cfg: Any, seed: int, device: str) -> dict[str, Any]:
+def _user_sets(key: str, config: str | None, overrides: dict[str, Any]) -> bool:
+    """Whether the config file or a ``--set`` names the top-level ``key``."""
+    if key in overrides:
+        return True
+    if config is None:
+        return False
+    from swarm_envs.config import load_yaml, resolve_config_path
+
+    return key in load_yaml(resolve_config_path(config))
+
+
+def _size_configs(cfg: Any, sizes: Sequence[int], episodes: int) -> list[Any]:
+    """``cfg`` at each ``--n-agents`` size, each checked as :func:`check_backend` does."""
+    from train.evaluate.transfer import size_configs
+
+    try:
+        configs = size_configs(cfg, sizes)
+    except ValueError as err:
+        raise CliError(f"--n-agents: {err}") from None
+    for c in configs:
+        check_backend(c, episodes)
+    return configs
+
+
+def _load_policies(
+    specs: Sequence[str], cfg: Any, seed: int, device: str, *, transfer: bool = False
+) -> dict[str, Any]:
+    """The policies of ``--policies``, each checked to fit ``cfg``; with ``transfer``,
+    to be shared per-agent policies (a central one is refused)."""
     from agents import CONTROLLERS, analytic_name, make_controller
-    from train.evaluate import SpaceMismatchError, load_sb3_model, policy_mode
+    from train.evaluate import CentralPolicyError, SpaceMismatchError, load_sb3_model, policy_mode
     from train.evaluate.policies import describe_trained_env
+    from train.evaluate.transfer import check_transferable
 
     policies: dict[str, Any] = {}
     for spec in specs:
@@ -218,6 +279,13 @@ def _load_policies(specs: Sequence[str], cfg: Any, seed: int, device: str) -> di
         except (ValueError, OSError) as err:
             raise CliError(str(err)) from None
         name = _unique(path.stem, set(policies))
+        if transfer:
+            try:
+                check_transferable(name, model, cfg)
+            except CentralPolicyError as err:
+                raise CliError(f"--n-agents: model {spec}: {err}") from None
+            except SpaceMismatchError:
+                pass  # reported below, as without --n-agents
         try:
             policy_mode(model, cfg)
         except SpaceMismatchError as err:
@@ -254,6 +322,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _main(args: Any) -> int:
+    from train.evaluate.transfer import TRANSFER_FILES
     from train.outdir import EVAL_FILES, OutDirError, check_out_dir, prepare_out_dir
 
     tune_allocator()  # a long-running tool: keep freed heap for reuse
@@ -268,14 +337,29 @@ def _main(args: Any) -> int:
         if args.torch_threads < 0:
             raise CliError(f"--torch-threads must be >= 0, got {args.torch_threads}")
         check_out_dir(out, overwrite=args.overwrite)
-        cfg = _make_config(args.env, args.config, _parse_overrides(args.overrides, args.max_steps))
-        check_backend(cfg, args.episodes)
-        policies = _load_policies(args.policies, cfg, args.seed, args.device)
-        prepare_out_dir(out, overwrite=args.overwrite, patterns=EVAL_FILES, prog=PROG)
+        overrides = _parse_overrides(args.overrides, args.max_steps)
+        if args.n_agents is not None and "n_agents" in overrides:
+            raise CliError("--n-agents and --set n_agents=... both set the swarm size; use one")
+        if args.n_agents and all(isinstance(n, int) and n >= 1 for n in args.n_agents):
+            # the base config at the smallest size: the sizes are checked one by one below
+            overrides = {**overrides, "n_agents": min(args.n_agents, default=1)}
+        cfg = _make_config(args.env, args.config, overrides)
+        if not _user_sets("on_unstable", args.config, overrides):
+            # count unstable episodes instead of stopping at the first
+            cfg = dataclasses.replace(cfg, on_unstable="truncate")
+        if args.n_agents is None:
+            check_backend(cfg, args.episodes)
+        else:
+            _size_configs(cfg, args.n_agents, args.episodes)
+        transfer = args.n_agents is not None
+        policies = _load_policies(args.policies, cfg, args.seed, args.device, transfer=transfer)
+        patterns = tuple(dict.fromkeys(EVAL_FILES + TRANSFER_FILES))
+        prepare_out_dir(out, overwrite=args.overwrite, patterns=patterns, prog=PROG)
     except (CliError, OutDirError) as err:
         return fail(PROG, err)
 
-    from train.evaluate import TrainedEnvWarning, evaluate_policies, format_table
+    from swarm_envs.envs.common import SwarmUnstableError
+    from train.evaluate import TrainedEnvWarning
 
     if args.torch_threads > 0:
         import torch
@@ -285,14 +369,12 @@ def _main(args: Any) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("always", TrainedEnvWarning)
         warnings.showwarning = _one_line_warning
-        results = _evaluate(args, policies, cfg, out, evaluate_policies)
-    print(format_table(results))
-    print(f"\nwrote {out / 'results.json'}, {out / 'summary.md'}", end="")
-    if not args.no_plots:
-        print(f", {out / 'curves.png'}", end="")
-    if not args.no_gif:
-        print(f" and {len(policies)} GIF(s) in {out}", end="")
-    print()
+        try:
+            table, written = _evaluate(args, policies, cfg, out)
+        except SwarmUnstableError as err:
+            return fail(PROG, f"{err} (on_unstable=raise is set in the config or a --set)")
+    print(table)
+    print(f"\nwrote {written}")
     return 0
 
 
@@ -300,21 +382,47 @@ def _one_line_warning(message: Any, category: type, *_args: Any, **_kw: Any) -> 
     print(f"{PROG}: warning: {one_line(str(message))}", file=sys.stderr)
 
 
-def _evaluate(args: Any, policies: dict[str, Any], cfg: Any, out: Path, evaluate: Any) -> Any:
-    return evaluate(
+def _evaluate(args: Any, policies: dict[str, Any], cfg: Any, out: Path) -> tuple[str, str]:
+    """Run the evaluation ``args`` ask for; return its table and what it wrote."""
+    from train.evaluate import (
+        evaluate_policies,
+        evaluate_transfer,
+        format_table,
+        format_transfer_table,
+    )
+
+    extra = {"config_path": args.config, "overrides": _parse_overrides(args.overrides, None)}
+    common = {
+        "out_dir": out,
+        "env_id": args.env,
+        "deterministic": not args.stochastic,
+        "progress": not args.no_progress,
+        "plots": not args.no_plots,
+        "extra": extra,
+    }
+    written = f"{out / 'results.json'}, {out / 'summary.md'}"
+    if args.n_agents is not None:
+        results = evaluate_transfer(
+            policies, cfg, args.n_agents, args.episodes, args.seed, **common
+        )
+        written += f", {out / 'transfer.csv'}"
+        if not args.no_plots:
+            written += f", {out / 'transfer.png'}"
+        return format_transfer_table(results), written
+    results = evaluate_policies(
         policies,
         cfg,
         args.episodes,
         args.seed,
-        out_dir=out,
-        env_id=args.env,
-        deterministic=not args.stochastic,
-        progress=not args.no_progress,
         gif=not args.no_gif,
-        plots=not args.no_plots,
         gif_size=args.gif_size,
-        extra={"config_path": args.config, "overrides": _parse_overrides(args.overrides, None)},
+        **common,
     )
+    if not args.no_plots:
+        written += f", {out / 'curves.png'}"
+    if not args.no_gif:
+        written += f" and {len(policies)} GIF(s) in {out}"
+    return format_table(results), written
 
 
 if __name__ == "__main__":  # pragma: no cover

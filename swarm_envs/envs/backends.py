@@ -38,6 +38,7 @@ from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.core import SwarmNavCore
 from swarm_envs.envs.protocol import Core
 from swarm_envs.envs.sparse_core import SPARSE_MIN_AGENTS, SparseSwarmNavCore
+from swarm_envs.envs.step_control import check_step_control
 
 #: Agent slots ``B·N`` from which ``"auto"`` runs the torch core on the CPU where the C
 #: step is not available: below it the compile time (tens of seconds, once) outweighs
@@ -166,9 +167,12 @@ def make_core(cfg: SwarmConfig, batch: int = 1, dtype: Any = np.float64) -> Core
     gives (warning there if the requested one cannot run ``cfg``).
 
     Raises:
-        ValueError: a torch device that is not available, or a ``device`` other than the
-            CPU with a backend that runs on the CPU only.
+        ValueError: a torch device that is not available, a ``device`` other than the
+            CPU with a backend that runs on the CPU only, or a config whose steps
+            predictably need more than ``max_substeps`` substeps
+            (:func:`~swarm_envs.envs.step_control.check_step_control`).
     """
+    check_step_control(cfg)
     backend = resolve_backend(cfg, batch)
     cls = _core_class(backend)
     if backend == "torch":

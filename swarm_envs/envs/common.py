@@ -38,6 +38,20 @@ def unstable_swarms(stats: dict[str, np.ndarray], over_cap: np.ndarray) -> np.nd
     return bad
 
 
+def check_start(cfg: Any, stats: dict[str, np.ndarray], idx: np.ndarray, dtype: Any) -> None:
+    """Raise :class:`SwarmUnstableError` if a new start (swarms ``idx``) is not finite in
+    the state's ``dtype`` (a start too large for it: its speeds, distances or energy)."""
+    bad = np.zeros(next(iter(stats.values())).shape, dtype=bool)
+    bad[idx] = unstable_swarms(stats, bad)[idx]
+    if bad.any():
+        b = int(np.flatnonzero(bad)[0])
+        raise SwarmUnstableError(
+            f"the start of swarm {b} is not finite in {np.dtype(dtype).name} (its energy, "
+            f"expanse or goal distance overflows): lower init_speed, init_radius, the goal "
+            f"distances or the physics' amplitudes, or use float64"
+        )
+
+
 def unstable_message(
     cfg: Any, stats: dict[str, np.ndarray], bad: np.ndarray, needed: np.ndarray, step: Any
 ) -> str:
@@ -115,16 +129,21 @@ def draw_starts(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``n`` new starts ``(x (n, N, d), v (n, N, d), goal (n, d))``, float64.
 
-    Agents uniform in a disc (ball) of ``init_radius`` around the origin, velocities
-    uniform in a disc of ``init_speed``; the goal at a uniform random bearing and a
-    distance uniform in ``[goal_distance_min, goal_distance_max]``.
+    Agents uniform in a disc (ball) of ``cfg.start_radius`` around the origin
+    (``init_radius``, or the radius of ``init_density``), velocities uniform in a disc of
+    ``init_speed``; the goal at a uniform random bearing and a distance uniform in
+    ``[goal_distance_min, goal_distance_max]``, plus the start radius when
+    ``goal_distance_scale == "relative"`` (measured from the start disc's edge).
     """
     N, d = cfg.n_agents, cfg.dim
-    x = uniform_ball(rng, (n, N, d), cfg.init_radius)
+    radius = cfg.start_radius
+    x = uniform_ball(rng, (n, N, d), radius)
     v = uniform_ball(rng, (n, N, d), cfg.init_speed)
     bearing = rng.standard_normal((n, d))
     bearing /= np.maximum(np.linalg.norm(bearing, axis=-1, keepdims=True), 1e-12)
     dist = rng.uniform(cfg.goal_distance_min, cfg.goal_distance_max, size=(n, 1))
+    if cfg.goal_distance_scale == "relative":
+        dist += radius
     return x, v, bearing * dist
 
 

@@ -32,6 +32,7 @@ from swarm_envs.envs.common import (
     check_actions,
     check_batch,
     check_dtype,
+    check_start,
     draw_starts,
     unstable_message,
     unstable_swarms,
@@ -115,8 +116,12 @@ class SwarmNavCore:
             return
         self.x[idx], self.v[idx], self.goal[idx] = draw_starts(self.cfg, rng, idx.size)
         self.t[idx] = 0
-        self._after_reset(idx, rng)
-        self._measure()
+        substeps = self._stats["substeps"].copy()
+        substeps[idx] = 0.0  # no step yet; the other swarms keep their last step's
+        with np.errstate(over="ignore", invalid="ignore"):
+            self._after_reset(idx, rng)
+            self._measure(substeps=substeps)
+        check_start(self.cfg, self._stats, idx, self.dtype)
         for key, value in self._stats.items():
             self._prev[key][idx] = value[idx]
             self._start[key][idx] = value[idx]
@@ -136,9 +141,12 @@ class SwarmNavCore:
         # In the core's dtype, so that every adapter gives bit-identical results.
         a = check_actions(actions, self.x.shape).astype(self.dtype, copy=False)
         before = (self.x, self.v)  # a step makes new arrays: these stay the old state
-        self._advance(cfg.u_max * a if a.any() else None)
-        self.t += 1
-        self._measure(substeps=self.dynamics.substeps)
+        # Overflow on the way is not reported as it happens: the unstable check below
+        # raises (or truncates) for every swarm whose state stopped being finite.
+        with np.errstate(over="ignore", invalid="ignore"):
+            self._advance(cfg.u_max * a if a.any() else None)
+            self.t += 1
+            self._measure(substeps=self.dynamics.substeps)
         bad = unstable_swarms(self._stats, self.dynamics.over_cap)
         if bad.any():
             self._unstable(bad, before)
@@ -154,13 +162,11 @@ class SwarmNavCore:
         return r, success, truncated, self.stats()
 
     def _unstable(self, bad: np.ndarray, before: tuple[np.ndarray, np.ndarray]) -> None:
-        """Raise :class:`SwarmUnstableError`, or (``on_unstable="truncate"``) put the
-        swarms ``bad`` back to their state before the step, marked ``unstable``."""
+        """Put the swarms ``bad`` back to their state before the step; then raise
+        :class:`SwarmUnstableError` (the core stays at the last sound state, as before
+        the step), or (``on_unstable="truncate"``) mark them ``unstable``."""
         cfg = self.cfg
-        if cfg.on_unstable == "raise":
-            raise SwarmUnstableError(
-                unstable_message(cfg, self._stats, bad, self.dynamics.needed, self.t)
-            )
+        message = unstable_message(cfg, self._stats, bad, self.dynamics.needed, self.t)
         idx = np.flatnonzero(bad)
         self.x[idx], self.v[idx] = before[0][idx], before[1][idx]
         self.dynamics.restore(self.x, self.v, self.goal, idx)
@@ -168,6 +174,8 @@ class SwarmNavCore:
         substeps = self.dynamics.substeps.copy()
         substeps[idx] = 0.0  # the step was undone
         self._measure(substeps=substeps)
+        if cfg.on_unstable == "raise":
+            raise SwarmUnstableError(message)
         self._stats["unstable"][idx] = 1.0
 
     # ------------------------------------------------------------------ physics hooks

@@ -164,7 +164,9 @@ class SocialPotentialDynamics(Dynamics):
         if self._verlet:
             assert self._force is not None
             g = self._physics_goal(goal)
-            self._force[idx] = forces(x[idx], v[idx], self.cfg.physics, None if g is None else g[idx])
+            self._force[idx] = forces(
+                x[idx], v[idx], self.cfg.physics, None if g is None else g[idx]
+            )
 
     def _rates(self, geometry: PairGeometry) -> np.ndarray:
         omega2, gamma = pair_rates(geometry, self.cfg.physics, sink=self._sink)

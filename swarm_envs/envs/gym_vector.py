@@ -212,7 +212,7 @@ class SwarmNavVectorEnv(VectorEnv):
 
         x, v, goal = self.core.x, self.core.v, self.core.goal
         return tuple(
-            draw_swarm(x[b], goal=goal[b], goal_radius=self.cfg.goal_radius, velocities=v[b])
+            draw_swarm(x[b], goal=goal[b], goal_radius=self.cfg.arrival_radius, velocities=v[b])
             for b in range(self.num_envs)
         )
 

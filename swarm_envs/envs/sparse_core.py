@@ -7,83 +7,77 @@
 array. One step:
 
 1. the action becomes the control force ``u = u_max · a``, added to the passive force
-   carried from the previous step (the passive force at the current state, or for
-   velocity Verlet at its extrapolated velocity, exactly as the dense core);
-2. the integrator advances ``(x, v)`` by ``dt`` (semi-implicit Euler or velocity
-   Verlet, the formulas of :mod:`swarm_envs.physics.integrators`);
-3. one cell-list search (:class:`swarm_envs.physics.neighbors.CellList`) finds every
-   pair within ``max(r_c, collision_radius)`` of the new positions, chunk by chunk, and
-   the same pass over those pairs gives the next passive force, the pair potential of
-   the ``energy`` statistic and the collision count (the agents are taken in cell
-   order, so the pairs' memory accesses stay local). Where numba imports, that pass is
-   one compiled loop over the cell pairs
-   (:func:`swarm_envs.physics.compiled_pairs.cell_pair_sums`, each candidate visited
-   once); otherwise numpy sums chunks of candidates
-   (:class:`swarm_envs.physics.cutoff.PairAccumulator`). Both apply the one pair law,
-   :func:`swarm_envs.physics.social_potential.pair_law` (``docs/models.md`` §1), and
-   give the same sums to round-off; ``SWARM_ENVS_NUMBA=0`` picks numpy;
+   carried from the previous substep (at the current state, or for velocity Verlet at
+   its extrapolated velocity, exactly as the dense core);
+2. step-size control, as in the dense core (``SocialPotentialDynamics.step``): each
+   swarm carries, beside its force, the stable substep ``h*`` of its current state
+   (:func:`~swarm_envs.physics.integrators.stable_substep`). The step of ``dt`` takes
+   ``⌈τ/h*⌉`` equal substeps of the time ``τ`` left, re-planned after each
+   (:func:`~swarm_envs.physics.integrators.substep_plan`), at most ``cfg.max_substeps``
+   (a swarm that needs more takes the rest of ``dt`` in the substeps left and is
+   marked over the cap). Only the swarms with time left are advanced and evaluated, so
+   a swarm's trajectory never depends on the others of the batch;
+3. after each substep, one cell-list search (:class:`swarm_envs.physics.neighbors.CellList`)
+   finds every pair within ``max(r_c, collision_radius)`` of the new positions, and one
+   pass over them, in cell order, gives the next passive force, the rate sums of the
+   step-size rule (``Σ_j κ_ij``, ``Σ_j w_ij`` per agent of
+   :func:`~swarm_envs.physics.social_potential.rate_law`, turned into ``(ω², γ)`` by
+   :func:`~swarm_envs.physics.pair_sums.swarm_rates`), the pair potential of the
+   ``energy`` statistic and the collision count. Where numba imports, that pass is one
+   compiled loop (:func:`swarm_envs.physics.compiled_pairs.cell_pair_sums`); otherwise
+   numpy sums chunks of candidates (:class:`swarm_envs.physics.pair_sums.PairAccumulator`).
+   Both apply the one pair law and the one rate law and agree to round-off;
+   ``SWARM_ENVS_NUMBA=0`` picks numpy;
 4. the k nearest neighbours (observations, nearest-neighbour distance) come from the
-   same cell-list structure (:func:`swarm_envs.physics.neighbors.knn`), on demand and
-   cached per state; the search starts at the previous step's neighbour distances
-   (each round compiled with numba where it imports).
-   From :data:`KNN_AHEAD_MIN_AGENTS` agents it starts in a worker thread as soon as
-   the positions are known, and runs while step 3 does.
+   cell-list structure (:func:`swarm_envs.physics.neighbors.knn`), on demand, cached per
+   state and started from the previous step's distances; from
+   :data:`KNN_AHEAD_MIN_AGENTS` agents the search starts in a worker thread as soon as
+   the step's last positions are known, while the last pair pass runs;
+5. the dense core's guard: a swarm whose state is no longer finite, or that needed more
+   substeps than ``max_substeps``, raises
+   :class:`~swarm_envs.envs.common.SwarmUnstableError` (``on_unstable="raise"``) or is
+   put back to its state before the step and truncated (``"truncate"``). A swarm that
+   diverges (non-finite, or beyond :data:`MAX_SPAN` search radii) takes no further
+   substeps, is never handed to the neighbour search, and its energy is NaN.
 
-What differs from the dense core is the cut-off only: pair terms (Morse cohesion,
-alignment; docs/models.md §1 eqs. 9–11) of agents farther apart than
-``r_c = cutoff_radius(cfg.physics, cutoff_tol, speed=cutoff_speed)`` are dropped, each
-smaller than ``cutoff_tol`` (force units) for relative speeds up to ``cutoff_speed``.
-The per-agent bound is :func:`swarm_envs.physics.cutoff.force_error_bound`:
-``(N − 1) g(r_c; w)`` always, ``n Σ_t A_t Φ_d(r_c, l_t)`` at density ``n``. The
-``energy`` statistic drops the same pairs
-(:func:`~swarm_envs.physics.cutoff.energy_error_bound`). Observations, collisions and
-the nearest-neighbour distance are exact. A state that is no longer finite raises
-:class:`ValueError` in :meth:`~SparseSwarmNavCore.step` (the dense core would carry NaN).
-
-The defaults, ``cutoff_tol = 0.03`` (1 % of the default action bound ``u_max = 3``) and
-``cutoff_speed = 1``, give ``r_c ≈ 5.08`` with the navigation parameters. What they cost
-in accuracy, measured at 2,000 agents at the default start density
-(``benchmarks/large_swarms.py --accuracy 2000``): per-agent force errors of median
-0.1–0.3 and maximum 0.6–1.3 in the first 20 steps, mostly the alignment drag of agents
-beyond ``r_c`` (:mod:`swarm_envs.physics.cutoff`); the bound holds with a factor of
-about 10 to spare. ``cutoff_tol = 0.01`` (``r_c ≈ 6.59``) divides the errors by about
-2.5, ``0.003`` (``r_c ≈ 8.31``) by about 7.
-
-Cost is ``O(N)`` per step at bounded density: the cell list and the pair pass visit,
-per agent, a number of candidates proportional to its pairs within ``r_c``, about
-``n ω_d r_c^d`` at density ``n`` (``ω_2 = π``, ``ω_3 = 4π/3``), so a larger ``r_c``
-costs as ``r_c^d``. The paper's parameters are in the collapsing regime (``C l² < 1``,
-``SocialPotentialParams.h_stability``): a swarm left to itself contracts, its density
-and the number of pairs within ``r_c`` grow over an episode, and the stiffening
-repulsion eventually makes the explicit integration unstable (agents at speeds of
-20–50): with 2,000 agents at rest after about 50 steps of ``dt = 0.1`` (about 700 of
-``dt = 0.02``), in both cores.
-Large-N scenarios should start at the density of the default ``N = 10`` case:
-:func:`density_preserving_radius` scales ``init_radius`` with ``N^{1/d}`` (``√N`` in
-2-D, ``∛N`` in 3-D); with the default radius, 100,000 agents would start ``10^4``
-times denser.
+What differs from the dense core is the cut-off only: the pair terms (and their rates)
+of agents farther apart than ``r_c = cutoff_radius(cfg.physics, cutoff_tol,
+speed=cutoff_speed)`` are dropped, each below ``cutoff_tol`` (force units) for relative
+speeds up to ``cutoff_speed``; :func:`swarm_envs.physics.cutoff.force_error_bound` and
+:func:`~swarm_envs.physics.cutoff.energy_error_bound` bound the per-agent force and the
+energy statistic's errors. Observations, collisions and the nearest-neighbour distance
+are exact; the substep counts equal the dense core's unless the dropped rates move
+``τ/h*`` across an integer. The defaults (``cutoff_tol = 0.03``, 1 % of the default
+``u_max``, and ``cutoff_speed = 1``) give ``r_c ≈ 5.08`` with the navigation set and
+``≈ 3.30`` with the large-swarm preset; ``docs/large_swarms.md`` has the measured
+errors, the cost (``O(N)`` per substep at bounded density, ``∝ r_c^d``) and the regimes
+of both parameter sets from 10 to 100,000 agents. Large swarms need an H-stable
+parameter set (``SocialPotentialParams.large_swarm()``, ``configs/env/large_swarm.yaml``)
+and a bounded start density (``SwarmConfig.init_density``): the paper's sets collapse,
+and the substeps a step needs grow with ``N`` until ``max_substeps``.
 
 Below :data:`SPARSE_MIN_AGENTS` agents per swarm the dense core (``O(N²)`` per step) is
-as fast or faster (and exact); above it this one is faster, increasingly so
-(``benchmarks/large_swarms.py`` measures the crossover on a given machine, with the
-compiled or the numpy pair pass). :func:`use_sparse_core` is the selection rule.
+as fast or faster (and exact); :func:`use_sparse_core` is the selection rule
+(``benchmarks/large_swarms.py`` measures the crossover).
 """
 
 from __future__ import annotations
 
 import os
 from concurrent.futures import Future, ThreadPoolExecutor
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from swarm_envs.config import SwarmConfig
+from swarm_envs.envs.common import SwarmUnstableError, unstable_message
 from swarm_envs.envs.core import SwarmNavCore
 from swarm_envs.physics import compiled_pairs, goal_force, goal_potential, kinetic_energy
 from swarm_envs.physics._validation import check_real
-from swarm_envs.physics.cutoff import PairAccumulator, cutoff_radius
-from swarm_envs.physics.integrators import euler_update
-from swarm_envs.physics.neighbors import CELL_MARGIN, REACH, CellList, knn
+from swarm_envs.physics.cutoff import cutoff_radius
+from swarm_envs.physics.integrators import euler_update, stable_substep, substep_plan
+from swarm_envs.physics.neighbors import knn
+from swarm_envs.physics.pair_sums import swarm_rates
 
 #: Agents per swarm from which to use :class:`SparseSwarmNavCore`: above the crossover
 #: with the dense cores that ``benchmarks/large_swarms.py`` measures (default config at
@@ -112,12 +106,21 @@ DEFAULT_CUTOFF_TOL = 0.03
 #: Default relative speed up to which the alignment term's tolerance holds.
 DEFAULT_CUTOFF_SPEED = 1.0
 
+#: A swarm with an agent farther than half this many search radii
+#: (``max(r_c, collision_radius, 1)``) from the origin along an axis has diverged: like
+#: a non-finite one it is left out of the pair pass and the neighbour search (whose
+#: grids it would make too coarse for the other swarms), and its energy is NaN, which
+#: the step's guard catches.
+MAX_SPAN = 2**24
+
 __all__ = [
     "DEFAULT_CUTOFF_SPEED",
     "DEFAULT_CUTOFF_TOL",
     "KNN_AHEAD_MIN_AGENTS",
+    "MAX_SPAN",
     "SPARSE_MIN_AGENTS",
     "SparseSwarmNavCore",
+    "StepCounts",
     "density_preserving_radius",
     "use_sparse_core",
 ]
@@ -143,7 +146,8 @@ def density_preserving_radius(
     ``R = radius · (n_agents / agents)^{1/d}``: the default start (10 agents in a disc of
     radius 1.5, 1.41 agents per unit area) scaled to ``N`` agents. With the default
     radius, 100,000 agents would start ``10^4`` times denser, with thousands of
-    neighbours within the cut-off each.
+    neighbours within the cut-off each. ``SwarmConfig.init_density`` gives the same law
+    from a density.
 
     >>> round(density_preserving_radius(100_000), 1)
     150.0
@@ -160,14 +164,51 @@ def density_preserving_radius(
     return radius * (n_agents / agents) ** (1.0 / dim)
 
 
+class StepCounts:
+    """The step-size control's account of a core's last step, per swarm ``(B,)``: what
+    :meth:`SwarmNavCore.step <swarm_envs.envs.core.SwarmNavCore.step>` reads from its
+    ``dynamics`` (``substeps`` taken, ``over_cap``: needed more than ``max_substeps``,
+    ``needed``: how many at least)."""
+
+    def __init__(self, batch: int) -> None:
+        self.substeps = np.zeros(batch)
+        self.over_cap = np.zeros(batch, dtype=bool)
+        self.needed = np.zeros(batch)
+
+    def record(self, used: np.ndarray, over: np.ndarray, needed: np.ndarray) -> None:
+        """Store the counts of a step."""
+        self.substeps, self.over_cap, self.needed = used, over, needed
+
+
+class _Pass(NamedTuple):
+    """What one pair pass gives for the swarms it covered."""
+
+    force: np.ndarray  # (b, N, d) passive force
+    h_stable: np.ndarray  # (b,) stable substep of the state
+    potential: np.ndarray  # (b,) Σ U over the pairs within the cut-off
+    collisions: np.ndarray  # (b,) pairs closer than collision_radius
+    finite: np.ndarray  # (b,) bool: the state was sound (else NaN force, not searched)
+
+
+def _sound_swarms(x: np.ndarray, v: np.ndarray | None, span: float) -> np.ndarray:
+    """``(b,)`` bool: the swarms whose positions ``x`` (and velocities ``v``) ``(b, N, d)``
+    are finite and within ``span / 2`` of the origin along every axis (so they span at
+    most ``span``)."""
+    flat = np.abs(x.reshape(x.shape[0], -1)).max(axis=1) if x.size else np.zeros(x.shape[0])
+    ok = flat <= 0.5 * span  # False for NaN
+    if v is not None:
+        ok &= np.isfinite(v).all(axis=(1, 2))
+    return ok
+
+
 class SparseSwarmNavCore(SwarmNavCore):
     """State and dynamics of ``batch`` independent SwarmNav swarms, for large ``N``.
 
     A drop-in for :class:`~swarm_envs.envs.core.SwarmNavCore` (same methods, same
-    random draws, same results up to the cut-off; see the module docstring). It
-    overrides only the physics hooks (``_after_reset``, ``_advance`` and
-    ``_pair_measures``); the reset draws, the reward, the statistics and the
-    observations are the dense core's.
+    random draws, same step-size control and guard, same results up to the cut-off; see
+    the module docstring). It overrides only the physics hooks (``_after_reset``,
+    ``_advance``, ``_pair_measures`` and ``_unstable``); the reset draws, the reward,
+    the statistics and the observations are the dense core's.
 
     Args:
         cfg: the scenario; ``cfg.dynamics`` must be ``"social_potential"``.
@@ -180,6 +221,7 @@ class SparseSwarmNavCore(SwarmNavCore):
     Attributes:
         cutoff: the cut-off radius ``r_c`` (from ``cfg.physics``, ``cutoff_tol`` and
             ``cutoff_speed``; recomputed if ``cfg`` is replaced).
+        dynamics: the :class:`StepCounts` of the last step.
 
     >>> from swarm_envs.config import SwarmConfig
     >>> from swarm_envs.envs.core import STAT_KEYS
@@ -188,6 +230,8 @@ class SparseSwarmNavCore(SwarmNavCore):
     >>> reward, terminated, truncated, stats = core.step(np.zeros((2, 4, 2)))
     >>> core.observe().shape, reward.shape, sorted(stats) == sorted(STAT_KEYS)
     ((2, 4, 34), (2,), True)
+    >>> stats["substeps"].tolist()
+    [1.0, 1.0]
     """
 
     backend = "sparse"
@@ -209,9 +253,11 @@ class SparseSwarmNavCore(SwarmNavCore):
         )
         self.cutoff_speed = check_real("SparseSwarmNavCore", "cutoff_speed", cutoff_speed, low=0.0)
         B = self.batch
+        self.dynamics = StepCounts(B)  # type: ignore[assignment]
         self._cutoff_key: tuple[Any, ...] | None = None
         self._cutoff = 0.0
-        self._f_passive: np.ndarray | None = None  # passive force carried to the next step
+        self._f_passive: np.ndarray | None = None  # passive force carried to the next substep
+        self._h_stable = np.full(B, np.inf)  # stable substep of the current state
         self._potential = np.zeros(B)  # Σ U over the pairs within the cut-off, per swarm
         self._collisions = np.zeros(B)
         self._state = 0  # bumped whenever x, v change; keys the neighbour cache
@@ -233,11 +279,54 @@ class SparseSwarmNavCore(SwarmNavCore):
         state["_knn_pending"] = None  # searched again on demand
         return state
 
+    # ------------------------------------------------------------------ neighbours
+    @property
+    def _span(self) -> float:
+        """The widest sound swarm, in length units (:data:`MAX_SPAN`)."""
+        return MAX_SPAN * max(self.cutoff, self.cfg.collision_radius, 1.0)
+
+    def _searchable(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(positions, bad)``: ``x`` with the diverged swarms (``bad``: non-finite, or
+        beyond :data:`MAX_SPAN`) at the origin, which the neighbour search accepts
+        (their distances are replaced by NaN)."""
+        bad = ~_sound_swarms(x, None, self._span)
+        if bad.any():
+            x = x.copy()
+            x[bad] = 0.0
+        return x, bad
+
     def _start_knn(self) -> None:
         """Search the k nearest neighbours of ``self.x`` in a worker thread, meanwhile."""
         k = max(self.cfg.n_neighbors, 1)
-        future = _knn_workers().submit(knn, self.x, k, radius=self._knn_radius)
+        x, _ = self._searchable(self.x)
+        future = _knn_workers().submit(knn, x, k, radius=self._knn_radius)
         self._knn_pending = (self._state, future)
+
+    def _knn(self) -> tuple[np.ndarray, np.ndarray]:
+        """Indices and distances ``(B, N, k)`` of each agent's nearest others, nearest first.
+
+        ``k = min(max(n_neighbors, 1), N − 1)``: the observation's neighbours and, in
+        column 0, the nearest neighbour for the NND statistic. Cached per state; the
+        search starts from the previous state's 90th percentile of the k-th distance.
+        A diverged swarm (:meth:`_searchable`) gets NaN distances.
+        """
+        if self._knn_cache is not None and self._knn_cache[0] == self._state:
+            return self._knn_cache[1], self._knn_cache[2]
+        k = max(self.cfg.n_neighbors, 1)
+        x, bad = self._searchable(self.x)
+        pending, self._knn_pending = self._knn_pending, None
+        if pending is not None and pending[0] == self._state:
+            idx, dist = pending[1].result()
+        else:
+            idx, dist = knn(x, k, radius=self._knn_radius)
+        if dist.size:
+            hint = float(np.quantile(dist[~bad][..., -1], 0.9)) if (~bad).any() else 0.0
+            self._knn_radius = hint if hint > 0 else None
+            if bad.any():
+                dist = dist.copy()
+                dist[bad] = np.nan
+        self._knn_cache = (self._state, idx, dist)
+        return idx, dist
 
     # ------------------------------------------------------------------ cut-off
     @property
@@ -253,116 +342,162 @@ class SparseSwarmNavCore(SwarmNavCore):
         cfg = self.cfg
         return self.goal if cfg.goal_in_physics and cfg.physics.C_g > 0 else None
 
-    def _passive(self, velocity: np.ndarray) -> np.ndarray:
-        """Passive force at ``self.x`` with ``velocity``; refreshes the pair statistics.
+    def _pair_pass(self, x: np.ndarray, velocity: np.ndarray, goal: np.ndarray | None) -> _Pass:
+        """The passive force at ``x`` ``(b, N, d)`` with ``velocity``, and what the same
+        pass over the pairs gives: the stable substep, the pair potential, the collisions.
 
         One cell-list search within ``max(r_c, collision_radius)`` and one pass over
-        its pairs (agents in cell order): the pair forces (eqs. 10–11), the pair
-        potential (eq. 9) and the collision count; then ``−β v`` (eq. 12) and the goal
-        sink (eqs. 19–21) when it acts passively.
+        its pairs (:func:`~swarm_envs.physics.compiled_pairs.swarm_pair_sums`): the pair
+        forces (eqs. 10–11), the rate sums of the step-size rule, the pair potential
+        (eq. 9) and the collision count; then
+        ``−β v`` (eq. 12) and the goal sink (eqs. 19–21) when it acts passively
+        (``goal`` ``(b, d)``, else ``None``). Diverged swarms (a non-finite position or
+        velocity, or beyond :data:`MAX_SPAN`) are left out: NaN force and potential,
+        ``h* = inf``.
         """
+        ok = _sound_swarms(x, velocity, self._span)
+        if not ok.all():
+            b, N, d = x.shape
+            out = _Pass(
+                np.full((b, N, d), np.nan, self.dtype),
+                np.full(b, np.inf),
+                np.full(b, np.nan),
+                np.zeros(b),
+                ok,
+            )
+            if ok.any():
+                part = self._pair_pass(x[ok], velocity[ok], None if goal is None else goal[ok])
+                out.force[ok], out.h_stable[ok] = part.force, part.h_stable
+                out.potential[ok], out.collisions[ok] = part.potential, part.collisions
+            return out
         cfg, p = self.cfg, self.cfg.physics
-        B, N, d = self.x.shape
-        radius = max(self.cutoff, cfg.collision_radius)
-        force = np.zeros((B * N, d), self.dtype)
-        self._potential = np.zeros(B)
-        self._collisions = np.zeros(B)
-        if B * N >= KNN_AHEAD_MIN_AGENTS:
-            self._start_knn()  # the observation's search, while the pairs are summed
-        if radius > 0 and N > 1:
-            cells = CellList.build(self.x, radius * (1.0 + CELL_MARGIN) / REACH, REACH)
-            order = cells.order
-            vel = velocity.reshape(B * N, d)[order]
-            groups = order // N if B > 1 else None
-            if compiled_pairs.numba_enabled():  # one compiled loop over the cell pairs
-                sums = compiled_pairs.cell_pair_sums(
-                    cells,
-                    radius,
-                    p,
-                    vel,
-                    groups=groups,
-                    n_groups=B,
-                    close_radius=cfg.collision_radius,
-                )
-            else:
-                acc = PairAccumulator(
-                    p,
-                    B * N,
-                    vel,
-                    groups=groups,
-                    n_groups=B,
-                    potential=True,
-                    close_radius=cfg.collision_radius,
-                )
-                for chunk in cells.iter_pairs(radius):
-                    acc.add(*chunk)
-                sums = acc.result(d, self.dtype)
-            force[order] = sums.force
-            self._potential = sums.potential
-            self._collisions = sums.close.astype(np.float64)
-        force = force.reshape(B, N, d)
+        b, N, d = x.shape
+        sums = compiled_pairs.swarm_pair_sums(
+            x, velocity, p, max(self.cutoff, cfg.collision_radius), cfg.collision_radius
+        )
+        assert sums.kappa is not None and sums.damping is not None
+        force = sums.force.astype(self.dtype, copy=False)
+        kappa, damping = sums.kappa, sums.damping
+        potential, collisions = sums.potential, sums.close.astype(np.float64)
+        force = force.reshape(b, N, d)
         if p.beta > 0:
             force -= p.beta * velocity
-        goal = self._physics_goal()
         if goal is not None:
-            force += goal_force(self.x, p, goal)
-        return force
+            force += goal_force(x, p, goal)
+        omega2, gamma = swarm_rates(
+            kappa.reshape(b, N), damping.reshape(b, N), p, sink=goal is not None
+        )
+        return _Pass(force, stable_substep(omega2, gamma), potential, collisions, ok)
+
+    def _keep(self, rows: np.ndarray | None, res: _Pass) -> None:
+        """Store a pass's rates, potential and collisions for ``rows`` (``None``: all)."""
+        where = slice(None) if rows is None else rows
+        self._h_stable[where] = res.h_stable
+        self._potential[where] = res.potential
+        self._collisions[where] = res.collisions
 
     # ------------------------------------------------------------------ physics hooks
     def _after_reset(self, idx: np.ndarray, rng: np.random.Generator) -> None:
         self._state += 1
-        f = self._passive(self.v)
+        if self.batch * self.cfg.n_agents >= KNN_AHEAD_MIN_AGENTS:
+            self._start_knn()  # the observation's search, while the pairs are summed
+        res = self._pair_pass(self.x, self.v, self._physics_goal())
         if self._f_passive is None or self.cfg.integrator != "velocity_verlet":
-            self._f_passive = f
+            self._f_passive = res.force
         else:  # Verlet keeps the other swarms' carried force (as the dense core does)
-            self._f_passive[idx] = f[idx]
+            self._f_passive[idx] = res.force[idx]
+        self._keep(None, res)
 
     def _advance(self, control: np.ndarray | None) -> None:
+        """One step of ``dt`` in the substeps of the step-size control (module docstring)."""
         cfg = self.cfg
         if self._f_passive is None:
             raise ValueError("SparseSwarmNavCore.step called before reset")
-        m, dt = cfg.physics.m, cfg.dt
-        accel = self._f_passive if control is None else self._f_passive + control
-        if cfg.integrator == "velocity_verlet":
-            # Kick–drift–kick with the force at the extrapolated velocity 2v_{n+½} − v_n
-            # (swarm_envs.physics.integrators.verlet_step).
-            v_half = self.v + (0.5 * dt / m) * accel
-            self.x = self.x + dt * v_half
+        B, cap, m = self.batch, cfg.max_substeps, cfg.physics.m
+        verlet = cfg.integrator == "velocity_verlet"
+        goal = self._physics_goal()
+        ahead = B * cfg.n_agents >= KNN_AHEAD_MIN_AGENTS
+        remaining = np.full(B, cfg.dt)
+        used = np.zeros(B)
+        over = np.zeros(B, dtype=bool)
+        needed = np.zeros(B)
+        rows = np.arange(B)
+        x, v, f = self.x, self.v, self._f_passive
+        moved = False  # self.x holds the step's final positions
+        while True:
+            every = rows.size == B  # no gather while every swarm is still stepping
+            n, h = substep_plan(remaining[rows], self._h_stable[rows])
+            needed[rows] = np.maximum(needed[rows], used[rows] + n)
+            left = cap - used[rows]
+            late = n > left
+            if late.any():  # the rest in the substeps left, and marked
+                over[rows[late]] = True
+                h = np.where(late, remaining[rows] / np.maximum(left, 1.0), h)
+                n = np.where(late, np.maximum(left, 1.0), n)
+            hb = h[:, None, None].astype(self.dtype)
+            xr, vr, fr = (x, v, f) if every else (x[rows], v[rows], f[rows])
+            ur = control if control is None or every else control[rows]
+            gr = goal if goal is None or every else goal[rows]
+            accel = fr if ur is None else fr + ur
+            if verlet:
+                # Kick–drift–kick with the force at the extrapolated velocity
+                # 2v_{n+½} − v_n (swarm_envs.physics.integrators.verlet_step).
+                v_half = vr + (0.5 / m) * hb * accel
+                xr = xr + hb * v_half
+                probe = 2.0 * v_half - vr
+            else:  # semi-implicit Euler (swarm_envs.physics.integrators.euler_update)
+                xr, vr = euler_update(xr, vr, accel, hb, m)
+                probe = vr
+            if every:
+                x = xr  # a new array: the caller's state before the step stays intact
+            else:
+                x[rows] = xr
+            if (n <= 1).all():  # the last substep of every swarm: x is final
+                self.x, moved = x, True
+                self._state += 1
+                if ahead:
+                    self._start_knn()
+            res = self._pair_pass(xr, probe, gr)
+            if verlet:
+                accel = res.force if ur is None else res.force + ur
+                vr = v_half + (0.5 / m) * hb * accel
+            if every:
+                v, f = vr, res.force
+            else:
+                v[rows], f[rows] = vr, res.force
+            self._keep(rows, res)
+            used[rows] += 1
+            remaining[rows] = np.where((n <= 1) | ~res.finite, 0.0, remaining[rows] - h)
+            done = remaining[rows] == 0
+            if done.all():
+                break
+            rows = rows[~done]
+        self.x, self.v, self._f_passive = x, v, f
+        if not moved:
             self._state += 1
-            self._f_passive = self._passive(2.0 * v_half - self.v)
-            accel = self._f_passive if control is None else self._f_passive + control
-            self.v = v_half + (0.5 * dt / m) * accel
-        else:
-            # Semi-implicit Euler (swarm_envs.physics.integrators.euler_update).
-            self.x, self.v = euler_update(self.x, self.v, accel, dt, m)
-            self._state += 1
-            self._f_passive = self._passive(self.v)
-        if not (np.isfinite(self.x).all() and np.isfinite(self.v).all()):
-            raise ValueError(
-                "SparseSwarmNavCore: the state is no longer finite (the explicit "
-                "integration diverged); use a smaller dt or stable parameters"
+        self.dynamics.record(used, over, needed)
+
+    def _unstable(self, bad: np.ndarray, before: tuple[np.ndarray, np.ndarray]) -> None:
+        """As the dense core's: raise :class:`SwarmUnstableError`, or put the swarms
+        ``bad`` back to their state before the step (one pair pass over them), marked
+        ``unstable``."""
+        cfg = self.cfg
+        if cfg.on_unstable == "raise":
+            raise SwarmUnstableError(
+                unstable_message(cfg, self._stats, bad, self.dynamics.needed, self.t)
             )
-
-    def _knn(self) -> tuple[np.ndarray, np.ndarray]:
-        """Indices and distances ``(B, N, k)`` of each agent's nearest others, nearest first.
-
-        ``k = min(max(n_neighbors, 1), N − 1)``: the observation's neighbours and, in
-        column 0, the nearest neighbour for the NND statistic. Cached per state; the
-        search starts from the previous state's 90th percentile of the k-th distance.
-        """
-        if self._knn_cache is not None and self._knn_cache[0] == self._state:
-            return self._knn_cache[1], self._knn_cache[2]
-        k = max(self.cfg.n_neighbors, 1)
-        pending, self._knn_pending = self._knn_pending, None
-        if pending is not None and pending[0] == self._state:
-            idx, dist = pending[1].result()
-        else:
-            idx, dist = knn(self.x, k, radius=self._knn_radius)
-        if dist.size:
-            hint = float(np.quantile(dist[..., -1], 0.9))
-            self._knn_radius = hint if hint > 0 else None
-        self._knn_cache = (self._state, idx, dist)
-        return idx, dist
+        assert self._f_passive is not None
+        idx = np.flatnonzero(bad)
+        self.x[idx], self.v[idx] = before[0][idx], before[1][idx]
+        self._state += 1
+        goal = self._physics_goal()
+        res = self._pair_pass(self.x[idx], self.v[idx], None if goal is None else goal[idx])
+        self._f_passive[idx] = res.force
+        self._keep(idx, res)
+        substeps = self.dynamics.substeps.copy()
+        substeps[idx] = 0.0  # the step was undone
+        self._measure(substeps=substeps)
+        self._stats["unstable"][idx] = 1.0
 
     def _pair_measures(self) -> tuple[np.ndarray | None, np.ndarray, np.ndarray, np.ndarray]:
         """As the dense core's; the energy sums the pair potential over the pairs within

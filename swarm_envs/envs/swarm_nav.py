@@ -262,7 +262,7 @@ class _Rendering:
         return self._renderer.frame(
             self.core.x[0],
             goal=self.core.goal[0],
-            goal_radius=self.core.cfg.goal_radius,
+            goal_radius=self.core.cfg.arrival_radius,
             velocities=self.core.v[0],
         )
 

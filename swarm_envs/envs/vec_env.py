@@ -316,7 +316,7 @@ class SwarmNavVecEnv(VecEnv):
             draw_swarm(
                 core.x[b],
                 goal=core.goal[b],
-                goal_radius=self.cfg.goal_radius,
+                goal_radius=self.cfg.arrival_radius,
                 velocities=core.v[b],
             )
             for core in self.cores

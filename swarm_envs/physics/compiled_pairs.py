@@ -52,9 +52,14 @@ from typing import Any
 
 import numpy as np
 
-from swarm_envs.physics.cutoff import PairSums
-from swarm_envs.physics.neighbors import CellList
-from swarm_envs.physics.social_potential import RHO_FLOOR, SocialPotentialParams, pair_law
+from swarm_envs.physics.neighbors import CELL_MARGIN, REACH, CellList
+from swarm_envs.physics.pair_sums import PairAccumulator, PairSums
+from swarm_envs.physics.social_potential import (
+    RHO_FLOOR,
+    SocialPotentialParams,
+    pair_law,
+    rate_law,
+)
 
 __all__ = [
     "AVAILABLE",
@@ -63,6 +68,7 @@ __all__ = [
     "compile_seconds",
     "knearest_round",
     "numba_enabled",
+    "swarm_pair_sums",
 ]
 
 #: Blocks of points summed separately, then added in order (see the module docstring).
@@ -94,19 +100,21 @@ def _scalar_exp(x: float) -> float:
 # (inlined into the kernel's loop, where LLVM folds them into the surrounding code).
 prange = range
 _law = pair_law
+_rates = rate_law
 _exp = _scalar_exp
 _compiled_fns: dict[Callable[..., Any], Callable[..., Any]] = {}
 
 
 def _compiled(fn: Callable[..., Any]) -> Callable[..., Any]:
     """``fn`` through ``numba.njit(parallel=True)``, made on first use (under the lock)."""
-    global prange, _law, _exp
+    global prange, _law, _rates, _exp
     if fn not in _compiled_fns:
         import numba
 
         if prange is range:
             prange = numba.prange
             _law = numba.njit(inline="always")(pair_law)
+            _rates = numba.njit(inline="always")(rate_law)
             _exp = numba.njit(inline="always")(_scalar_exp)
         _compiled_fns[fn] = numba.njit(parallel=True, cache=True, nogil=True)(fn)
     return _compiled_fns[fn]
@@ -167,11 +175,12 @@ def numba_enabled() -> bool:
 
 
 def _pair_pass_kernel(law_key: str) -> Callable[..., Any]:
-    """The pair kernel, closed over ``law_key``, a hash of :func:`pair_law`'s code.
+    """The pair kernel, closed over ``law_key``, a hash of the code of :func:`pair_law`
+    and :func:`rate_law`.
 
     numba's disk cache keys a kernel on its own file, bytecode and closure, not on the
-    functions it calls from other files: the closure brings ``pair_law`` into the key,
-    so that a changed law is compiled anew instead of loaded stale.
+    functions it calls from other files: the closure brings the laws into the key, so
+    that a changed law is compiled anew instead of loaded stale.
     """
 
     def _pair_pass(
@@ -186,30 +195,39 @@ def _pair_pass_kernel(law_key: str) -> Callable[..., Any]:
         r2: float,
         close2: float,
         consts: np.ndarray,
-        blocks: int,
+        win_lo: np.ndarray,
+        win_off: np.ndarray,
+        rates: bool,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The kernel that numba compiles (see :func:`cell_pair_sums`).
 
         ``coords`` and ``vel`` are ``(3, M)``: 2-D points come with a zero third row, so
         that one loop body, on scalars, serves both dimensions. ``consts`` holds
         ``C_a, C_r, l_a, l_r, C_o, l_o`` (``pair_law``'s parameters), ``align`` (1 for
-        the alignment term, 0 without) and ``RHO_FLOOR``.
+        the alignment term, 0 without) and ``RHO_FLOOR``. Block ``b`` (points
+        ``b M // blocks`` to ``(b + 1) M // blocks``, ``blocks = len(win_lo)``) writes
+        only positions from ``win_lo[b]`` on, into its window of the buffer, columns
+        ``win_off[b] … win_off[b + 1]``: rows 0–2 the force, and with ``rates`` rows 3
+        and 4 the sums of ``κ`` and ``w`` of ``rate_law`` over each point's pairs.
         """
         _ = law_key  # in the closure: part of numba's cache key (see above)
         m = coords.shape[1]
         n_rows = lo.shape[0]
+        blocks = win_lo.shape[0]
         C_a, C_r, l_a, l_r, C_o, l_o, align, floor = consts
-        force = np.zeros((blocks, 3, m))
+        acc = np.zeros((5 if rates else 3, win_off[blocks]))
         pot = np.zeros((blocks, n_groups))
         close = np.zeros((blocks, n_groups), dtype=np.int64)
         for b in prange(blocks):
             start = b * m // blocks
             stop = (b + 1) * m // blocks
+            shift = win_off[b] - win_lo[b]  # position q is column q + shift
             for p in range(start, stop):
                 u = cell[p]
                 x0, x1, x2 = coords[0, p], coords[1, p], coords[2, p]
                 v0, v1, v2 = vel[0, p], vel[1, p], vel[2, p]
                 f0 = f1 = f2 = 0.0  # the force on p, added once at the end
+                k_p = w_p = 0.0  # its rate sums (with rates)
                 pot_p = 0.0
                 close_p = 0
                 for r in range(n_rows + 1):
@@ -239,21 +257,35 @@ def _pair_pass_kernel(law_key: str) -> Callable[..., Any]:
                         f0 += w0
                         f1 += w1
                         f2 += w2
-                        force[b, 0, q] -= w0
-                        force[b, 1, q] -= w1
-                        force[b, 2, q] -= w2
-                force[b, 0, p] += f0
-                force[b, 1, p] += f1
-                force[b, 2, p] += f2
+                        c = q + shift
+                        acc[0, c] -= w0
+                        acc[1, c] -= w1
+                        acc[2, c] -= w2
+                        if rates:  # symmetric: both ends of the pair
+                            kap, damp = _rates(rho, C_a, C_r, l_a, l_r, C_o, l_o, _exp)
+                            k_p += kap
+                            acc[3, c] += kap
+                            if damp is not None:
+                                w_p += damp
+                                acc[4, c] += damp
+                c = p + shift
+                acc[0, c] += f0
+                acc[1, c] += f1
+                acc[2, c] += f2
+                if rates:
+                    acc[3, c] += k_p
+                    acc[4, c] += w_p
                 pot[b, groups[p]] += pot_p
                 close[b, groups[p]] += close_p
-        return force, pot, close
+        return acc, pot, close
 
     return _pair_pass
 
 
 #: The pair kernel (see :func:`_pair_pass_kernel`).
-_pair_pass = _pair_pass_kernel(hashlib.sha256(marshal.dumps(pair_law.__code__)).hexdigest())
+_pair_pass = _pair_pass_kernel(
+    hashlib.sha256(marshal.dumps((pair_law.__code__, rate_law.__code__))).hexdigest()
+)
 
 
 def _knn_round(
@@ -337,14 +369,16 @@ def cell_pair_sums(
     groups: np.ndarray | None = None,
     n_groups: int = 1,
     close_radius: float = 0.0,
+    rates: bool = False,
 ) -> PairSums:
     """:class:`PairSums` over every pair within ``radius`` of ``cells``, in sorted order.
 
     The same as ``PairAccumulator(params, M, v, groups=groups, n_groups=n_groups,
-    potential=True, close_radius=close_radius)`` fed with ``cells.iter_pairs(radius)``:
-    ``v`` (velocities ``(M, d)`` in the cells' sorted order, or ``None`` for no
-    alignment) and ``groups`` (``(M,)`` swarm of each sorted point) as there; the
-    force comes back ``(M, d)`` in sorted order, float64.
+    potential=True, close_radius=close_radius, rates=rates)`` fed with
+    ``cells.iter_pairs(radius)``: ``v`` (velocities ``(M, d)`` in the cells' sorted
+    order, or ``None`` for no alignment) and ``groups`` (``(M,)`` swarm of each sorted
+    point) as there; the force (and, with ``rates``, the rate sums) come back in sorted
+    order, float64.
     """
     m_pts = cells.order.size
     d = cells.dim
@@ -358,7 +392,8 @@ def cell_pair_sums(
     grp = np.zeros(m_pts, np.int64) if groups is None else np.asarray(groups, np.int64)
     p = params
     consts = np.array([p.C_a, p.C_r, p.l_a, p.l_r, p.C_o, p.l_o, 1.0 if align else 0.0, RHO_FLOOR])
-    force, pot, close = _run(
+    win_lo, win_off = _windows(stencil, m_pts)
+    acc, pot, close = _run(
         _pair_pass,
         coords,
         vel,
@@ -371,9 +406,103 @@ def cell_pair_sums(
         float(stencil.radius) ** 2,
         float(close_radius) ** 2,
         consts,
-        BLOCKS,
+        win_lo,
+        win_off,
+        bool(rates),
     )
-    total_force = force[0]
-    for b in range(1, BLOCKS):
-        total_force = total_force + force[b]
-    return PairSums(total_force[:d].T.copy(), pot.sum(axis=0), close.sum(axis=0))
+    total = np.zeros((acc.shape[0], m_pts))
+    for b in range(BLOCKS):  # in block order, whatever thread summed which block
+        lo = int(win_lo[b])
+        width = int(win_off[b + 1] - win_off[b])
+        total[:, lo : lo + width] += acc[:, win_off[b] : win_off[b + 1]]
+    return PairSums(
+        total[:d].T.copy(),
+        pot.sum(axis=0),
+        close.sum(axis=0),
+        total[3].copy() if rates else None,
+        total[4].copy() if rates else None,
+    )
+
+
+def _windows(stencil: Any, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(win_lo (BLOCKS,), win_off (BLOCKS + 1,))``: the positions each block of the pair
+    kernel writes, ``win_lo[b]`` up to its last point's or candidate's position, and
+    where each window starts in the kernel's buffer. Every candidate of a point comes
+    after it in the sorted order (the half stencil), so a block's window starts at its
+    first point and ends at the farthest run end of its points: the buffer holds about
+    ``M`` columns plus the blocks' overlaps, not ``BLOCKS · M``."""
+    starts = np.arange(BLOCKS, dtype=np.int64) * m // BLOCKS
+    stops = np.arange(1, BLOCKS + 1, dtype=np.int64) * m // BLOCKS
+    ends = stops.copy()
+    if m:
+        reach = np.asarray(stencil.own_end, np.int64)
+        if stencil.hi.shape[0]:
+            reach = np.maximum(reach, stencil.hi.max(axis=0))
+        point_end = reach[stencil.cell]
+        full = stops > starts
+        ends[full] = np.maximum(stops[full], np.maximum.reduceat(point_end, starts[full]))
+    win_off = np.zeros(BLOCKS + 1, np.int64)
+    np.cumsum(ends - starts, out=win_off[1:])
+    return starts, win_off
+
+
+def swarm_pair_sums(
+    x: np.ndarray,
+    v: np.ndarray,
+    params: SocialPotentialParams,
+    radius: float,
+    close_radius: float = 0.0,
+) -> PairSums:
+    """:class:`PairSums` of every pair within ``radius`` in each swarm of ``x`` ``(B, N, d)``
+    (velocities ``v`` for the alignment), rates included, in the agents' own order.
+
+    One cell list (cells of ``radius (1 + CELL_MARGIN) / REACH``), then the compiled pass
+    (:func:`cell_pair_sums`) where :func:`numba_enabled`, else the numpy
+    :class:`~swarm_envs.physics.pair_sums.PairAccumulator` over
+    :meth:`~swarm_envs.physics.neighbors.CellList.iter_pairs`; both visit the agents in
+    cell order. The force, ``kappa`` and ``damping`` come back flat, ``(B·N, d)`` and
+    ``(B·N,)`` in ``x.reshape(-1, d)``'s order (float64), the potential and the close
+    pairs per swarm ``(B,)``. ``radius = 0`` or ``N = 1``: no pairs, zeros.
+    """
+    B, N, d = x.shape
+    m = B * N
+    if not (radius > 0 and N > 1):
+        zero = np.zeros(m)
+        return PairSums(np.zeros((m, d)), np.zeros(B), np.zeros(B, np.int64), zero, zero.copy())
+    cells = CellList.build(x, radius * (1.0 + CELL_MARGIN) / REACH, REACH)
+    order = cells.order
+    vel = v.reshape(m, d)[order]
+    groups = order // N if B > 1 else None
+    if numba_enabled():
+        sums = cell_pair_sums(
+            cells,
+            radius,
+            params,
+            vel,
+            groups=groups,
+            n_groups=B,
+            close_radius=close_radius,
+            rates=True,
+        )
+    else:
+        acc = PairAccumulator(
+            params,
+            m,
+            vel,
+            groups=groups,
+            n_groups=B,
+            potential=True,
+            close_radius=close_radius,
+            rates=True,
+        )
+        for chunk in cells.iter_pairs(radius):
+            acc.add(*chunk)
+        sums = acc.result(d)
+    force = np.empty((m, d))
+    force[order] = sums.force
+    kappa = np.empty(m)
+    damping = np.empty(m)
+    assert sums.kappa is not None and sums.damping is not None
+    kappa[order] = sums.kappa
+    damping[order] = sums.damping
+    return PairSums(force, sums.potential, sums.close, kappa, damping)

@@ -96,6 +96,40 @@ class SocialPotentialParams:
             C_a=1.0, C_r=1.0, l_a=1.0, l_r=0.2, C_o=0.7, l_o=1.5, beta=1.0, C_g=15.0, l_g=5.0, m=1.0
         )
 
+    @classmethod
+    def large_swarm(cls) -> SocialPotentialParams:
+        """An H-stable set for large swarms, in 2-D and in 3-D (``docs/large_swarms.md``).
+
+        ``C_a = 4, C_r = 64, l_a = 0.5, l_r = 0.25`` (``C = 16``, ``l = 0.5``):
+        ``C·l² = 4`` and ``C·l³ = 2``, twice the H-stability threshold in 3-D and four
+        times in 2-D, so the nearest-neighbour spacing stays bounded as ``N`` grows
+        (D'Orsogna et al., PRL 96, 104302 (2006); :attr:`h_stability`,
+        :attr:`h_stability_3d`). The pair potential has its minimum at
+        ``ρ* = l_a l ln(C/l)/(1 − l) ≈ 1.73`` (depth 0.0625). Dissipation ``β = 1`` as
+        in the navigation set; alignment ``C_o = 0.5`` with the range ``l_o = 1`` (the
+        sparse core's cut-off is then ``r_c ≈ 3.3`` at its default tolerance, against
+        5.08 for the navigation set). The goal sink ``C_g = 30, l_g = 10`` reaches twice
+        as far as the navigation set's (a swarm of this spacing is wider) with the same
+        largest force ``C_g/l_g = 3``, the default action bound ``u_max``, so the
+        analytic controller is never clipped.
+
+        >>> p = SocialPotentialParams.large_swarm()
+        >>> p.h_stability, p.h_stability_3d, p.C_g / p.l_g
+        (4.0, 2.0, 3.0)
+        """
+        return cls(
+            C_a=4.0,
+            C_r=64.0,
+            l_a=0.5,
+            l_r=0.25,
+            C_o=0.5,
+            l_o=1.0,
+            beta=1.0,
+            C_g=30.0,
+            l_g=10.0,
+            m=1.0,
+        )
+
     @property
     def range_ratio(self) -> float:
         """``l = l_r / l_a``, the abscissa of the paper's Fig. 9."""
@@ -114,6 +148,19 @@ class SocialPotentialParams:
         the collapsing regime, in which nearest-neighbour distances shrink as N grows.
         """
         return self.amplitude_ratio * self.range_ratio**2
+
+    @property
+    def h_stability_3d(self) -> float:
+        """``C·l³``; with ``l < 1`` the Morse swarm is H-stable in 3-D exactly when this
+        exceeds 1.
+
+        The 2-D argument of :attr:`h_stability` carried to 3-D: the Fourier transform
+        of the pair potential, ``Û(k) = 8π [C_r l_r³ / (1 + k² l_r²)² − C_a l_a³ /
+        (1 + k² l_a²)²]``, is positive at ``k = 0`` iff ``C·l³ > 1`` and then, with
+        ``l_r < l_a``, at every ``k`` (``docs/large_swarms.md``). The navigation set
+        gives 0.008.
+        """
+        return self.amplitude_ratio * self.range_ratio**3
 
 
 # --------------------------------------------------------------------------- the laws
@@ -332,13 +379,15 @@ def pair_rates(
     xp = namespace(rho)
     kappa, w = rate_law(rho, p.C_a, p.C_r, p.l_a, p.l_r, p.C_o, p.l_o, xp.exp_temp)
     k0 = p.C_r / (p.l_r * p.l_r) + p.C_a / (p.l_a * p.l_a)  # κ(0), the diagonal
-    omega2 = (2.0 / p.m) * (xp.amax(xp.sum(kappa, axis=-1), axis=-1) - k0)
+    # the diagonal's κ(0) is subtracted from the row sums; the clip drops its round-off
+    omega2 = (2.0 / p.m) * xp.clip(xp.amax(xp.sum(kappa, axis=-1), axis=-1) - k0, 0.0, None)
     if sink:
         omega2 = omega2 + p.C_g / (p.l_g * p.l_g * p.m)
     if w is None:
         gamma = p.beta / p.m + 0.0 * omega2
     else:
-        gamma = (p.beta + 2.0 * (xp.amax(xp.sum(w, axis=-1), axis=-1) - p.C_o)) / p.m
+        rows = xp.clip(xp.amax(xp.sum(w, axis=-1), axis=-1) - p.C_o, 0.0, None)
+        gamma = (p.beta + 2.0 * rows) / p.m
     return omega2, gamma
 
 

@@ -32,7 +32,15 @@ action units — the integral the reward's effort term penalises — then the me
 episodes), ``control_effort_per_step`` (the same divided by the episode's length), and
 the group statistics at the episode's last step: ``final_expanse``,
 ``final_polarization``, ``final_angular_momentum``, ``final_nearest_neighbor_distance``,
-``final_centroid_distance``, ``final_fraction_arrived``.
+``final_centroid_distance``, ``final_fraction_arrived``; with step-size control,
+``unstable_episodes`` (episodes truncated on an unstable step, ``info["unstable"]``) and
+``mean_substeps`` (``info["substeps"]`` per integrated step). A measure that is
+undefined (the time to goal when nothing succeeded) is ``None``: ``results.json`` never
+holds NaN or infinity (``null`` there, ``—`` in the tables).
+
+Size transfer (:func:`evaluate_transfer`): every shared policy, unchanged, at several
+swarm sizes N, with a table, ``transfer.csv`` and ``transfer.png`` against N; a central
+policy (fixed whole-swarm observation) is refused with :class:`CentralPolicyError`.
 
 Python API::
 
@@ -50,15 +58,16 @@ Modules:
 - :mod:`train.evaluate.episodes`: :func:`run_episodes` → :class:`EpisodeBatch`;
 - :mod:`train.evaluate.measures`: :func:`summarize` and :data:`METRIC_DOCS`;
 - :mod:`train.evaluate.harness`: :func:`evaluate_policies`;
+- :mod:`train.evaluate.transfer`: :func:`evaluate_transfer` and its outputs;
 - :mod:`train.evaluate.report`: :func:`write_outputs`, :func:`format_table`;
-- :mod:`train.evaluate.figures`: ``curves.png`` and the GIFs.
+- :mod:`train.evaluate.figures`: ``curves.png``, the GIFs and ``transfer.png``.
 """
 
 from __future__ import annotations
 
 from train.evaluate.episodes import CURVE_KEYS, FINAL_KEYS, EpisodeBatch, run_episodes
-from train.evaluate.harness import TrainedEnvWarning, evaluate_policies
-from train.evaluate.measures import METRIC_DOCS, summarize
+from train.evaluate.harness import TrainedEnvWarning, check_policies, evaluate_policies
+from train.evaluate.measures import METRIC_DOCS, json_safe, summarize
 from train.evaluate.policies import (
     TRAINED_ENV,
     SpaceMismatchError,
@@ -66,7 +75,13 @@ from train.evaluate.policies import (
     policy_mode,
     trained_env_record,
 )
-from train.evaluate.report import TABLE_COLUMNS, format_table, write_outputs
+from train.evaluate.report import TABLE_COLUMNS, format_table, write_json, write_outputs
+from train.evaluate.transfer import (
+    TRANSFER_FILES,
+    CentralPolicyError,
+    evaluate_transfer,
+    format_transfer_table,
+)
 
 __all__ = [
     "CURVE_KEYS",
@@ -74,15 +89,22 @@ __all__ = [
     "METRIC_DOCS",
     "TABLE_COLUMNS",
     "TRAINED_ENV",
+    "TRANSFER_FILES",
+    "CentralPolicyError",
     "EpisodeBatch",
     "SpaceMismatchError",
     "TrainedEnvWarning",
+    "check_policies",
     "evaluate_policies",
+    "evaluate_transfer",
     "format_table",
+    "format_transfer_table",
+    "json_safe",
     "load_sb3_model",
     "policy_mode",
     "run_episodes",
     "summarize",
     "trained_env_record",
+    "write_json",
     "write_outputs",
 ]

@@ -44,6 +44,11 @@ class EpisodeBatch:
     value); ``times`` is ``(T + 1,)`` in simulated seconds. ``trajectory`` holds episode
     0: positions and velocities ``(T0 + 1, N, d)`` and its goal ``(d,)``. ``backend``
     names the core that ran the episodes.
+
+    Step-size control: ``unstable`` marks the episodes that ended on an unstable step
+    (``info["unstable"] = 1``, truncated with ``on_unstable="truncate"``);
+    ``substeps`` sums ``info["substeps"]`` over each episode's integrated steps and
+    ``integrated`` counts those steps (an unstable step is undone, so not counted).
     """
 
     name: str
@@ -58,6 +63,9 @@ class EpisodeBatch:
     final: dict[str, np.ndarray]
     curves: dict[str, np.ndarray]
     times: np.ndarray
+    unstable: np.ndarray
+    substeps: np.ndarray
+    integrated: np.ndarray
     trajectory: dict[str, np.ndarray] = field(default_factory=dict)
 
 
@@ -89,6 +97,8 @@ def run_episodes(
         ValueError: ``episodes < 1``, the policy returned non-finite actions, or the
             config's ``device`` is unavailable or needs another backend
             (:func:`~swarm_envs.envs.backends.make_core`).
+        SwarmUnstableError: a step went unstable and the config's ``on_unstable`` is
+            ``"raise"`` (with ``"truncate"`` that episode ends, marked ``unstable``).
     """
     cfg = swarm_config_of(cfg)
     if isinstance(episodes, bool) or int(episodes) != episodes or episodes < 1:
@@ -103,6 +113,9 @@ def run_episodes(
     collisions = np.zeros(B)
     effort = np.zeros(B)
     success = np.zeros(B, bool)
+    unstable = np.zeros(B, bool)
+    substeps = np.zeros(B)
+    integrated = np.zeros(B, np.int64)
     done = np.zeros(B, bool)
     stats = core.stats()
     final = {k: stats[k].astype(np.float64) for k in FINAL_KEYS}
@@ -147,10 +160,15 @@ def run_episodes(
             lengths[live] += 1
             collisions[live] += stats["collisions"][live]
             effort[live] += np.einsum("bik,bik->b", clipped, clipped)[live] / N
+            undone = np.asarray(stats["unstable"]) > 0
+            counted = live & ~undone
+            substeps[counted] += stats["substeps"][counted]
+            integrated[counted] += 1
             for k in CURVE_KEYS:
                 series[k].append(stats[k].astype(np.float64))
             ended = live & (terminated | truncated)
             success |= ended & terminated
+            unstable |= ended & undone
             for k in FINAL_KEYS:
                 final[k][ended] = stats[k][ended]
             if record_episode and live[0]:
@@ -187,5 +205,8 @@ def run_episodes(
         final=final,
         curves=curves,
         times=steps * cfg.dt,
+        unstable=unstable,
+        substeps=substeps,
+        integrated=integrated,
         trajectory=trajectory,
     )

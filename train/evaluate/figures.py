@@ -1,4 +1,5 @@
-"""The figures of an evaluation: ``curves.png`` and one GIF of episode 0 per policy.
+"""The figures of an evaluation: ``curves.png`` and one GIF of episode 0 per policy;
+``transfer.png`` of a size-transfer evaluation (:func:`plot_transfer`).
 
 matplotlib and :mod:`swarm_envs.render` are imported when a figure is drawn, not with
 this module.
@@ -9,11 +10,12 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 from swarm_envs.config import SwarmConfig
 from train.evaluate.episodes import CURVE_KEYS, EpisodeBatch
 
-__all__ = ["plot_curves", "write_episode_gif"]
+__all__ = ["TRANSFER_PANELS", "plot_curves", "plot_transfer", "write_episode_gif"]
 
 
 def plot_curves(batches: Mapping[str, EpisodeBatch], cfg: SwarmConfig, path: Path) -> Path:
@@ -72,4 +74,77 @@ def write_episode_gif(batch: EpisodeBatch, cfg: SwarmConfig, path: Path, size: i
     write_gif(frames, path, fps=fps, max_frames=None)
     if path.stat().st_size > 1_000_000:  # keep it small: halve the frames
         write_gif(frames[::2], path, fps=fps / 2, max_frames=None)
+    return path
+
+
+#: The panels of ``transfer.png``: (measure, its spread, title).
+TRANSFER_PANELS = (
+    ("success_rate", "success_ci95", "success rate (95 % Wilson interval)"),
+    ("mean_return", "std_return", "return (mean ± std)"),
+    ("mean_time_to_goal", "std_time_to_goal", "time to goal, s (mean ± std over successes)"),
+    ("collisions_per_episode", "std_collisions", "collisions per episode (mean ± std)"),
+)
+
+
+def plot_transfer(results: Mapping[str, Any], path: Path) -> Path:
+    """Four panels against the swarm size N (success rate, return, time to goal,
+    collisions), one line per policy with its spread as a band; an undefined value
+    (``None``, e.g. the time to goal without a success) leaves a gap. N is on a log
+    axis when the sizes span a factor of 10 or more."""
+    import numpy as np
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    def value(x: Any) -> float:
+        return np.nan if x is None else float(x)
+
+    sizes = results["sizes"]
+    ns = np.array([s["n_agents"] for s in sizes], dtype=float)
+    names: list[str] = []
+    for s in sizes:
+        names += [n for n in s["policies"] if n not in names]
+    fig = Figure(figsize=(9.0, 6.5), dpi=100, layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(2, 2, sharex=True).ravel()
+    for ax, (key, spread, title) in zip(axes, TRANSFER_PANELS, strict=True):
+        defined = False
+        for name in names:
+            ms = [s["policies"].get(name, {}) for s in sizes]
+            mean = np.array([value(m.get(key)) for m in ms])
+            if spread == "success_ci95":
+                ci = [m.get(spread) or (None, None) for m in ms]
+                low = np.array([value(c[0]) for c in ci])
+                high = np.array([value(c[1]) for c in ci])
+            else:
+                std = np.array([value(m.get(spread)) for m in ms])
+                low, high = mean - std, mean + std
+            defined |= bool(np.isfinite(mean).any())
+            (line,) = ax.plot(ns, mean, marker="o", ms=4, lw=1.6, label=name)
+            ax.fill_between(ns, low, high, color=line.get_color(), alpha=0.15)
+        if not defined:
+            ax.text(
+                0.5,
+                0.5,
+                "undefined at every N",
+                ha="center",
+                va="center",
+                transform=ax.transAxes,
+                color="0.4",
+            )
+        ax.set_title(title, fontsize=10)
+        ax.grid(alpha=0.3)
+        if ns.size and ns.max() >= 10 * ns.min():
+            ax.set_xscale("log")
+        ax.set_xticks(ns, [str(int(n)) for n in ns])
+        ax.minorticks_off()
+    for ax in axes[2:]:
+        ax.set_xlabel("swarm size N")
+    axes[0].set_ylim(-0.05, 1.05)
+    axes[0].legend(fontsize=8)
+    fig.suptitle(
+        f"size transfer: {results['episodes']} episodes per policy and N, "
+        f"on_unstable={results['on_unstable']}",
+        fontsize=10,
+    )
+    fig.savefig(path)
     return path

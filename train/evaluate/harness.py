@@ -21,12 +21,41 @@ from train.evaluate.policies import (
 )
 from train.evaluate.report import write_outputs
 
-__all__ = ["TrainedEnvWarning", "evaluate_policies"]
+__all__ = ["TrainedEnvWarning", "check_policies", "evaluate_policies"]
 
 
 class TrainedEnvWarning(UserWarning):
     """A model is evaluated on an env whose observations or actions mean something else
     than in the env it was trained on (same spaces, other dynamics, layout or scales)."""
+
+
+def check_policies(policies: Mapping[str, Any], cfg: SwarmConfig) -> None:
+    """Check that every policy fits ``cfg`` (:func:`policy_mode`), and warn
+    (:class:`TrainedEnvWarning`) about a model that records another env than ``cfg``
+    in what its observations or actions mean.
+
+    Raises:
+        ValueError: no policies.
+        SpaceMismatchError: a policy's spaces do not fit (the message names the policy
+            and what a recorded model was trained on).
+    """
+    if not policies:
+        raise ValueError("no policies to evaluate")
+    for name, policy in policies.items():
+        try:
+            policy_mode(policy, cfg)
+        except SpaceMismatchError as err:
+            trained = describe_trained_env(policy)
+            extra = f"; the model was {trained}" if trained else ""
+            raise SpaceMismatchError(f"policy {name!r}: {err}{extra}") from None
+        differences = trained_env_differences(getattr(policy, TRAINED_ENV, None), cfg)
+        if differences:
+            warnings.warn(
+                f"policy {name!r} is evaluated on another env than it was trained on: "
+                + "; ".join(differences),
+                TrainedEnvWarning,
+                stacklevel=3,
+            )
 
 
 def evaluate_policies(
@@ -75,23 +104,7 @@ def evaluate_policies(
             the message says what a recorded model was trained on).
     """
     cfg = swarm_config_of(cfg)
-    if not policies:
-        raise ValueError("no policies to evaluate")
-    for name, policy in policies.items():
-        try:
-            policy_mode(policy, cfg)
-        except SpaceMismatchError as err:
-            trained = describe_trained_env(policy)
-            extra = f"; the model was {trained}" if trained else ""
-            raise SpaceMismatchError(f"policy {name!r}: {err}{extra}") from None
-        differences = trained_env_differences(getattr(policy, TRAINED_ENV, None), cfg)
-        if differences:
-            warnings.warn(
-                f"policy {name!r} is evaluated on another env than it was trained on: "
-                + "; ".join(differences),
-                TrainedEnvWarning,
-                stacklevel=2,
-            )
+    check_policies(policies, cfg)
     batches = {
         name: run_episodes(
             policy,

@@ -1,7 +1,8 @@
 """What an evaluation writes: ``results.json``, ``summary.md``, ``curves.png``, GIFs.
 
 ``summary.md`` holds the markdown table of :func:`format_table`; the figures are drawn
-by :mod:`train.evaluate.figures`.
+by :mod:`train.evaluate.figures`. ``results.json`` never holds NaN or infinity
+(:func:`write_json`): an undefined measure is ``null``, shown as ``—`` in the tables.
 """
 
 from __future__ import annotations
@@ -16,9 +17,9 @@ from typing import Any
 from swarm_envs.config import SwarmConfig
 from train.evaluate.episodes import EpisodeBatch
 from train.evaluate.figures import plot_curves, write_episode_gif
-from train.evaluate.measures import METRIC_DOCS
+from train.evaluate.measures import METRIC_DOCS, json_safe
 
-__all__ = ["TABLE_COLUMNS", "format_table", "write_outputs"]
+__all__ = ["MISSING", "TABLE_COLUMNS", "format_cell", "format_table", "write_json", "write_outputs"]
 
 #: Columns of the summary table: (key, header, format).
 TABLE_COLUMNS = (
@@ -30,13 +31,35 @@ TABLE_COLUMNS = (
     ("final_centroid_distance", "final centroid dist.", "{:.2f}"),
     ("final_expanse", "final expanse", "{:.2f}"),
     ("final_polarization", "final polarization", "{:.2f}"),
+    ("unstable_episodes", "unstable", "{:d}"),
+    ("mean_substeps", "substeps / step", "{:.1f}"),
 )
+
+#: The spread shown after a mean in the tables, as ``mean ± std``.
+STD_OF = {
+    "mean_return": "std_return",
+    "mean_time_to_goal": "std_time_to_goal",
+    "collisions_per_episode": "std_collisions",
+}
+
+#: What a table shows for an undefined measure (``null`` in ``results.json``).
+MISSING = "—"
 
 
 def _fmt(value: Any, spec: str) -> str:
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return "–"
+        return MISSING
     return spec.format(value)
+
+
+def format_cell(measures: Mapping[str, Any], key: str, spec: str) -> str:
+    """One table cell: the measure ``key`` formatted with ``spec``, followed by
+    ``± std`` where :data:`STD_OF` names its spread; :data:`MISSING` if undefined."""
+    cell = _fmt(measures.get(key), spec)
+    std_key = STD_OF.get(key)
+    if cell != MISSING and std_key is not None and measures.get(std_key) is not None:
+        cell += " ± " + _fmt(measures[std_key], spec)
+    return cell
 
 
 def format_table(results: Mapping[str, Any]) -> str:
@@ -45,14 +68,18 @@ def format_table(results: Mapping[str, Any]) -> str:
     rule = "|---|" + "---:|" * len(TABLE_COLUMNS)
     rows = []
     for name, m in results["policies"].items():
-        cells = []
-        for key, _, spec in TABLE_COLUMNS:
-            cell = _fmt(m.get(key), spec)
-            if key == "mean_return" and m.get("std_return") is not None:
-                cell += " ± " + _fmt(m["std_return"], spec)
-            cells.append(cell)
+        cells = [format_cell(m, key, spec) for key, _, spec in TABLE_COLUMNS]
         rows.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join([header, rule, *rows])
+
+
+def write_json(results: Mapping[str, Any], path: Path) -> Path:
+    """Write ``results`` as JSON with every non-finite number as ``null``
+    (:func:`~train.evaluate.measures.json_safe`); NaN and infinity never reach the file
+    (``allow_nan=False``)."""
+    text = json.dumps(json_safe(results), indent=2, ensure_ascii=False, allow_nan=False)
+    path.write_text(text + "\n", encoding="utf-8")
+    return path
 
 
 def _summary_markdown(results: Mapping[str, Any]) -> str:
@@ -70,7 +97,7 @@ def _summary_markdown(results: Mapping[str, Any]) -> str:
         "Measures (means over episodes):",
         "",
     ]
-    shown = {k for k, _, _ in TABLE_COLUMNS} | {"std_return"}
+    shown = {k for k, _, _ in TABLE_COLUMNS} | set(STD_OF.values())
     lines += [f"- `{k}`: {doc}" for k, doc in METRIC_DOCS.items() if k in shown]
     return "\n".join(lines) + "\n"
 
@@ -93,9 +120,7 @@ def write_outputs(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths: dict[str, Path] = {"results": out / "results.json", "summary": out / "summary.md"}
-    paths["results"].write_text(
-        json.dumps(results, indent=2, ensure_ascii=False) + "\n", encoding="utf-8"
-    )
+    write_json(results, paths["results"])
     paths["summary"].write_text(_summary_markdown(results), encoding="utf-8")
     if plots:
         paths["curves"] = plot_curves(batches, cfg, out / "curves.png")

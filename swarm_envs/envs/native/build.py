@@ -124,7 +124,7 @@ class Library:
         self.f32, self.f64 = lib.fused_step_f32, lib.fused_step_f64
         for fn in (self.f32, self.f64):
             fn.restype = ctypes.c_int
-            fn.argtypes = [ctypes.c_void_p, ctypes.c_int64, ctypes.c_int64] + [ctypes.c_void_p] * 12
+            fn.argtypes = [ctypes.c_void_p, ctypes.c_int64, ctypes.c_int64] + [ctypes.c_void_p] * 14
 
 
 def build_flags() -> tuple[str, ...]:

@@ -10,9 +10,10 @@ itself derived from the dataclasses:
   typed from the dataclass's annotations;
 - a few derived values (:data:`DERIVED`), each with the function that computes it.
 
-The statistics' column indices (``PK_<name>``, in the order of ``STAT_KEYS``, then
-``PK_effort``) come from :mod:`swarm_envs.envs.task.statistics`. The generated header is
-part of the build (and of the cache key); the C code refers to fields and columns by
+The output columns' indices (``PK_<name>``, :data:`PACKED_COLUMNS`: the statistics in
+the order of ``STAT_KEYS`` from :mod:`swarm_envs.envs.task.statistics`, then
+``PK_effort``, ``PK_over_cap``, ``PK_needed``) are generated too. The generated header
+is part of the build (and of the cache key); the C code refers to fields and columns by
 name, so a field or statistic renamed or removed on the Python side fails the build. The
 other direction: the kernel declares the physics parameters, statistics and observation
 layout it implements (:class:`KernelInfo`, read from the library), and
@@ -48,6 +49,7 @@ from swarm_envs.envs.task import (
 from swarm_envs.envs.task.observation import LAYOUT
 from swarm_envs.metrics import CENTRE_RTOL
 from swarm_envs.physics import SocialPotentialParams
+from swarm_envs.physics.integrators import STEP_SAFETY
 from swarm_envs.physics.social_potential import RHO_FLOOR
 
 __all__ = [
@@ -55,6 +57,7 @@ __all__ = [
     "HOST_CONFIG_FIELDS",
     "KERNEL_CONFIG_FIELDS",
     "PACKED_COLUMNS",
+    "UNSOUND",
     "Field",
     "KernelInfo",
     "header",
@@ -72,12 +75,12 @@ KERNEL_CONFIG_FIELDS = (
     "n_neighbors",
     "dt",
     "u_max",
-    "goal_radius",
     "collision_radius",
     "obs_goal_scale",
     "obs_neighbor_scale",
     "obs_velocity_scale",
     "goal_in_physics",
+    "max_substeps",
 )
 
 #: The :class:`SwarmConfig` fields the C step does not read, and why.
@@ -90,6 +93,9 @@ HOST_CONFIG_FIELDS = {
     "lagrangian": "another model's section",
     "init_radius": "starts are drawn in Python",
     "init_speed": "starts are drawn in Python",
+    "init_density": "starts are drawn in Python",
+    "goal_distance_scale": "starts are drawn in Python; as the derived `arrival_radius`",
+    "goal_radius": "as the derived `arrival_radius`",
     "goal_distance_min": "starts are drawn in Python",
     "goal_distance_max": "starts are drawn in Python",
     "success_fraction": "as the derived count `need`",
@@ -97,10 +103,18 @@ HOST_CONFIG_FIELDS = {
     "reward": "the reward is combined in Python from the kernel's columns",
     "backend": "selects the core",
     "device": "the C step runs on the CPU",
+    "on_unstable": "the guard after the step runs in Python (it raises, or undoes the step)",
 }
 
-#: Columns of the kernel's per-swarm output: the statistics, then the actions' effort.
-PACKED_COLUMNS = (*STAT_KEYS, "effort")
+#: Or'ed into the C step's return value where a swarm of the call went over the cap or
+#: wrote a non-finite column: only then does the caller run its guard (the exact check,
+#: :func:`~swarm_envs.envs.common.unstable_swarms`).
+UNSOUND = 4
+
+#: Columns of the kernel's per-swarm output: the statistics, the actions' effort, then
+#: the step-size control's ``over_cap`` (1 where the step needed more substeps than
+#: ``max_substeps``) and ``needed`` (how many it would have taken, for the error message).
+PACKED_COLUMNS = (*STAT_KEYS, "effort", "over_cap", "needed")
 
 
 @dataclass(frozen=True)
@@ -123,6 +137,7 @@ DERIVED: tuple[tuple[str, str, Callable[[SwarmConfig, np.dtype], float], str], .
     ("k_rank", "int64_t", lambda c, dt: max(ranked_neighbors(c), 0), "ranked neighbours"),
     ("need", "int64_t", lambda c, dt: success_count(c.n_agents, c.success_fraction), "success"),
     ("obs_dim", "int64_t", lambda c, dt: observation_size(c), "observation size"),
+    ("arrival_radius", "double", lambda c, dt: c.arrival_radius, "arrived within this"),
     (
         "physics_goal",
         "int64_t",
@@ -182,6 +197,9 @@ def _header_body() -> list[str]:
     columns = ", ".join(f"PK_{name}" for name in PACKED_COLUMNS)
     lines.append(f"enum {{ {columns}, PK_SIZE }};")
     lines.append(f'#define STEP_OBS_LAYOUT "{LAYOUT}"')
+    lines.append(f"#define STEP_UNSOUND {UNSOUND}")
+    # the numerator of the step-size rule, 4 · STEP_SAFETY, exactly as Python rounds it
+    lines.append(f"#define STEP_EDGE_NUMERATOR {float.hex(4.0 * STEP_SAFETY)}")
     return lines
 
 

@@ -2,17 +2,22 @@
 
 :class:`NativeSwarmNavCore` implements :class:`~swarm_envs.envs.protocol.Core` for the
 social potential model with the semi-implicit Euler integrator. Its step is the C step
-of ``fused_step.c`` (:mod:`swarm_envs.envs.native.build`): the same physics, neighbour
-ranking, observation layout and statistics as the shared definitions, computed per swarm
-in a few kilobytes of scratch memory, the swarms spread over OpenMP threads. The reward
-is the shared definition (:func:`swarm_envs.envs.task.reward`) applied to the statistics
-and the effort the C step writes; a statistic the kernel does not declare is computed by
-its shared definition from the state (:mod:`swarm_envs.envs.task.statistics`).
+of ``fused_step.c`` (:mod:`swarm_envs.envs.native.build`): the same physics, step-size
+control, neighbour ranking, observation layout and statistics as the shared definitions,
+computed per swarm in a few kilobytes of scratch memory, the swarms spread over OpenMP
+threads. The reward is the shared definition (:func:`swarm_envs.envs.task.reward`)
+applied to the statistics and the effort the C step writes; a statistic the kernel does
+not declare is computed by its shared definition from the state
+(:mod:`swarm_envs.envs.task.statistics`).
 
 State: positions, velocities and the carried passive force live component first,
-``(d, B, N)``, the layout the kernel vectorises, and are updated in place; ``x`` and
-``v`` read as ``(B, N, d)`` copies. Observations are written into buffers that are
-recycled once nobody else holds them (:class:`_BufferPool`), so a step allocates no
+``(d, B, N)``, the layout the kernel vectorises; ``x`` and ``v`` read as ``(B, N, d)``
+copies. The stable substep ``h*`` of each swarm is carried beside them, ``(B,)``. A step
+writes the new state into a second set of buffers and swaps the two, so the state
+before the step is still at hand when the guard undoes an unstable step
+(``on_unstable="truncate"``, as :meth:`SwarmNavCore.step
+<swarm_envs.envs.core.SwarmNavCore.step>`). Observations are written into buffers that
+are recycled once nobody else holds them (:class:`_BufferPool`), so a step allocates no
 large array. A reset of a few swarms re-measures those swarms only, in place.
 """
 
@@ -27,14 +32,18 @@ import numpy as np
 from swarm_envs._array import NUMPY, SCALAR
 from swarm_envs.envs.common import (
     NON_FINITE_ACTIONS,
+    SwarmUnstableError,
     check_action_shape,
     check_batch,
     check_dtype,
+    check_start,
     draw_starts,
+    unstable_message,
+    unstable_swarms,
     wide_dtypes,
 )
 from swarm_envs.envs.native.build import NATIVE_ENV, Library, load_library, resolve_native
-from swarm_envs.envs.native.contract import PACKED_COLUMNS, step_params, unsupported
+from swarm_envs.envs.native.contract import PACKED_COLUMNS, UNSOUND, step_params, unsupported
 from swarm_envs.envs.task import (
     STAT_KEYS,
     STATISTICS,
@@ -51,6 +60,9 @@ __all__ = ["UNAVAILABLE", "NativeSwarmNavCore"]
 UNAVAILABLE = "the C step is not available"
 
 _EFFORT = PACKED_COLUMNS.index("effort")
+_OVER_CAP = PACKED_COLUMNS.index("over_cap")
+_NEEDED = PACKED_COLUMNS.index("needed")
+_SUBSTEPS = PACKED_COLUMNS.index("substeps")
 
 
 class _BufferPool:
@@ -114,6 +126,8 @@ class NativeSwarmNavCore:
         self._x = np.zeros((d, B, N), self.dtype)
         self._v = np.zeros((d, B, N), self.dtype)
         self._f = np.zeros((d, B, N), self.dtype)
+        self._spare = self._buffers()  # a step's output; then the state before it
+        self._h = np.full(B, np.inf)  # the stable substep of the current state
         self._goal = np.zeros((B, d), self.dtype)
         self._zero_actions = np.zeros((B, N, d), self.dtype)
         self._move_all = np.ones(B, np.bool_)
@@ -142,12 +156,25 @@ class NativeSwarmNavCore:
         return unsupported(cfg, load_library().info)
 
     # ------------------------------------------------------------------ the C step
+    def _buffers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        shape = (self.cfg.dim, self.batch, self.cfg.n_agents)
+        return tuple(np.zeros(shape, self.dtype) for _ in range(3))  # type: ignore[return-value]
+
     def _call(
-        self, actions: np.ndarray, move: np.ndarray, obs: np.ndarray, rows: np.ndarray | None
-    ) -> None:
-        """The C step on all swarms (``rows`` None) or on ``rows``, in place."""
+        self,
+        actions: np.ndarray,
+        move: np.ndarray,
+        obs: np.ndarray,
+        rows: np.ndarray | None,
+        into_spare: bool = False,
+    ) -> bool:
+        """The C step on all swarms (``rows`` None) or on ``rows``: the new state in
+        place, or (``into_spare``) into the spare buffers (:meth:`_swap` then). True
+        where a swarm may have gone unstable (the guard's check is needed)."""
         n = self.batch if rows is None else rows.size
-        x, v, f, goal, packed = self._state_ptrs
+        x, v, f = self._state_ptrs
+        x_out, v_out, f_out = self._spare_ptrs if into_spare else self._state_ptrs
+        h, goal, packed = self._fixed_ptrs
         code = self._fn(
             self._params_ptr,
             0,
@@ -156,19 +183,23 @@ class NativeSwarmNavCore:
             x,
             v,
             f,
+            h,
             goal,
             actions.ctypes.data,
             move.ctypes.data,
-            x,
-            v,
-            f,
+            x_out,
+            v_out,
+            f_out,
+            h,
             obs.ctypes.data,
             packed,
         )
-        if code == 3:
+        error = code & ~UNSOUND
+        if error == 3:
             raise ValueError(NON_FINITE_ACTIONS)
-        if code:
+        if error:
             raise MemoryError("the C step could not allocate its scratch memory")
+        return bool(code & UNSOUND)
 
     def _bind(self) -> None:
         """The kernel, its parameters and the addresses of the state (fixed buffers)."""
@@ -177,9 +208,17 @@ class NativeSwarmNavCore:
         self._params.batch = self.batch
         self._params_ptr = ctypes.addressof(self._params)
         self._fn = self._lib.f32 if self.dtype == np.float32 else self._lib.f64
-        self._state_ptrs = tuple(
-            a.ctypes.data for a in (self._x, self._v, self._f, self._goal, self._packed)
-        )
+        self._state_ptrs = tuple(a.ctypes.data for a in (self._x, self._v, self._f))
+        self._spare_ptrs = tuple(a.ctypes.data for a in self._spare)
+        self._fixed_ptrs = tuple(a.ctypes.data for a in (self._h, self._goal, self._packed))
+
+    def _swap(self) -> None:
+        """The step wrote the new state into the spare buffers: they become the state,
+        and the state before the step the spare."""
+        spare = self._spare
+        self._spare = (self._x, self._v, self._f)
+        self._x, self._v, self._f = spare
+        self._state_ptrs, self._spare_ptrs = self._spare_ptrs, self._state_ptrs
 
     def _measure(self, rows: np.ndarray | None = None) -> None:
         """Observations and statistics of the current state (no step)."""
@@ -235,7 +274,10 @@ class NativeSwarmNavCore:
         self._x[:, idx] = x.transpose(2, 0, 1)
         self._v[:, idx] = v.transpose(2, 0, 1)
         self._goal[idx] = goal
+        # As the numpy core's statistics after a reset: no step, no substeps.
+        self._packed[idx, _SUBSTEPS] = 0.0
         self._measure(None if idx.size == self.batch else idx.astype(np.int64))
+        check_start(self.cfg, self._stats, idx, self.dtype)
         for key, value in self._stats.items():
             self._prev[key][idx] = value[idx]
             self._start[key][idx] = value[idx]
@@ -249,15 +291,31 @@ class NativeSwarmNavCore:
                 :class:`ValueError` before anything changes) and clips them.
 
         Returns:
-            ``(reward (B,), terminated (B,), truncated (B,), stats)`` as in every core.
+            ``(reward (B,), terminated (B,), truncated (B,), stats)`` as in every core;
+            a swarm whose step went unstable under ``on_unstable="truncate"`` is back
+            at its state before the step, with reward 0, ``truncated`` and
+            ``stats["unstable"]`` 1.
+
+        Raises:
+            SwarmUnstableError: a step went unstable (a non-finite state, or more
+                substeps needed than ``max_substeps``) under ``on_unstable="raise"``.
         """
         shape = (self.batch, self.cfg.n_agents, self.cfg.dim)
         a = np.ascontiguousarray(check_action_shape(actions, shape), dtype=self.dtype)
         obs = self._pool.get()
-        self._call(a, self._move_all, obs, None)
+        unsound = self._call(a, self._move_all, obs, None, into_spare=True)
+        self._swap()
         self._obs, self._obs_given = obs, False
         self.t += 1
-        stats = self._stats = self._unpack()
+        self._stats = self._unpack()
+        bad = None
+        if unsound:  # else every swarm is sound: nothing to check
+            bad = unstable_swarms(self._stats, self._packed[:, _OVER_CAP] > 0)
+            if bad.any():
+                self._unstable(bad)
+            else:
+                bad = None
+        stats = self._stats
         effort = self._packed[:, _EFFORT]
         xp = NUMPY
         prev, start = self._prev, self._start
@@ -276,7 +334,23 @@ class NativeSwarmNavCore:
         self._prev = {key: value.copy() for key, value in stats.items()}
         success = stats["success"].astype(bool)
         truncated = (self.t >= self.cfg.max_steps) & ~success
+        if bad is not None:
+            r[bad], success[bad], truncated[bad] = 0.0, False, True
         return r, success, truncated, stats
+
+    def _unstable(self, bad: np.ndarray) -> None:
+        """Raise :class:`~swarm_envs.envs.common.SwarmUnstableError`, or
+        (``on_unstable="truncate"``) put the swarms ``bad`` back to their state before
+        the step (the spare buffers), re-measured, marked ``unstable``."""
+        cfg = self.cfg
+        if cfg.on_unstable == "raise":
+            needed = self._packed[:, _NEEDED].astype(np.float64)
+            raise SwarmUnstableError(unstable_message(cfg, self._stats, bad, needed, self.t))
+        idx = np.flatnonzero(bad)
+        x_old, v_old, _ = self._spare
+        self._x[:, idx], self._v[:, idx] = x_old[:, idx], v_old[:, idx]
+        self._measure(idx.astype(np.int64))  # their force, h*, observations, statistics
+        self._stats["unstable"][idx] = 1.0
 
     # ------------------------------------------------------------------ views
     def stats(self) -> dict[str, np.ndarray]:
@@ -313,13 +387,15 @@ class NativeSwarmNavCore:
 
     # ------------------------------------------------------------------ pickling
     def __getstate__(self) -> dict[str, Any]:
-        skip = ("_lib", "_params", "_params_ptr", "_fn", "_pool", "_state_ptrs")
+        skip = ("_lib", "_params", "_params_ptr", "_fn", "_pool", "_spare")
+        skip += ("_state_ptrs", "_spare_ptrs", "_fixed_ptrs")
         state = {k: v for k, v in self.__dict__.items() if k not in skip}
         state["_obs"] = self._obs.copy()
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
+        self._spare = self._buffers()
         self._bind()
         B, N = self.batch, self.cfg.n_agents
         self._pool = _BufferPool((B, N, self.obs_dim))

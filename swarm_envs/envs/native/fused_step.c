@@ -2,8 +2,9 @@
  *
  * An execution strategy for the shared definitions of swarm_envs.physics and
  * swarm_envs.envs.task (docs/design.md): the same semi-implicit Euler step with the
- * carried force, pair law, goal sink, neighbour ranking, observation layout and
- * statistics, laid out for the CPU. The reward is not here: Python combines it from the
+ * carried force and stable substep (step-size control, docs/models.md §7), pair law,
+ * goal sink, neighbour ranking, observation layout and statistics, laid out for the
+ * CPU. The reward is not here: Python combines it from the
  * statistics and the effort this step writes (swarm_envs.envs.task.reward).
  *
  * The parameters arrive in StepParams, and the output columns are PK_*, both from the
@@ -38,7 +39,8 @@ double exp(double);
 #define KERNEL_PHYSICS "C_a C_r l_a l_r C_o l_o beta C_g l_g m"
 #define KERNEL_STATS                                                                        \
     "polarization angular_momentum expanse nearest_neighbor_distance energy "              \
-    "fraction_arrived collisions centroid_distance mean_goal_distance success"
+    "fraction_arrived collisions centroid_distance mean_goal_distance success substeps "   \
+    "unstable"
 #define KERNEL_OBS_LAYOUT                                                                   \
     "goal_offset/obs_goal_scale,velocity/obs_velocity_scale;"                              \
     "offset/obs_neighbor_scale,relative_velocity/obs_velocity_scale,mask"
@@ -76,6 +78,19 @@ static inline float exp_f32(float x) {
     return flush ? 0.0f : y * scale;
 }
 
+/* swarm_envs.physics.integrators.substep_plan for one swarm: the n equal substeps still
+ * needed for the time tau >= 0 left of a step whose stable substep is hs (n = 0 where
+ * tau = 0, at least 1 where tau > 0, inf where hs = 0), and their length h = tau / n (0
+ * where n is 0 or inf). The relative slack of 1e-9 is Python's, so that the counts
+ * agree with the numpy core's. */
+static inline void substep_plan(double tau, double hs, double *n_out, double *h_out) {
+    const double ratio = hs > 0 ? tau / hs : INFINITY;
+    double n = tau > 0 ? ceil(ratio * (1.0 - 1e-9)) : 0.0;
+    n = tau > 0 ? (n < 1.0 ? 1.0 : n) : 0.0;
+    *n_out = n;
+    *h_out = n > 0 && n < INFINITY ? tau / n : 0.0;
+}
+
 /* An action x clipped to [-1, 1] (x finite). */
 #define UNIT_CLIP(x) ((x) < -1 ? (REAL)-1 : (x) > 1 ? (REAL)1 : (x))
 
@@ -106,6 +121,7 @@ typedef int32_t vindex_f32 __attribute__((vector_size(64)));
 #define FLOOR floorf
 #define FABS fabsf
 #define FUSED_SWARM fused_swarm_f32
+#define STABLE_SUBSTEP stable_substep_f32
 typedef uint64_t vkey __attribute__((vector_size(64)));
 /* Lanes [8h, 8h + 8) of a 16-lane int32 vector, zero-extended to 64 bits. */
 #define KEY_HALF(v, h)                                                                 \
@@ -139,6 +155,7 @@ static inline vkey key_max(vkey a, vkey b) { vkey lt = (vkey)(a < b); return (b 
 #undef FLOOR
 #undef FABS
 #undef FUSED_SWARM
+#undef STABLE_SUBSTEP
 #undef KNN_BLOCK
 #undef KNN_KEYS
 #undef OBS_PAIRS_AVX512
@@ -162,6 +179,18 @@ typedef int64_t vindex_f64 __attribute__((vector_size(64)));
 #define FLOOR floor
 #define FABS fabs
 #define FUSED_SWARM fused_swarm_f64
+#define STABLE_SUBSTEP stable_substep_f64
 #define KNN_BLOCK knn_block_f64
 #define FUSED_STEP fused_step_f64
 #include "fused_step_body.h"
+
+/* The step-size rule over arrays, for the tests (against swarm_envs.physics.integrators). */
+void fused_stable_substep_f32(const float *omega2, const float *gamma, double *h, int64_t n) {
+    for (int64_t t = 0; t < n; t++) h[t] = stable_substep_f32(omega2[t], gamma[t]);
+}
+void fused_stable_substep_f64(const double *omega2, const double *gamma, double *h, int64_t n) {
+    for (int64_t t = 0; t < n; t++) h[t] = stable_substep_f64(omega2[t], gamma[t]);
+}
+void fused_substep_plan(const double *tau, const double *hs, double *n, double *h, int64_t count) {
+    for (int64_t t = 0; t < count; t++) substep_plan(tau[t], hs[t], &n[t], &h[t]);
+}

@@ -1,12 +1,14 @@
 /* One SwarmNav step for swarms [b0, b1): the body of fused_step.c, included once per
  * floating type (REAL, with EXP, SQRT, FLOOR and the function name FUSED_STEP).
  *
- * The arithmetic of swarm_envs.envs.torch_step.build_advance (docs/models.md §1-2, §6):
- * the semi-implicit Euler step with the carried passive force, one pass over the pairs
- * of the new state (pair_law: forces eqs. 10-12, pair energy eq. 9, distances), the goal
- * sink (sink_law, eqs. 19-20), the k nearest neighbours, the observations, the
- * statistics and the actions' effort. Everything for one swarm stays in a few kilobytes
- * of scratch memory.
+ * The arithmetic of swarm_envs.envs.dynamics.SocialPotentialDynamics (docs/models.md
+ * §1-2, §6-7): the semi-implicit Euler step with the carried passive force, split into
+ * the substeps that stability needs (substep_plan, with the stable substep h* carried
+ * like the force), one pass over the pairs of each new state (pair_law: forces eqs.
+ * 10-12; rate_law: the Gershgorin rates of h*; and after the last substep the pair
+ * energy eq. 9 and the distances), the goal sink (sink_law, eqs. 19-20), the k nearest
+ * neighbours, the observations, the statistics and the actions' effort. Everything for
+ * one swarm stays in a few kilobytes of scratch memory.
  */
 
 /* The k_sort = K nearest neighbours of the agents of block I (docs/models.md §2's k-NN order:
@@ -94,21 +96,31 @@ static inline __attribute__((always_inline)) void KNN_BLOCK(
         }
 }
 
-static inline __attribute__((always_inline)) void FUSED_SWARM(
+/* swarm_envs.physics.integrators.stable_substep in REAL, as numpy computes it in the
+ * state's dtype: h* = 4·STEP_SAFETY / (γ + √(γ² + 4ω²)); inf where both rates are 0 or one is NaN
+ * (the non-finite state then takes one substep, and the guard sees it), 0 where one is
+ * inf. */
+static inline double STABLE_SUBSTEP(REAL omega2, REAL gamma) {
+    const REAL den = gamma + SQRT(gamma * gamma + (REAL)4 * omega2);
+    return den > 0 ? (double)((REAL)STEP_EDGE_NUMERATOR / den) : INFINITY;
+}
+
+static inline __attribute__((always_inline)) int FUSED_SWARM(
     const StepParams *P, const int64_t d, int64_t b, REAL *scratch, const REAL *x,
-    const REAL *v, const REAL *f, const REAL *goal, const REAL *a, const uint8_t *move,
-    REAL *x_out, REAL *v_out, REAL *f_out, float *obs, REAL *packed) {
+    const REAL *v, const REAL *f, const double *h_in, const REAL *goal, const REAL *a,
+    const uint8_t *move, REAL *x_out, REAL *v_out, REAL *f_out, double *h_out, float *obs,
+    REAL *packed) {
     const int64_t B = P->batch, N = P->n_agents, k = P->n_neighbors;
     const int64_t k_real = P->k_real, k_sort = P->k_rank, need = P->need;
     const int64_t obs_dim = P->obs_dim, physics_goal = P->physics_goal;
     const int64_t NP = (N + LANES - 1) / LANES * LANES;
-    const REAL dt = (REAL)P->dt, m = (REAL)P->physics_m, u_max = (REAL)P->u_max;
+    const REAL m = (REAL)P->physics_m, u_max = (REAL)P->u_max;
     const REAL C_a = (REAL)P->physics_C_a, C_r = (REAL)P->physics_C_r;
     const REAL l_a = (REAL)P->physics_l_a, l_r = (REAL)P->physics_l_r;
     const REAL C_o = (REAL)P->physics_C_o;
     const REAL beta = (REAL)P->physics_beta, C_g = (REAL)P->physics_C_g;
     const REAL l_g = (REAL)P->physics_l_g;
-    const REAL goal_radius = (REAL)P->goal_radius;
+    const REAL goal_radius = (REAL)P->arrival_radius;
     const REAL collision_radius = (REAL)P->collision_radius;
     const REAL goal_scale = (REAL)P->obs_goal_scale, vel_scale = (REAL)P->obs_velocity_scale;
     const REAL inv_nbr_scale = (REAL)(1.0 / P->obs_neighbor_scale);
@@ -121,88 +133,118 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
     const REAL ca_la = (REAL)(P->physics_C_a / P->physics_l_a);
     const REAL cr_lr = (REAL)(P->physics_C_r / P->physics_l_r);
     const REAL cg_lg = (REAL)(P->physics_C_g / P->physics_l_g);
+    /* The step-size rule's constants (social_potential.rate_law and pair_rates). */
+    const REAL kappa_r = (REAL)(P->physics_C_r / (P->physics_l_r * P->physics_l_r));
+    const REAL kappa_a = (REAL)(P->physics_C_a / (P->physics_l_a * P->physics_l_a));
+    const REAL omega2_scale = (REAL)(2.0 / P->physics_m);
+    const REAL omega2_sink =
+        (REAL)(P->physics_C_g / (P->physics_l_g * P->physics_l_g * P->physics_m));
+    const REAL gamma_still = (REAL)(P->physics_beta / P->physics_m);
+    const double cap = (double)P->max_substeps;
     const int same_decay = l_a == l_r, alignment = C_o > 0;
     const REAL Nr = (REAL)N;
     const int64_t S = NP; /* component stride of the scratch state (padded to LANES) */
 
-    /* Scratch: xs, vs, fs, offset (d × NP each), gd (N), rho (NP × NP, per tile and
-     * offset), near (k_sort × N each, distances and int32 indices), tab (8 × N) and own
-     * (2d × NP float32) for the observations. */
+    /* Scratch: xs, vs, fs, offset (d × NP each), the agents' rate sums ks, ws (NP each),
+     * gd (N), rho (NP × NP, per tile and offset), near (k_sort × N each, distances and
+     * int32 indices), tab (8 × N) and own (2d × NP float32) for the observations. */
     REAL *xs = scratch, *vs = xs + d * S, *fs = vs + d * S, *off = fs + d * S;
-    REAL *gd = off + d * S, *rho = gd + N, *near_d = rho + NP * NP;
+    REAL *ks = off + d * S, *ws = ks + S;
+    REAL *gd = ws + S, *rho = gd + N, *near_d = rho + NP * NP;
     int32_t *near_i = (int32_t *)(near_d + k_sort * N);
 
-    /* 1. Semi-implicit Euler with the carried passive force; actions clipped to [-1, 1]
-     * (FUSED_STEP has checked that they are finite). */
+    /* 1. The step in substeps (swarm_envs.envs.dynamics.SocialPotentialDynamics.step).
+     * Each plans the time tau left of the step with the stable substep hs of the current
+     * state (substep_plan); where the count would pass max_substeps the swarm is marked
+     * over the cap (needed: the count it would have taken) and takes the time left in
+     * the substeps left. A substep is the semi-implicit Euler update with the carried
+     * passive force (the inputs' in the first substep, then the scratch state's),
+     * actions clipped to [-1, 1] (FUSED_STEP has checked that they are finite), then
+     * one pass over the pairs of the new state (2. below) for its passive force and
+     * its hs; after the last substep that pass also sums the energy and stores the
+     * distances. A measure without a step (move[b] = 0) is that last pass alone. */
     const REAL *ab = a + b * N * d;
+    const REAL *g = goal + b * d;
     const int moving = move[b];
-    for (int64_t c = 0; c < d; c++) {
-        const REAL *xc = x + (c * B + b) * N, *vc = v + (c * B + b) * N, *fc = f + (c * B + b) * N;
-        REAL *xn = xs + c * S, *vn = vs + c * S;
-        if (moving) {
-#pragma omp simd
-            for (int64_t i = 0; i < N; i++) {
-                REAL accel = fc[i] + u_max * UNIT_CLIP(ab[i * d + c]);
-                if (m != (REAL)1) accel = accel / m;
-                vn[i] = vc[i] + dt * accel;
-                xn[i] = xc[i] + dt * vn[i];
-            }
-        } else {
-            memcpy(vn, vc, N * sizeof(REAL));
-            memcpy(xn, xc, N * sizeof(REAL));
-        }
-        for (int64_t i = N; i < NP; i++) xn[i] = vn[i] = 0; /* padding lanes */
-    }
-
-    /* 2. One pass over the unordered pairs of the new state: F(x', v'), pair energy, ρ.
-     * Agents in tiles of LANES × LANES (I ≤ J blocks). In tile (I, J) the lanes hold
-     * agents i = I0 + l and, at offset s, the partners j = J0 + (l + s) mod LANES (block
-     * J rotated by s): every pair is evaluated once, its force added to i in its lane
-     * and, rotated back by s, subtracted from j. The diagonal tile (I, I) needs offsets
-     * 1 .. LANES/2 only (offset LANES/2 holds every pair twice, so it adds to i only).
-     * Lanes past N are padding: masked out, their distances inf. ρ is stored per tile
-     * and offset, the layout the k-NN below reads. */
+    double tau = moving ? P->dt : 0, hs = h_in[b], used = 0, needed = 0;
+    int over = 0;
     const int64_t nb = NP / LANES;
     VINDEX iota, rot[LANES];
     for (int l = 0; l < LANES; l++) iota[l] = l;
     for (int s = 0; s < LANES; s++) rot[s] = (iota + s) & (LANES - 1);
-    for (int64_t c = 0; c < d; c++)
-        for (int64_t i = 0; i < NP; i++) fs[c * S + i] = 0;
     REAL energy_pairs = 0; /* the sum over ordered pairs i ≠ j of the pair energy */
     int64_t close_pairs = 0; /* ordered pairs closer than the collision radius */
-    for (int64_t I = 0; I < nb; I++) {
-        const int64_t I0 = I * LANES;
-        REAL FI[3][LANES], E_lane[LANES];
-        int32_t close_lane[LANES];
-        for (int l = 0; l < LANES; l++) {
-            FI[0][l] = FI[1][l] = FI[2][l] = E_lane[l] = 0;
-            close_lane[l] = 0;
-        }
-        const REAL *xi0 = xs + I0, *xi1 = xs + S + I0, *xi2 = xs + 2 * S + I0;
-        const REAL *vi0 = vs + I0, *vi1 = vs + S + I0, *vi2 = vs + 2 * S + I0;
-        for (int64_t J = I; J < nb; J++) {
-            const int64_t J0 = J * LANES;
-            VREAL xJ[3], vJ[3], FJ[3];
-            for (int64_t c = 0; c < d; c++) {
-                memcpy(&xJ[c], xs + c * S + J0, sizeof(VREAL));
-                memcpy(&vJ[c], vs + c * S + J0, sizeof(VREAL));
-                FJ[c] = (VREAL){0};
+    for (int first = 1;; first = 0) {
+        if (moving) {
+            double n, h;
+            substep_plan(tau, hs, &n, &h);
+            needed = used + n > needed ? used + n : needed;
+            const double left = cap - used;
+            if (n > left) { /* the rest in the substeps left, and marked */
+                over = 1;
+                n = left > 1 ? left : 1;
+                h = tau / n;
             }
-            const int s_first = J == I ? 1 : 0, s_last = J == I ? LANES / 2 : LANES - 1;
-            const int full = I0 + LANES <= N && J0 + LANES <= N; /* no padding lanes */
-            for (int s = s_first; s <= s_last; s++) {
-                const int both = !(J == I && s == LANES / 2); /* else each pair twice */
-                const REAL w = both ? 2 : 1;
-                const int32_t wc = both ? 2 : 1;
-                REAL xj[3][LANES], vj[3][LANES], cx[3][LANES];
-                for (int64_t c = 0; c < d; c++) {
-                    VREAL t = __builtin_shuffle(xJ[c], rot[s]);
-                    memcpy(xj[c], &t, sizeof t);
-                    t = __builtin_shuffle(vJ[c], rot[s]);
-                    memcpy(vj[c], &t, sizeof t);
+            const REAL hr = (REAL)h;
+            for (int64_t c = 0; c < d; c++) {
+                const int64_t at = (c * B + b) * N;
+                const REAL *xc = first ? x + at : xs + c * S, *vc = first ? v + at : vs + c * S;
+                const REAL *fc = first ? f + at : fs + c * S;
+                REAL *xn = xs + c * S, *vn = vs + c * S;
+#pragma omp simd
+                for (int64_t i = 0; i < N; i++) {
+                    REAL accel = fc[i] + u_max * UNIT_CLIP(ab[i * d + c]);
+                    if (m != (REAL)1) accel = accel / m;
+                    vn[i] = vc[i] + hr * accel;
+                    xn[i] = xc[i] + hr * vn[i];
                 }
-                REAL *drow = rho + ((I * nb + J) * LANES + s) * LANES;
-#define PAIR_BODY(ALIGN, SAME, FULL)                                                       \
+                for (int64_t i = N; i < NP; i++) xn[i] = vn[i] = 0; /* padding lanes */
+            }
+            used += 1;
+            tau = n <= 1 ? 0 : tau - h;
+        } else {
+            for (int64_t c = 0; c < d; c++) {
+                memcpy(vs + c * S, v + (c * B + b) * N, N * sizeof(REAL));
+                memcpy(xs + c * S, x + (c * B + b) * N, N * sizeof(REAL));
+                for (int64_t i = N; i < NP; i++) xs[c * S + i] = vs[c * S + i] = 0;
+            }
+        }
+        const int last = tau == 0;
+
+        /* 2. One pass over the unordered pairs of the new state: F(x', v'), the rates
+         * κ and w summed per agent, and after the last substep the pair energy and ρ.
+         * Agents in tiles of LANES × LANES (I ≤ J blocks). In tile (I, J) the lanes hold
+         * agents i = I0 + l and, at offset s, the partners j = J0 + (l + s) mod LANES
+         * (block J rotated by s): every pair is evaluated once, its force and rates
+         * added to i in its lane and, rotated back by s, to j (the force negated). The
+         * diagonal tile (I, I) needs offsets 1 .. LANES/2 only (offset LANES/2 holds
+         * every pair twice, so it adds to i only). Lanes past N are padding: masked
+         * out, their distances inf. ρ is stored per tile and offset, the layout the
+         * k-NN below reads. The lane loop (PAIR_BODY) writes each pair's terms; the
+         * offset loop (S_LOOP) adds them to the sums of i (FI, KI, ...: vectors, so
+         * that they stay in registers) and of j (FJ, KJ, ...). */
+        for (int64_t c = 0; c < d; c++)
+            for (int64_t i = 0; i < NP; i++) fs[c * S + i] = 0;
+        for (int64_t i = 0; i < NP; i++) ks[i] = ws[i] = 0;
+        for (int64_t I = 0; I < nb; I++) {
+            const int64_t I0 = I * LANES;
+            /* Sums per agent i of block I, lane by lane: force, pair energy (× 2 for
+             * ordered pairs), κ, w and ordered pairs closer than the collision radius. */
+            VREAL FI[3] = {{0}, {0}, {0}}, E_lane = {0}, KI = {0}, WI = {0};
+            VINDEX close_lane = {0};
+            const REAL *xi0 = xs + I0, *xi1 = xs + S + I0, *xi2 = xs + 2 * S + I0;
+            const REAL *vi0 = vs + I0, *vi1 = vs + S + I0, *vi2 = vs + 2 * S + I0;
+            for (int64_t J = I; J < nb; J++) {
+                const int64_t J0 = J * LANES;
+                VREAL xJ[3], vJ[3], FJ[3], KJ = {0}, WJ = {0};
+                for (int64_t c = 0; c < d; c++) {
+                    memcpy(&xJ[c], xs + c * S + J0, sizeof(VREAL));
+                    memcpy(&vJ[c], vs + c * S + J0, sizeof(VREAL));
+                    FJ[c] = (VREAL){0};
+                }
+                const int s_first = J == I ? 1 : 0, s_last = J == I ? LANES / 2 : LANES - 1;
+                const int full = I0 + LANES <= N && J0 + LANES <= N; /* no padding lanes */
+#define PAIR_BODY(ALIGN, SAME, FULL, LAST)                                                 \
     _Pragma("omp simd") for (int l = 0; l < LANES; l++) {                                  \
         const int valid = FULL || ((I0 + l < N) & (J0 + ((l + s) & (LANES - 1)) < N));     \
         REAL dx0 = xj[0][l] - xi0[l], dx1 = xj[1][l] - xi1[l];                             \
@@ -220,80 +262,162 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
         REAL ea = EXP(r * dec_a);                                                          \
         REAL er = SAME ? ea : EXP(r * dec_r);                                              \
         REAL sp = ea * ca_la - cr_lr * er;                                                 \
+        kx[l] = valid ? kappa_r * er + kappa_a * ea : 0; /* κ(ρ) */                        \
         if (ALIGN) {                                                                       \
             REAL proj = (vi0[l] - vj[0][l]) * dx0 + (vi1[l] - vj[1][l]) * dx1;             \
             if (d == 3) proj = proj + (vi2[l] - vj[2][l]) * dx2;                           \
-            sp = sp - proj * inv * EXP(r * dec_o) * C_o;                                   \
+            REAL eo = EXP(r * dec_o);                                                      \
+            sp = sp - proj * inv * eo * C_o;                                               \
+            wx[l] = valid ? C_o * eo : 0; /* w(ρ) */                                       \
         }                                                                                  \
         sp = valid ? sp * inv : 0;                                                         \
         cx[0][l] = sp * dx0;                                                               \
         cx[1][l] = sp * dx1;                                                               \
-        FI[0][l] += cx[0][l];                                                              \
-        FI[1][l] += cx[1][l];                                                              \
-        if (d == 3) {                                                                      \
-            cx[2][l] = sp * dx2;                                                           \
-            FI[2][l] += cx[2][l];                                                          \
+        if (d == 3) cx[2][l] = sp * dx2;                                                   \
+        if (LAST) {                                                                        \
+            ex[l] = valid ? w * (C_r * er - C_a * ea) : 0;                                 \
+            cl[l] = valid & (r < collision_radius) ? wc : 0;                               \
+            drow[l] = valid ? r : inf;                                                     \
         }                                                                                  \
-        E_lane[l] += valid ? w * (C_r * er - C_a * ea) : 0;                                \
-        close_lane[l] += valid & (r < collision_radius) ? wc : 0;                          \
-        drow[l] = valid ? r : inf;                                                         \
     }
-                /* Constant flags: alignment, equal decay lengths, and no padding lane
-                 * in the tile (the masks fold away). */
-                if (full) {
-                    if (alignment) {
-                        if (same_decay) { PAIR_BODY(1, 1, 1) } else { PAIR_BODY(1, 0, 1) }
+#define S_LOOP(ALIGN, SAME, FULL, LAST)                                                    \
+    for (int s = s_first; s <= s_last; s++) {                                              \
+        const int both = !(J == I && s == LANES / 2); /* else each pair twice */           \
+        const REAL w = both ? 2 : 1;                                                       \
+        const INDEX wc = both ? 2 : 1;                                                     \
+        REAL xj[3][LANES], vj[3][LANES], cx[3][LANES], kx[LANES], wx[LANES], ex[LANES];    \
+        INDEX cl[LANES];                                                                   \
+        for (int64_t c = 0; c < d; c++) {                                                  \
+            VREAL t = __builtin_shuffle(xJ[c], rot[s]);                                    \
+            memcpy(xj[c], &t, sizeof t);                                                   \
+            t = __builtin_shuffle(vJ[c], rot[s]);                                          \
+            memcpy(vj[c], &t, sizeof t);                                                   \
+        }                                                                                  \
+        REAL *drow = rho + ((I * nb + J) * LANES + s) * LANES;                             \
+        PAIR_BODY(ALIGN, SAME, FULL, LAST)                                                 \
+        { /* to i, in its lane */                                                          \
+            VREAL t;                                                                       \
+            for (int64_t c = 0; c < d; c++) {                                              \
+                memcpy(&t, cx[c], sizeof t);                                               \
+                FI[c] += t;                                                                \
+            }                                                                              \
+            memcpy(&t, kx, sizeof t);                                                      \
+            KI += t;                                                                       \
+            if (ALIGN) {                                                                   \
+                memcpy(&t, wx, sizeof t);                                                  \
+                WI += t;                                                                   \
+            }                                                                              \
+            if (LAST) {                                                                    \
+                memcpy(&t, ex, sizeof t);                                                  \
+                E_lane += t;                                                               \
+                VINDEX ct;                                                                 \
+                memcpy(&ct, cl, sizeof ct);                                                \
+                close_lane += ct;                                                          \
+            }                                                                              \
+        }                                                                                  \
+        if (both) { /* to j, rotated back */                                               \
+            const VINDEX back = rot[(LANES - s) & (LANES - 1)];                            \
+            for (int64_t c = 0; c < d; c++) {                                              \
+                VREAL t;                                                                   \
+                memcpy(&t, cx[c], sizeof t);                                               \
+                FJ[c] -= __builtin_shuffle(t, back);                                       \
+            }                                                                              \
+            VREAL t;                                                                       \
+            memcpy(&t, kx, sizeof t);                                                      \
+            KJ += __builtin_shuffle(t, back);                                              \
+            if (ALIGN) {                                                                   \
+                memcpy(&t, wx, sizeof t);                                                  \
+                WJ += __builtin_shuffle(t, back);                                          \
+            }                                                                              \
+        }                                                                                  \
+    }
+                /* Constant flags: alignment, equal decay lengths, no padding lane in the
+                 * tile (the masks fold away), and the last substep's pass; each copy has
+                 * its own offset loop, so that its sums stay in registers. The other
+                 * passes do not share the exponential of equal decay lengths (four
+                 * copies fewer to compile). */
+                if (last) {
+                    if (full) {
+                        if (alignment) {
+                            if (same_decay) { S_LOOP(1, 1, 1, 1) } else { S_LOOP(1, 0, 1, 1) }
+                        } else {
+                            if (same_decay) { S_LOOP(0, 1, 1, 1) } else { S_LOOP(0, 0, 1, 1) }
+                        }
+                    } else if (alignment) {
+                        if (same_decay) { S_LOOP(1, 1, 0, 1) } else { S_LOOP(1, 0, 0, 1) }
                     } else {
-                        if (same_decay) { PAIR_BODY(0, 1, 1) } else { PAIR_BODY(0, 0, 1) }
+                        if (same_decay) { S_LOOP(0, 1, 0, 1) } else { S_LOOP(0, 0, 0, 1) }
                     }
-                } else if (alignment) {
-                    if (same_decay) { PAIR_BODY(1, 1, 0) } else { PAIR_BODY(1, 0, 0) }
+                } else if (full) {
+                    if (alignment) { S_LOOP(1, 0, 1, 0) } else { S_LOOP(0, 0, 1, 0) }
                 } else {
-                    if (same_decay) { PAIR_BODY(0, 1, 0) } else { PAIR_BODY(0, 0, 0) }
+                    if (alignment) { S_LOOP(1, 0, 0, 0) } else { S_LOOP(0, 0, 0, 0) }
                 }
+#undef S_LOOP
 #undef PAIR_BODY
-                if (both)
-                    for (int64_t c = 0; c < d; c++) {
-                        VREAL t;
-                        memcpy(&t, cx[c], sizeof t);
-                        FJ[c] -= __builtin_shuffle(t, rot[(LANES - s) & (LANES - 1)]);
-                    }
+                for (int64_t c = 0; c < d; c++)
+                    for (int l = 0; l < LANES; l++) fs[c * S + J0 + l] += FJ[c][l];
+                for (int l = 0; l < LANES; l++) {
+                    ks[J0 + l] += KJ[l];
+                    ws[J0 + l] += WJ[l];
+                }
             }
             for (int64_t c = 0; c < d; c++)
-                for (int l = 0; l < LANES; l++) fs[c * S + J0 + l] += FJ[c][l];
+                for (int l = 0; l < LANES; l++) fs[c * S + I0 + l] += FI[c][l];
+            for (int l = 0; l < LANES; l++) {
+                ks[I0 + l] += KI[l];
+                ws[I0 + l] += WI[l];
+                energy_pairs += E_lane[l];
+                close_pairs += close_lane[l];
+            }
         }
+
+        /* Dissipation, then the goal sink (eqs. 19-20), in the numpy core's order. */
         for (int64_t c = 0; c < d; c++)
-            for (int l = 0; l < LANES; l++) fs[c * S + I0 + l] += FI[c][l];
-        for (int l = 0; l < LANES; l++) {
-            energy_pairs += E_lane[l];
-            close_pairs += close_lane[l];
+            for (int64_t i = 0; i < N; i++) {
+                if (beta > 0) fs[c * S + i] = fs[c * S + i] - beta * vs[c * S + i];
+                off[c * S + i] = g[c] - xs[c * S + i];
+            }
+#pragma omp simd
+        for (int64_t i = 0; i < N; i++) {
+            REAL s2 = 0;
+            for (int64_t c = 0; c < d; c++) s2 += off[c * S + i] * off[c * S + i];
+            gd[i] = SQRT(s2);
         }
+        if (physics_goal) {
+#pragma omp simd
+            for (int64_t i = 0; i < N; i++) {
+                REAL scale = cg_lg * EXP(-gd[i] / l_g);
+                scale = scale / (gd[i] > rho_floor ? gd[i] : rho_floor);
+                for (int64_t c = 0; c < d; c++)
+                    fs[c * S + i] = fs[c * S + i] + off[c * S + i] * scale;
+            }
+        }
+
+        /* The stable substep of the new state (pair_rates, then STABLE_SUBSTEP, in
+         * REAL as numpy computes them in the state's dtype): ω² = (2/m) max_i Σ_j κ_ij
+         * (+ the sink's C_g/(l_g² m) where it acts passively), γ = (β + 2 max_i Σ_j
+         * w_ij)/m; a NaN sum makes ω² NaN, as numpy's max keeps a NaN. */
+        REAL kmax = 0, wmax = 0;
+        int nan = 0;
+#pragma omp simd reduction(max : kmax, wmax) reduction(| : nan)
+        for (int64_t i = 0; i < N; i++) {
+            kmax = ks[i] > kmax ? ks[i] : kmax;
+            wmax = ws[i] > wmax ? ws[i] : wmax;
+            nan |= (ks[i] != ks[i]) | (ws[i] != ws[i]);
+        }
+        REAL omega2 = nan ? (REAL)NAN : omega2_scale * kmax;
+        if (physics_goal) omega2 = omega2 + omega2_sink;
+        const REAL gamma =
+            alignment ? (beta + (REAL)2 * wmax) / m : gamma_still + (REAL)0 * omega2;
+        hs = STABLE_SUBSTEP(omega2, gamma);
+        if (last) break;
     }
 
-    /* Dissipation, then the goal sink (eqs. 19-20), in the torch core's order. */
-    const REAL *g = goal + b * d;
-    for (int64_t c = 0; c < d; c++)
-        for (int64_t i = 0; i < N; i++) {
-            if (beta > 0) fs[c * S + i] = fs[c * S + i] - beta * vs[c * S + i];
-            off[c * S + i] = g[c] - xs[c * S + i];
-        }
+    /* The energy: kinetic, pairs and sink, of the step's last state. The sums below and
+     * in 5. are vectorised (omp simd reductions): their order is fixed by the build,
+     * not by the thread count. */
     REAL sink = 0, kinetic = 0;
-#pragma omp simd
-    for (int64_t i = 0; i < N; i++) {
-        REAL s2 = 0;
-        for (int64_t c = 0; c < d; c++) s2 += off[c * S + i] * off[c * S + i];
-        gd[i] = SQRT(s2);
-    }
-    if (physics_goal) {
-#pragma omp simd
-        for (int64_t i = 0; i < N; i++) {
-            REAL scale = cg_lg * EXP(-gd[i] / l_g);
-            scale = scale / (gd[i] > rho_floor ? gd[i] : rho_floor);
-            for (int64_t c = 0; c < d; c++) fs[c * S + i] = fs[c * S + i] + off[c * S + i] * scale;
-        }
-    }
-    /* The sums below and in 5. are vectorised (omp simd reductions): their order is
-     * fixed by the build, not by the thread count. */
     if (C_g > 0) {
 #pragma omp simd reduction(+ : sink)
         for (int64_t i = 0; i < N; i++) sink += -C_g * EXP(-gd[i] / l_g);
@@ -503,18 +627,29 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
     pk[PK_centroid_distance] = SQRT(cd2);
     pk[PK_mean_goal_distance] = mean_goal_distance;
     pk[PK_success] = success;
+    pk[PK_substeps] = (REAL)used;
+    pk[PK_unstable] = 0; /* set by the caller's guard, which undoes an unstable step */
     pk[PK_effort] = effort;
+    pk[PK_over_cap] = (REAL)over;
+    pk[PK_needed] = (REAL)needed;
 #ifdef SWARM_ENVS_PERTURB_COLUMN
     /* A deliberately broken term, for the conformance tests only (built with
      * -DSWARM_ENVS_PERTURB_COLUMN=PK_<name>): they check that the suite catches it. */
     pk[SWARM_ENVS_PERTURB_COLUMN] += (REAL)0.25;
 #endif
+    /* Over the cap, or a column not finite (x - x is NaN for NaN and inf): the caller's
+     * guard decides (swarm_envs.envs.common.unstable_swarms); else it has nothing to do. */
+    REAL probe = 0; /* NaN where a column is (or the sum overflows: checked needlessly) */
+    for (int c = 0; c < PK_SIZE; c++) probe += pk[c];
+    const int unsound = over | !(probe - probe == 0);
     for (int64_t c = 0; c < d; c++)
         for (int64_t i = 0; i < N; i++) {
             x_out[(c * B + b) * N + i] = xs[c * S + i];
             v_out[(c * B + b) * N + i] = vs[c * S + i];
             f_out[(c * B + b) * N + i] = fs[c * S + i];
         }
+    h_out[b] = hs;
+    return unsound;
 }
 
 /* Swarms [b0, b1) (or rows[b0 .. b1) where rows is not NULL: a reset re-measures the
@@ -523,13 +658,19 @@ static inline __attribute__((always_inline)) void FUSED_SWARM(
  * threads (torch's own pool when torch is loaded: its libgomp.so.1 is the one this
  * library links to). Every swarm is stepped by one thread in the same way, so the
  * results do not depend on the thread count.
+ * State per swarm: x, v and the carried passive force f (component first, d × B × N),
+ * and the carried stable substep h (B, double); the step writes the new ones to the
+ * *_out arrays, the observations to obs and the columns PK_* to packed (B × PK_SIZE):
+ * the statistics, the actions' effort, over_cap (1 where the step needed more than
+ * max_substeps) and needed (the substeps it would have taken).
  * Returns 0, 1 if scratch memory could not be allocated, 2 if k_sort > KMAX_SORT, 3 if
- * an action of these swarms is NaN or infinite (checked first: nothing is written).
+ * an action of these swarms is NaN or infinite (checked first: nothing is written);
+ * or'ed with STEP_UNSOUND where a swarm went over the cap or wrote a non-finite column.
  * Finite actions outside [-1, 1] are clipped, as numpy's clip would. */
 int FUSED_STEP(const StepParams *P, int64_t b0, int64_t b1, const int64_t *rows,
-               const REAL *x, const REAL *v, const REAL *f, const REAL *goal, const REAL *a,
-               const uint8_t *move, REAL *x_out, REAL *v_out, REAL *f_out, float *obs,
-               REAL *packed) {
+               const REAL *x, const REAL *v, const REAL *f, const double *h, const REAL *goal,
+               const REAL *a, const uint8_t *move, REAL *x_out, REAL *v_out, REAL *f_out,
+               double *h_out, float *obs, REAL *packed) {
     const int64_t N = P->n_agents, d = P->dim, k_sort = P->k_rank;
     const int64_t NP = (N + LANES - 1) / LANES * LANES;
     if (k_sort > KMAX_SORT) return 2;
@@ -541,7 +682,8 @@ int FUSED_STEP(const StepParams *P, int64_t b0, int64_t b1, const int64_t *rows,
             nonfinite |= (ABITS)((abits[u] & EXP_MASK) == EXP_MASK);
     }
     if (nonfinite) return 3;
-    const size_t n_real = (size_t)(4 * d * NP + N + NP * NP + 2 * k_sort * N + 8 * N + 2 * d * NP);
+    const size_t n_real =
+        (size_t)(4 * d * NP + 2 * NP + N + NP * NP + 2 * k_sort * N + 8 * N + 2 * d * NP);
     int status = 0;
 #pragma omp parallel if (b1 - b0 > 1) reduction(| : status)
     {
@@ -552,15 +694,17 @@ int FUSED_STEP(const StepParams *P, int64_t b0, int64_t b1, const int64_t *rows,
 #pragma omp for schedule(static)
             for (int64_t t = b0; t < b1; t++) {
                 if (!scratch) { status |= 1; continue; }
-                FUSED_SWARM(P, 2, rows ? rows[t] : t, scratch, x, v, f, goal, a, move, x_out,
-                            v_out, f_out, obs, packed);
+                if (FUSED_SWARM(P, 2, rows ? rows[t] : t, scratch, x, v, f, h, goal, a, move,
+                                x_out, v_out, f_out, h_out, obs, packed))
+                    status |= STEP_UNSOUND;
             }
         } else {
 #pragma omp for schedule(static)
             for (int64_t t = b0; t < b1; t++) {
                 if (!scratch) { status |= 1; continue; }
-                FUSED_SWARM(P, 3, rows ? rows[t] : t, scratch, x, v, f, goal, a, move, x_out,
-                            v_out, f_out, obs, packed);
+                if (FUSED_SWARM(P, 3, rows ? rows[t] : t, scratch, x, v, f, h, goal, a, move,
+                                x_out, v_out, f_out, h_out, obs, packed))
+                    status |= STEP_UNSOUND;
             }
         }
         free(scratch);

@@ -79,7 +79,7 @@ def success_count(n_agents: int, success_fraction: float) -> int:
 
 
 def _arrived_count(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
-    return xp.sum(xp.astype(f.goal_distance <= task.goal_radius, f.goal_distance), axis=-1)
+    return xp.sum(xp.astype(f.goal_distance <= task.arrival_radius, f.goal_distance), axis=-1)
 
 
 def _centroid_distance(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
@@ -123,7 +123,7 @@ STATISTICS: tuple[Statistic, ...] = (
     Statistic("energy", "the model's energy", lambda f, task, xp: f.energy),
     Statistic(
         "fraction_arrived",
-        "fraction of agents within goal_radius of the goal",
+        "fraction of agents within the arrival radius of the goal (SwarmConfig.arrival_radius)",
         lambda f, task, xp: _arrived_count(f, task, xp) / task.n_agents,
         wide=True,
     ),
@@ -141,7 +141,7 @@ STATISTICS: tuple[Statistic, ...] = (
     ),
     Statistic(
         "success",
-        "1 when at least success_fraction of the agents are within goal_radius",
+        "1 when at least success_fraction of the agents have arrived",
         _success,
         wide=True,
     ),
