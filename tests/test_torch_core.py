@@ -6,8 +6,9 @@ resets (of the whole batch, and of a few swarms through the sub-batch function),
 padding (N − 1 < k), N = 1, 3-D and the passive goal; TESTING.md items 11 (coincident
 agents), 12 (seeding), 13 (pickling) and 16 (bad input). Step-size control: steps that
 need several substeps (64 and 100 agents, a long dt; each swarm its own count), the cap
-in both ``on_unstable`` modes and a non-finite state give the numpy core's statistics,
-flags and error messages. Two tests compile (64 swarms of 6: the step and the sub-batch
+in both ``on_unstable`` modes (a raise leaves the last sound state), a non-finite state,
+a start that overflows the dtype and the substeps after a reset give the numpy core's
+statistics, flags, states and error messages. Two tests compile (64 swarms of 6: the step and the sub-batch
 reset; 4 swarms of 8 with substeps and truncations: the substep function) and check
 them against plain torch or numpy; the rest run plain torch, the fallback path. The
 CUDA test runs where a GPU is present.
@@ -47,16 +48,10 @@ def test_same_rollout_as_the_numpy_core(name, dtype):
     assert_same_rollout(ours, ref, TOL[dtype])
 
 
-def step_stats(out: list[tuple]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``substeps`` and ``unstable`` per step ``(steps, B)`` and ``substeps`` after the
-    resets of a :func:`~helpers.rollout`."""
+def step_stats(out: list[tuple]) -> tuple[np.ndarray, np.ndarray]:
+    """``substeps`` and ``unstable`` per step ``(steps, B)`` of a :func:`~helpers.rollout`."""
     steps = [stats for _, reward, _, _, stats in out if reward is not None]
-    resets = [stats for _, reward, _, _, stats in out if reward is None]
-    return (
-        np.array([s["substeps"] for s in steps]),
-        np.array([s["unstable"] for s in steps]),
-        np.array([s["substeps"] for s in resets]),
-    )
+    return np.array([s["substeps"] for s in steps]), np.array([s["unstable"] for s in steps])
 
 
 #: Configs whose steps need several substeps: a swarm of 64 and one of 100 (default
@@ -82,9 +77,8 @@ def test_substeps_match_the_numpy_core(name, dtype):
         reset_every=5,
     )
     assert_same_rollout(ours, ref, TOL[dtype])
-    substeps, unstable, after_reset = step_stats(ours)
+    substeps, unstable = step_stats(ours)
     assert substeps.min() >= 1 and substeps.max() >= 3 and not unstable.any()
-    assert (after_reset == 0).all()
     if name == "dt_half":
         assert any(len(set(row)) > 1 for row in substeps.tolist())
 
@@ -107,7 +101,7 @@ def test_substep_cap_truncates_as_the_numpy_core(overrides, dtype):
         reset_every=5,
     )
     assert_same_rollout(ours, ref, TOL[dtype])
-    substeps, unstable, _ = step_stats(ours)
+    substeps, unstable = step_stats(ours)
     assert unstable.any() and not unstable.all()
     assert (substeps[unstable == 1] == 0).all()  # the step was undone
     assert (substeps[unstable == 0] >= 1).all()
@@ -124,7 +118,7 @@ def test_substep_cap_truncates_as_the_numpy_core(overrides, dtype):
 )
 def test_substep_cap_raises_as_the_numpy_core(overrides):
     cfg = SwarmConfig(**overrides)  # on_unstable="raise", the default
-    messages = []
+    messages, states = [], []
     for core in (
         SwarmNavCore(cfg, batch=3),
         TorchSwarmNavCore(cfg, batch=3, dtype=np.float64, compile=False),
@@ -134,8 +128,15 @@ def test_substep_cap_raises_as_the_numpy_core(overrides):
             for _ in range(10):
                 core.step(np.zeros((3, cfg.n_agents, 2)))
         messages.append(str(err.value))
+        states.append((core.x, core.v, core.stats()))
     assert messages[0] == messages[1]
     assert f"more than max_substeps={cfg.max_substeps}" in messages[1]
+    # The core stays at the last sound state: the unstable swarm's step is undone.
+    (x_ref, v_ref, stats_ref), (x, v, stats) = states
+    np.testing.assert_allclose(x, x_ref, **TOL[np.float64])
+    np.testing.assert_allclose(v, v_ref, **TOL[np.float64])
+    np.testing.assert_array_equal(stats["substeps"], stats_ref["substeps"])
+    assert not stats["unstable"].any()
 
 
 def test_non_finite_state_raises_as_the_numpy_core():
@@ -160,8 +161,9 @@ def test_non_finite_state_raises_as_the_numpy_core():
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_resets_of_a_few_swarms_with_substeps(dtype):
-    # The sub-batch reset writes the reset swarms' stable substeps, and the substeps
-    # and unstable statistics of every swarm become 0, as after the numpy core's reset.
+    # The sub-batch reset writes the reset swarms' stable substeps and their substeps
+    # statistic (0), and the unstable statistic of every swarm becomes 0, as after the
+    # numpy core's reset.
     cfg = SwarmConfig(n_agents=8, dt=0.3, max_substeps=2, on_unstable="truncate")
     ours = TorchSwarmNavCore(cfg, batch=64, dtype=dtype, compile=False)
     got = rollout(ours, seed=3, steps=12, reset_every=3, few=True)
@@ -169,8 +171,39 @@ def test_resets_of_a_few_swarms_with_substeps(dtype):
         SwarmNavCore(cfg, batch=64, dtype=dtype), seed=3, steps=12, reset_every=3, few=True
     )
     assert_same_rollout(got, ref, TOL[dtype])
-    substeps, unstable, after_reset = step_stats(got)
-    assert substeps.max() == 2 and unstable.any() and (after_reset == 0).all()
+    substeps, unstable = step_stats(got)
+    assert substeps.max() == 2 and unstable.any()
+
+
+@pytest.mark.parametrize("batch", [4, 64])
+def test_substeps_are_zero_after_a_reset_only_for_the_swarms_reset(batch):
+    # 4 swarms: a reset measures the whole batch; 64: the sub-batch of the swarms reset.
+    cfg = SwarmConfig(n_agents=10, dt=0.5)
+    core = TorchSwarmNavCore(cfg, batch=batch, dtype=np.float64, compile=False)
+    ref = SwarmNavCore(cfg, batch=batch)
+    which = np.zeros(batch, dtype=bool)
+    which[[1, 2]] = True
+    for c in (core, ref):
+        c.reset(np.random.default_rng(0))
+        assert (c.stats()["substeps"] == 0).all()
+        c.step(np.zeros((batch, 10, 2)))
+        c.reset(np.random.default_rng(1), which=which)
+    substeps = core.stats()["substeps"]
+    assert (substeps[which] == 0).all() and (substeps[~which] >= 3).all()
+    np.testing.assert_array_equal(substeps, ref.stats()["substeps"])
+
+
+def test_a_start_that_overflows_the_dtype_raises_as_the_numpy_core():
+    cfg = SwarmConfig(n_agents=4, init_speed=1e25)  # |v|² overflows float32
+    messages = []
+    for core in (
+        SwarmNavCore(cfg, batch=2, dtype=np.float32),
+        TorchSwarmNavCore(cfg, batch=2, compile=False),
+    ):
+        with pytest.raises(SwarmUnstableError, match="not finite in float32") as err:
+            core.reset(np.random.default_rng(0))
+        messages.append(str(err.value))
+    assert messages[0] == messages[1]
 
 
 def test_same_seed_same_start_and_attributes_as_numpy():
@@ -399,7 +432,7 @@ def test_compiled_substeps_match_the_numpy_core(monkeypatch):
     got = rollout(compiled, seed=5, steps=24, reset_every=4)
     ref = rollout(SwarmNavCore(cfg, batch=4), seed=5, steps=24, reset_every=4)
     assert_same_rollout(got, ref, TOL[np.float64])
-    substeps, unstable, _ = step_stats(got)
+    substeps, unstable = step_stats(got)
     assert len(calls) >= 24 and substeps.max() == 2 and unstable.any()
 
 

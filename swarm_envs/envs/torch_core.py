@@ -57,12 +57,13 @@ from swarm_envs.envs.common import (
     check_actions,
     check_batch,
     check_dtype,
+    check_start,
     draw_starts,
     wide_dtypes,
 )
 from swarm_envs.envs.task import STAT_KEYS, observation_size
 from swarm_envs.envs.torch_step import PACKED_KEYS, build_advance, build_substep
-from swarm_envs.envs.torch_substeps import SUBSTEPS, UNSTABLE, SubstepControl
+from swarm_envs.envs.torch_substeps import UNSTABLE, SubstepControl
 
 __all__ = ["PARTIAL_RESET_MIN_BATCH", "TorchSwarmNavCore", "partial_reset_batch"]
 
@@ -335,8 +336,8 @@ class TorchSwarmNavCore(SubstepControl):
 
         The rows are padded to ``reset_batch`` with copies of the first; the results of
         the real ones are written into the force, observations and statistics; the
-        ``substeps`` and ``unstable`` statistics of every swarm become 0, as a reset's
-        measure of the whole batch makes them.
+        ``unstable`` statistic of every swarm becomes 0, as a reset's measure of the
+        whole batch makes it.
         """
         assert self._advance_part is not None and self.reset_batch is not None
         n = rows.shape[0]
@@ -349,7 +350,6 @@ class TorchSwarmNavCore(SubstepControl):
             self._obs_given = self._obs_shared = False
         self._obs[rows] = obs[:n]
         self._packed = self._packed.index_put((rows,), packed[:n])  # a new tensor
-        self._packed[:, SUBSTEPS] = 0.0
         self._packed[:, UNSTABLE] = 0.0
         self._host_packed(whole=False)
 
@@ -362,9 +362,11 @@ class TorchSwarmNavCore(SubstepControl):
             return
         x, v, goal = draw_starts(self.cfg, rng, idx.size)
         self.t[idx] = 0
-        self._counted, self._flagged = self._none_each, None
         # Out of place: the old tensors may share memory with arrays handed out.
         rows = torch.as_tensor(idx, device=self.device)
+        # No step yet for these swarms; the others keep their last step's substeps.
+        self._counted = self._counted.index_put((rows,), self._none_each[rows])
+        self._flagged = None
         self._x = self._put(self._x, rows, x)
         self._v = self._put(self._v, rows, v)
         self._goal = self._goal.index_put((rows,), self._to_device(goal))
@@ -372,6 +374,7 @@ class TorchSwarmNavCore(SubstepControl):
             self._measure_rows(rows)
         else:
             self._measure()
+        check_start(self.cfg, self.stats(), idx, self.dtype)
         measured = self._packed[rows]
         self._prev = self._prev.index_put((rows,), measured)
         self._start = self._start.index_put((rows,), measured)

@@ -35,13 +35,12 @@ from swarm_envs.envs.common import SwarmUnstableError, unstable_message, unstabl
 from swarm_envs.envs.task import STAT_KEYS
 from swarm_envs.envs.torch_step import PACKED_KEYS
 
-__all__ = ["SUBSTEPS", "UNSTABLE", "SubstepControl"]
+__all__ = ["UNSTABLE", "SubstepControl"]
 
 _H_STABLE = PACKED_KEYS.index("h_stable")
 _H_GUARD = PACKED_KEYS.index("h_guard")
 _CALM = PACKED_KEYS.index("calm")
-#: Columns of the ``substeps`` and ``unstable`` statistics in the packed row.
-SUBSTEPS = STAT_KEYS.index("substeps")
+#: The column of the ``unstable`` statistic in the packed row.
 UNSTABLE = STAT_KEYS.index("unstable")
 
 State = tuple[torch.Tensor, torch.Tensor]
@@ -155,17 +154,19 @@ class SubstepControl:
         stats: dict[str, np.ndarray],
         needed: np.ndarray,
     ) -> dict[str, np.ndarray]:
-        """Raise :class:`~swarm_envs.envs.common.SwarmUnstableError`, or (``on_unstable=
-        "truncate"``) put the swarms ``bad`` back to their state ``before`` the step,
-        re-measured and marked ``unstable``; returns the statistics then."""
+        """Put the swarms ``bad`` back to their state ``before`` the step, re-measured;
+        then raise :class:`~swarm_envs.envs.common.SwarmUnstableError` (the core stays
+        at the last sound state), or (``on_unstable="truncate"``) mark them
+        ``unstable`` and return the statistics."""
         cfg = self.cfg
-        if cfg.on_unstable == "raise":
-            raise SwarmUnstableError(unstable_message(cfg, stats, bad, needed, self.t))
+        message = unstable_message(cfg, stats, bad, needed, self.t)
         idx = np.flatnonzero(bad)
         rows = torch.as_tensor(idx, device=self.device)
         self._x, self._v = self._x.clone(), self._v.clone()  # out of place, as a reset
         self._x[:, rows], self._v[:, rows] = before[0][:, rows], before[1][:, rows]
         self._counted = self._counted.index_put((rows,), self._none_each[rows])  # undone
-        self._flagged = idx
+        self._flagged = None if cfg.on_unstable == "raise" else idx
         self._run(a, self._no_step)
+        if cfg.on_unstable == "raise":
+            raise SwarmUnstableError(message)
         return self.stats()
