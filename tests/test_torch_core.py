@@ -8,10 +8,11 @@ agents), 12 (seeding), 13 (pickling) and 16 (bad input). Step-size control: step
 need several substeps (64 and 100 agents, a long dt; each swarm its own count), the cap
 in both ``on_unstable`` modes (a raise leaves the last sound state), a non-finite state,
 a start that overflows the dtype and the substeps after a reset give the numpy core's
-statistics, flags, states and error messages. Two tests compile (64 swarms of 6: the step and the sub-batch
-reset; 4 swarms of 8 with substeps and truncations: the substep function) and check
-them against plain torch or numpy; the rest run plain torch, the fallback path. The
-CUDA test runs where a GPU is present.
+statistics, flags, states and error messages. Two tests compile (64 swarms of 6: the
+step and the sub-batch reset; 4 swarms of 8 with substeps and truncations: the substep
+function) and check them against plain torch or numpy; the rest run plain torch, the
+fallback path. The CUDA tests (also with substeps and truncations) run where a GPU is
+present.
 """
 
 from __future__ import annotations
