@@ -4,9 +4,15 @@ Same seed and actions → same starts, observations, rewards, flags and statisti
 :class:`SwarmNavCore` over dozens of steps (float32 and float64), including partial
 resets (of the whole batch, and of a few swarms through the sub-batch function),
 padding (N − 1 < k), N = 1, 3-D and the passive goal; TESTING.md items 11 (coincident
-agents), 12 (seeding), 13 (pickling) and 16 (bad input). One test compiles (64 swarms
-of 6: the step and the sub-batch reset) and checks both against plain torch; the rest
-run plain torch, the fallback path. The CUDA test runs where a GPU is present.
+agents), 12 (seeding), 13 (pickling) and 16 (bad input). Step-size control: steps that
+need several substeps (64 and 100 agents, a long dt; each swarm its own count), the cap
+in both ``on_unstable`` modes (a raise leaves the last sound state), a non-finite state,
+a start that overflows the dtype and the substeps after a reset give the numpy core's
+statistics, flags, states and error messages. Two tests compile (64 swarms of 6: the
+step and the sub-batch reset; 4 swarms of 8 with substeps and truncations: the substep
+function) and check them against plain torch or numpy; the rest run plain torch, the
+fallback path. The CUDA tests (also with substeps and truncations) run where a GPU is
+present.
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ from helpers import assert_same_rollout, make_config, rollout
 
 from swarm_envs._runtime.torch_compile import compile_support
 from swarm_envs.config import SwarmConfig
+from swarm_envs.envs.common import SwarmUnstableError
 from swarm_envs.envs.core import OBS_BOUND, STAT_KEYS, SwarmNavCore
 from swarm_envs.envs.torch_core import TorchSwarmNavCore
 
@@ -40,6 +47,164 @@ def test_same_rollout_as_the_numpy_core(name, dtype):
         reset_every=12,
     )
     assert_same_rollout(ours, ref, TOL[dtype])
+
+
+def step_stats(out: list[tuple]) -> tuple[np.ndarray, np.ndarray]:
+    """``substeps`` and ``unstable`` per step ``(steps, B)`` of a :func:`~helpers.rollout`."""
+    steps = [stats for _, reward, _, _, stats in out if reward is not None]
+    return np.array([s["substeps"] for s in steps]), np.array([s["unstable"] for s in steps])
+
+
+#: Configs whose steps need several substeps: a swarm of 64 and one of 100 (default
+#: navigation physics, dense enough to need 4-7), and a dt five times the default.
+SUBSTEP_CONFIGS = {
+    "n64": dict(n_agents=64),
+    "n100_goal_physics": dict(n_agents=100, goal_in_physics=True, max_steps=8),
+    "dt_half": dict(n_agents=10, dt=0.5),
+}
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("name", list(SUBSTEP_CONFIGS))
+def test_substeps_match_the_numpy_core(name, dtype):
+    # float64 to round-off (1e-9), float32 to 2e-4, with the substep counts exact; the
+    # swarms of a batch take different counts (dt_half: 3 and 4 in one step).
+    cfg = make_config(SUBSTEP_CONFIGS[name])
+    ref = rollout(SwarmNavCore(cfg, batch=3, dtype=dtype), seed=2, steps=12, reset_every=5)
+    ours = rollout(
+        TorchSwarmNavCore(cfg, batch=3, dtype=dtype, compile=False),
+        seed=2,
+        steps=12,
+        reset_every=5,
+    )
+    assert_same_rollout(ours, ref, TOL[dtype])
+    substeps, unstable = step_stats(ours)
+    assert substeps.min() >= 1 and substeps.max() >= 3 and not unstable.any()
+    if name == "dt_half":
+        assert any(len(set(row)) > 1 for row in substeps.tolist())
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize(
+    "overrides",
+    [dict(n_agents=10, dt=0.5, max_substeps=3), dict(n_agents=20, max_substeps=1)],
+    ids=["cap3", "cap1"],
+)
+def test_substep_cap_truncates_as_the_numpy_core(overrides, dtype):
+    # on_unstable="truncate": swarms needing more than max_substeps are put back to
+    # their state before the step (reward 0, truncated, unstable 1) and then reset.
+    cfg = SwarmConfig(**overrides, on_unstable="truncate")
+    ref = rollout(SwarmNavCore(cfg, batch=4, dtype=dtype), seed=7, steps=12, reset_every=5)
+    ours = rollout(
+        TorchSwarmNavCore(cfg, batch=4, dtype=dtype, compile=False),
+        seed=7,
+        steps=12,
+        reset_every=5,
+    )
+    assert_same_rollout(ours, ref, TOL[dtype])
+    substeps, unstable = step_stats(ours)
+    assert unstable.any() and not unstable.all()
+    assert (substeps[unstable == 1] == 0).all()  # the step was undone
+    assert (substeps[unstable == 0] >= 1).all()
+    for _, reward, _, truncated, stats in ours:
+        if reward is not None:
+            hit = stats["unstable"] == 1
+            assert truncated[hit].all() and (reward[hit] == 0).all()
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [dict(n_agents=10, dt=0.5, max_substeps=3), dict(n_agents=20, max_substeps=1)],
+    ids=["cap3", "cap1"],
+)
+def test_substep_cap_raises_as_the_numpy_core(overrides):
+    cfg = SwarmConfig(**overrides)  # on_unstable="raise", the default
+    messages, states = [], []
+    for core in (
+        SwarmNavCore(cfg, batch=3),
+        TorchSwarmNavCore(cfg, batch=3, dtype=np.float64, compile=False),
+    ):
+        core.reset(np.random.default_rng(0))
+        with pytest.raises(SwarmUnstableError, match="max_substeps") as err:
+            for _ in range(10):
+                core.step(np.zeros((3, cfg.n_agents, 2)))
+        messages.append(str(err.value))
+        states.append((core.x, core.v, core.stats()))
+    assert messages[0] == messages[1]
+    assert f"more than max_substeps={cfg.max_substeps}" in messages[1]
+    # The core stays at the last sound state: the unstable swarm's step is undone.
+    (x_ref, v_ref, stats_ref), (x, v, stats) = states
+    np.testing.assert_allclose(x, x_ref, **TOL[np.float64])
+    np.testing.assert_allclose(v, v_ref, **TOL[np.float64])
+    np.testing.assert_array_equal(stats["substeps"], stats_ref["substeps"])
+    assert not stats["unstable"].any()
+
+
+def test_non_finite_state_raises_as_the_numpy_core():
+    # Velocities of 1e200 make the kinetic energy infinite: the guard's finiteness
+    # check (not the cap) must catch it, although the state's stable substep is finite.
+    cfg = SwarmConfig(n_agents=5)
+    messages = []
+    for core in (
+        SwarmNavCore(cfg, batch=3),
+        TorchSwarmNavCore(cfg, batch=3, dtype=np.float64, compile=False),
+    ):
+        core.reset(np.random.default_rng(0))
+        core.step(np.zeros((3, 5, 2)))
+        v = np.array(core.v)
+        v[1] = 1e200
+        core.v = v
+        with pytest.raises(SwarmUnstableError, match="NaN or infinite") as err:
+            core.step(np.zeros((3, 5, 2)))
+        messages.append(str(err.value))
+    assert messages[0] == messages[1] and "swarm 1 of 3" in messages[1]
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_resets_of_a_few_swarms_with_substeps(dtype):
+    # The sub-batch reset writes the reset swarms' stable substeps and their substeps
+    # statistic (0), and the unstable statistic of every swarm becomes 0, as after the
+    # numpy core's reset.
+    cfg = SwarmConfig(n_agents=8, dt=0.3, max_substeps=2, on_unstable="truncate")
+    ours = TorchSwarmNavCore(cfg, batch=64, dtype=dtype, compile=False)
+    got = rollout(ours, seed=3, steps=12, reset_every=3, few=True)
+    ref = rollout(
+        SwarmNavCore(cfg, batch=64, dtype=dtype), seed=3, steps=12, reset_every=3, few=True
+    )
+    assert_same_rollout(got, ref, TOL[dtype])
+    substeps, unstable = step_stats(got)
+    assert substeps.max() == 2 and unstable.any()
+
+
+@pytest.mark.parametrize("batch", [4, 64])
+def test_substeps_are_zero_after_a_reset_only_for_the_swarms_reset(batch):
+    # 4 swarms: a reset measures the whole batch; 64: the sub-batch of the swarms reset.
+    cfg = SwarmConfig(n_agents=10, dt=0.5)
+    core = TorchSwarmNavCore(cfg, batch=batch, dtype=np.float64, compile=False)
+    ref = SwarmNavCore(cfg, batch=batch)
+    which = np.zeros(batch, dtype=bool)
+    which[[1, 2]] = True
+    for c in (core, ref):
+        c.reset(np.random.default_rng(0))
+        assert (c.stats()["substeps"] == 0).all()
+        c.step(np.zeros((batch, 10, 2)))
+        c.reset(np.random.default_rng(1), which=which)
+    substeps = core.stats()["substeps"]
+    assert (substeps[which] == 0).all() and (substeps[~which] >= 3).all()
+    np.testing.assert_array_equal(substeps, ref.stats()["substeps"])
+
+
+def test_a_start_that_overflows_the_dtype_raises_as_the_numpy_core():
+    cfg = SwarmConfig(n_agents=4, init_speed=1e25)  # |v|² overflows float32
+    messages = []
+    for core in (
+        SwarmNavCore(cfg, batch=2, dtype=np.float32),
+        TorchSwarmNavCore(cfg, batch=2, compile=False),
+    ):
+        with pytest.raises(SwarmUnstableError, match="not finite in float32") as err:
+            core.reset(np.random.default_rng(0))
+        messages.append(str(err.value))
+    assert messages[0] == messages[1]
 
 
 def test_same_seed_same_start_and_attributes_as_numpy():
@@ -174,6 +339,7 @@ def test_pickle_round_trip_reproduces_the_rollout():
         np.testing.assert_array_equal(r1, r2)
         np.testing.assert_array_equal(core.observe(), clone.observe())
     np.testing.assert_array_equal(core.t, clone.t)
+    np.testing.assert_array_equal(core.stats()["substeps"], clone.stats()["substeps"])
 
 
 def test_fallback_is_used_when_compiling_is_unavailable(monkeypatch):
@@ -256,11 +422,37 @@ def test_compiled_core_matches_plain_core():
     )
 
 
+@pytest.mark.skipif(compile_support("cpu") is not None, reason="torch.compile unavailable")
+def test_compiled_substeps_match_the_numpy_core(monkeypatch):
+    # Every step needs two substeps for some swarm, and some swarms need more than the
+    # cap of 2 (truncated): the compiled substep function, float64, against numpy.
+    cfg = SwarmConfig(n_agents=8, dt=0.3, max_substeps=2, on_unstable="truncate", max_steps=16)
+    compiled = TorchSwarmNavCore(cfg, batch=4, dtype=np.float64, compile=True)
+    assert compiled.compiled and compiled._substep.compiled
+    calls = count_calls(monkeypatch, compiled._substep)
+    got = rollout(compiled, seed=5, steps=24, reset_every=4)
+    ref = rollout(SwarmNavCore(cfg, batch=4), seed=5, steps=24, reset_every=4)
+    assert_same_rollout(got, ref, TOL[np.float64])
+    substeps, unstable = step_stats(got)
+    assert len(calls) >= 24 and substeps.max() == 2 and unstable.any()
+
+
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
-def test_cuda_core_matches_cpu_core():
-    cfg = SwarmConfig(n_agents=12)
-    gpu = TorchSwarmNavCore(cfg, batch=16, device="cuda")
-    cpu = TorchSwarmNavCore(cfg, batch=16, device="cpu", compile=False)
+@pytest.mark.parametrize(
+    ("overrides", "dtype"),
+    [
+        (dict(n_agents=12), np.float32),
+        (dict(n_agents=8, dt=0.3, max_substeps=2, on_unstable="truncate"), np.float64),
+        (dict(n_agents=20, max_substeps=1, on_unstable="truncate"), np.float64),
+    ],
+    ids=["one_substep", "substeps_and_truncation", "cap1_truncation"],
+)
+def test_cuda_core_matches_cpu_core(overrides, dtype):
+    # With substeps: the substep function runs outside the CUDA graph, and a truncated
+    # swarm goes back to the state kept from the graph's inputs (cap 1) or a copy.
+    cfg = SwarmConfig(**overrides)
+    gpu = TorchSwarmNavCore(cfg, batch=16, dtype=dtype, device="cuda")
+    cpu = TorchSwarmNavCore(cfg, batch=16, dtype=dtype, device="cpu", compile=False)
     assert_same_rollout(
         rollout(gpu, seed=9, steps=30, reset_every=10),
         rollout(cpu, seed=9, steps=30, reset_every=10),

@@ -281,6 +281,12 @@ class CudaGraphed:
         with torch.cuda.graph(self._graph):
             self._outputs = fn(*self._inputs)
 
+    @property
+    def inputs(self) -> list[torch.Tensor]:
+        """The graph's own input tensors: after a call, the arguments it was given (until
+        the next call copies new ones in)."""
+        return self._inputs
+
     def __call__(self, *args: torch.Tensor) -> Any:
         for static, arg in zip(self._inputs, args, strict=True):
             if static is not arg:

@@ -10,16 +10,26 @@ same seed and actions give the same starts, and the same observations, rewards a
 statistics as the numpy core to floating-point tolerance.
 
 The passive force of the current state is carried from one step to the next, so each
-step evaluates the pairs once. A reset (or assigning ``x``, ``v`` or ``goal``)
-re-evaluates the same function with the integration switched off, so the observations,
-statistics and carried force always describe the current state. A reset of a few swarms
-(at most :attr:`TorchSwarmNavCore.reset_batch`, 1/16 of a batch of 64 or more) evaluates
-them alone, through the same function compiled for that sub-batch: in a VecEnv some
-swarm ends on most steps.
+step evaluates the pairs once; so is the stable substep ``h*`` of the step-size control
+(computed in the same pass; :mod:`swarm_envs.physics.integrators`). When every swarm's
+``h*`` allows the whole ``dt`` in one substep, the step is that one fused call. Otherwise
+each swarm's substeps but its last run through a second compiled function (update,
+force and ``h*`` only; :func:`~swarm_envs.envs.torch_step.build_substep`), each swarm its
+own count, and the fused function takes the last ones and measures the new state
+(:mod:`swarm_envs.envs.torch_substeps`). The substep counts, the cap ``max_substeps`` and
+the unstable guard (``on_unstable``) are the numpy core's.
 
-Compile time: the constructor makes the first (compiling) call, on the all-zero state,
-and stores its wall time in :attr:`TorchSwarmNavCore.compile_seconds`; steps never
-compile. Shapes are static: the function is compiled for this core's ``(batch, N, d)``.
+A reset (or assigning ``x``, ``v`` or ``goal``) re-evaluates the same function with the
+integration switched off, so the observations, statistics and carried force always
+describe the current state. A reset of a few swarms (at most
+:attr:`TorchSwarmNavCore.reset_batch`, 1/16 of a batch of 64 or more) evaluates them
+alone, through the same function compiled for that sub-batch: in a VecEnv some swarm
+ends on most steps.
+
+Compile time: the constructor makes the first (compiling) calls of both functions, on
+the all-zero state, and stores their wall time in
+:attr:`TorchSwarmNavCore.compile_seconds`; steps never compile. Shapes are static: the
+functions are compiled for this core's ``(batch, N, d)``.
 
 Host and device: actions arrive as numpy (or as a torch tensor, kept on the device),
 state stays on ``device``; per step the ``(B, S)`` statistics and the rewards come back,
@@ -28,6 +38,9 @@ copying; from a GPU into page-locked memory). The starts are drawn on the host w
 numpy generator, as every core draws them, then moved to the device. On a GPU the
 compiled step is captured once as a CUDA graph (:class:`~swarm_envs._runtime.
 torch_compile.CudaGraphed`) and replayed each step: one launch instead of one per kernel.
+The substep function runs compiled but not captured (its count varies from step to
+step), and the state before a step is kept for the unstable guard (the graph's inputs,
+or a copy when substeps follow).
 """
 
 from __future__ import annotations
@@ -44,11 +57,13 @@ from swarm_envs.envs.common import (
     check_actions,
     check_batch,
     check_dtype,
+    check_start,
     draw_starts,
     wide_dtypes,
 )
 from swarm_envs.envs.task import STAT_KEYS, observation_size
-from swarm_envs.envs.torch_step import build_advance
+from swarm_envs.envs.torch_step import PACKED_KEYS, build_advance, build_substep
+from swarm_envs.envs.torch_substeps import UNSTABLE, SubstepControl
 
 __all__ = ["PARTIAL_RESET_MIN_BATCH", "TorchSwarmNavCore", "partial_reset_batch"]
 
@@ -89,7 +104,7 @@ def _device(device: Any) -> torch.device:
     return dev
 
 
-class TorchSwarmNavCore:
+class TorchSwarmNavCore(SubstepControl):
     """State and dynamics of ``batch`` independent SwarmNav swarms, in torch.
 
     A :class:`~swarm_envs.envs.protocol.Core` (numpy in, numpy out) for
@@ -149,24 +164,40 @@ class TorchSwarmNavCore:
         # State component first, (d, B, N): the layout the fused step vectorises.
         self._x, self._v, self._f = zeros(d, B, N), zeros(d, B, N), zeros(d, B, N)
         self._goal = zeros(B, d)
-        S = len(STAT_KEYS)
-        self._prev, self._start = zeros(B, S), zeros(B, S)
+        P = len(PACKED_KEYS)
+        self._prev, self._start = zeros(B, P), zeros(B, P)
         self._no_action = zeros(B, N, d)
-        self._move_all = torch.ones(B, dtype=torch.bool, device=self.device)
-        self._move_none = torch.zeros(B, dtype=torch.bool, device=self.device)
+        self._one_each, self._none_each = self._zeros(B) + 1.0, zeros(B)
+        # Every swarm's substep: dt when it takes the step in one, 0 to only measure it.
+        self._dt_each, self._no_step = zeros(B) + cfg.dt, zeros(B)
+        self._one_needed = np.ones(B)
+        wide = dict(dtype=torch.float64, device=self.device)
+        # A step's first time left, substeps taken and needed (float64; distinct tensors:
+        # the compiled substep function is specialised on which arguments alias).
+        self._wide_start = (torch.full((B,), cfg.dt, **wide), zeros(B).to(**wide))
+        self._wide_start += (zeros(B).to(**wide),)
+        # The substeps statistic of the current state (the last step's count, 0 after a
+        # reset), and the swarms its step truncated as unstable (host indices, or None).
+        self._counted = self._none_each
+        self._flagged: np.ndarray | None = None
         self._compile_request = compile
         self._advance = self._build(self.batch, compile, "TorchSwarmNavCore.step")
+        self._substep = self._build(
+            self.batch, self._advance.compiled, "TorchSwarmNavCore.substep", build_substep
+        )
         self._obs = torch.empty(0)
         self._obs_given = False  # observe() handed out the current observations
         self._obs_shared = False  # observe_tensor() did
         self._packed = torch.empty(0)
-        self._packed_host: np.ndarray = np.empty((0, S))
+        self._packed_host: np.ndarray = np.empty((0, P))
+        self._calm = True
         self._reward = torch.empty(0)
         self._graphed: CudaGraphed | None = None
         self._measure(warmup=True)
+        self._substep.warmup(*self._substep_inputs(self._no_action))
         if self.device.type == "cuda" and self._advance.compiled:
             # One replay instead of a launch per kernel (captured here, never in a step).
-            self._graphed = CudaGraphed(self._advance, self._args(self._no_action, self._move_none))
+            self._graphed = CudaGraphed(self._advance, self._args(self._no_action, self._no_step))
             self._measure()
         # Resets of a few swarms measure only those, through the same function compiled
         # for a sub-batch of `reset_batch` swarms (padded): in a VecEnv some swarm ends
@@ -189,23 +220,33 @@ class TorchSwarmNavCore:
             return f"supports integrator='semi_implicit_euler' only, got {cfg.integrator!r}"
         return None
 
-    def _build(self, batch: int, compile: bool | str, name: str) -> MaybeCompiled:
-        """The fused function for ``batch`` swarms, compiled or plain.
+    def _build(
+        self, batch: int, compile: bool | str, name: str, build: Any = build_advance
+    ) -> MaybeCompiled:
+        """The fused function (or, with ``build=build_substep``, the substep function)
+        for ``batch`` swarms, compiled or plain.
 
         The neighbour indices come from ``nearest_neighbors``, always in range: no bound
-        checks on the gathers. On the CPU a small step (at most
+        checks on the gathers. The graph keeps the order of the Python code (no
+        ``reorder_for_locality``, which moves each computation next to its first use):
+        TorchInductor fuses only reductions that lie close in that order, and the pair
+        sums of the force, the energy and the stable substep's rates then share one loop
+        and its exponentials. On the CPU a small step (at most
         :data:`SINGLE_THREAD_PAIRS` pair evaluations) is generated for one thread.
         """
-        options: dict[str, Any] = {"assert_indirect_indexing": False}
+        options: dict[str, Any] = {
+            "assert_indirect_indexing": False,
+            "reorder_for_locality": False,
+        }
         if self.device.type == "cpu" and batch * self.cfg.n_agents**2 <= SINGLE_THREAD_PAIRS:
             options["cpp.threads"] = 1
         return MaybeCompiled(
-            build_advance(self.cfg),
+            build(self.cfg),
             compile=compile,
             device=self.device,
             name=name,
             options=options,
-            key=("TorchSwarmNavCore", repr(self.cfg), batch, str(self.dtype), str(self.device)),
+            key=(name, repr(self.cfg), batch, str(self.dtype), str(self.device)),
         )
 
     # ------------------------------------------------------------------ helpers
@@ -225,19 +266,38 @@ class TorchSwarmNavCore:
     @property
     def compile_seconds(self) -> float | None:
         """Wall time of the constructor's first calls (the compile time when compiled):
-        the step's function, plus the partial reset's when there is one."""
+        the step's function and the substep function, plus the partial reset's when
+        there is one."""
         seconds = self._advance.compile_seconds
-        part = self._advance_part
-        if seconds is not None and part is not None and part.compile_seconds is not None:
-            seconds += part.compile_seconds
+        for other in (self._substep, self._advance_part):
+            if seconds is not None and other is not None and other.compile_seconds is not None:
+                seconds += other.compile_seconds
         return seconds
 
-    def _args(self, a: torch.Tensor, move: torch.Tensor) -> tuple[torch.Tensor, ...]:
-        """The fused function's arguments for the whole batch."""
-        return (self._x, self._v, self._f, self._goal, a, move, self._prev, self._start)
+    def _args(self, a: torch.Tensor, h: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """The fused function's arguments for the whole batch (``h``: each swarm's
+        substep, 0 to only measure it)."""
+        return (
+            self._x,
+            self._v,
+            self._f,
+            self._goal,
+            a,
+            h,
+            self._counted,
+            self._prev,
+            self._start,
+        )
 
-    def _run(self, a: torch.Tensor, move: torch.Tensor, warmup: bool = False) -> None:
-        args = self._args(a, move)
+    def _run(
+        self,
+        a: torch.Tensor,
+        h: torch.Tensor,
+        warmup: bool = False,
+    ) -> None:
+        """The fused function on the whole batch; the swarms :attr:`_flagged` keep their
+        ``unstable`` mark."""
+        args = self._args(a, h)
         if self._graphed is not None:
             # The graph's outputs are overwritten by its next replay: the state is only
             # read before then (or passed back in); what is kept or handed out is copied.
@@ -246,12 +306,15 @@ class TorchSwarmNavCore:
         else:
             out = self._advance.warmup(*args) if warmup else self._advance(*args)
             self._x, self._v, self._f, self._obs, self._packed, self._reward, _ = out
-        self._packed_host = self._packed.cpu().numpy()
+        if self._flagged is not None:  # a fresh tensor (or the graph's output's copy)
+            rows = torch.as_tensor(self._flagged, device=self.device)
+            self._packed[rows, UNSTABLE] = 1.0
+        self._host_packed()
         self._obs_given = self._obs_shared = False
 
     def _measure(self, warmup: bool = False) -> None:
         """Observations, statistics and passive force of the current state (no step)."""
-        self._run(self._no_action, self._move_none, warmup=warmup)
+        self._run(self._no_action, self._no_step, warmup=warmup)
 
     def _row_args(self, rows: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """The fused function's arguments for swarms ``rows`` only, measuring (no step)."""
@@ -262,7 +325,8 @@ class TorchSwarmNavCore:
             self._f[:, rows],
             self._goal[rows],
             self._no_action[:n],
-            self._move_none[:n],
+            self._no_step[:n],
+            self._none_each[:n],
             self._prev[rows],
             self._start[rows],
         )
@@ -271,7 +335,9 @@ class TorchSwarmNavCore:
         """:meth:`_measure` for swarms ``rows`` (at most :attr:`reset_batch`) only.
 
         The rows are padded to ``reset_batch`` with copies of the first; the results of
-        the real ones are written into the force, observations and statistics.
+        the real ones are written into the force, observations and statistics; the
+        ``unstable`` statistic of every swarm becomes 0, as a reset's measure of the
+        whole batch makes it.
         """
         assert self._advance_part is not None and self.reset_batch is not None
         n = rows.shape[0]
@@ -283,8 +349,9 @@ class TorchSwarmNavCore:
             self._obs = self._obs.clone()
             self._obs_given = self._obs_shared = False
         self._obs[rows] = obs[:n]
-        self._packed = self._packed.index_put((rows,), packed[:n])
-        self._packed_host = self._packed.cpu().numpy()
+        self._packed = self._packed.index_put((rows,), packed[:n])  # a new tensor
+        self._packed[:, UNSTABLE] = 0.0
+        self._host_packed(whole=False)
 
     # ------------------------------------------------------------------ reset
     def reset(self, rng: np.random.Generator, which: np.ndarray | None = None) -> None:
@@ -297,6 +364,9 @@ class TorchSwarmNavCore:
         self.t[idx] = 0
         # Out of place: the old tensors may share memory with arrays handed out.
         rows = torch.as_tensor(idx, device=self.device)
+        # No step yet for these swarms; the others keep their last step's substeps.
+        self._counted = self._counted.index_put((rows,), self._none_each[rows])
+        self._flagged = None
         self._x = self._put(self._x, rows, x)
         self._v = self._put(self._v, rows, v)
         self._goal = self._goal.index_put((rows,), self._to_device(goal))
@@ -304,6 +374,7 @@ class TorchSwarmNavCore:
             self._measure_rows(rows)
         else:
             self._measure()
+        check_start(self.cfg, self.stats(), idx, self.dtype)
         measured = self._packed[rows]
         self._prev = self._prev.index_put((rows,), measured)
         self._start = self._start.index_put((rows,), measured)
@@ -356,13 +427,15 @@ class TorchSwarmNavCore:
             ``stats`` mapping each of ``STAT_KEYS`` to a ``(B,)`` array.
         """
         a = self._actions(actions)
-        self._run(a, self._move_all)
-        self._prev = self._packed
+        before, over, needed = self._integrate(a)
         self.t += 1
-        stats = self.stats()
+        stats, bad = self._guard(a, self.stats(), before, over, needed)
+        self._prev = self._packed
         reward = self._reward.cpu().numpy().astype(np.float64)
         success = stats["success"].astype(bool)
         truncated = (self.t >= self.cfg.max_steps) & ~success
+        if bad is not None:
+            reward[bad], success[bad], truncated[bad] = 0.0, False, True
         return reward, success, truncated, stats
 
     # ------------------------------------------------------------------ views
@@ -463,9 +536,10 @@ class TorchSwarmNavCore:
             "device": str(self.device),
             "compile": self._compile_request,
             "t": self.t.copy(),
+            "flagged": self._flagged,
             "tensors": {
                 name: getattr(self, name).detach().cpu()
-                for name in ("_x", "_v", "_goal", "_prev", "_start")
+                for name in ("_x", "_v", "_goal", "_prev", "_start", "_counted")
             },
         }
 
@@ -473,7 +547,7 @@ class TorchSwarmNavCore:
         self.__init__(  # type: ignore[misc]
             state["cfg"], state["batch"], state["dtype"], state["device"], state["compile"]
         )
-        self.t = state["t"]
+        self.t, self._flagged = state["t"], state["flagged"]
         for name, tensor in state["tensors"].items():
             setattr(self, name, tensor.to(self.device))
         self._measure()

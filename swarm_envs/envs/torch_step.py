@@ -6,6 +6,15 @@ runs (through ``torch.compile`` where it can, plain otherwise; see
 core, on tensors: the Euler update and the pair law of :mod:`swarm_envs.physics`, and the
 statistics, observation and reward of :mod:`swarm_envs.envs.task`. What is torch's own
 here is how the k nearest neighbours are found (:func:`nearest_neighbors`).
+
+Step-size control (:mod:`swarm_envs.physics.integrators`): the fused step also computes
+the stable substep ``h*`` of the new state (the rates of
+:func:`~swarm_envs.physics.social_potential.pair_rates`, in the same pair loop as the
+force) and returns it in its packed row after the statistics (:data:`PACKED_KEYS`). A
+step whose swarms all fit in one substep is that one fused call; otherwise
+:func:`build_substep` takes the substeps but the last, each swarm its own count
+(:func:`plan_substep`), and the fused function takes each swarm's last one and measures
+the result.
 """
 
 from __future__ import annotations
@@ -17,6 +26,7 @@ from typing import Any
 import torch
 
 from swarm_envs._array import torch_namespace
+from swarm_envs.envs.common import FINITE_KEYS
 from swarm_envs.envs.task import (
     STAT_KEYS,
     Frame,
@@ -27,10 +37,24 @@ from swarm_envs.envs.task import (
     statistics,
 )
 from swarm_envs.physics import kinetic_energy
-from swarm_envs.physics.integrators import euler_update
-from swarm_envs.physics.social_potential import goal_terms, pair_geometry, pair_terms
+from swarm_envs.physics.integrators import euler_update, stable_substep, substep_plan
+from swarm_envs.physics.social_potential import (
+    PairGeometry,
+    goal_terms,
+    pair_geometry,
+    pair_rates,
+    pair_terms,
+)
 
-__all__ = ["build_advance", "nearest_neighbors"]
+__all__ = ["PACKED_KEYS", "build_advance", "build_substep", "nearest_neighbors", "plan_substep"]
+
+#: The columns of the fused step's packed row per swarm: the statistics (``STAT_KEYS``),
+#: the stable substep ``h*`` of the state (``"h_stable"``), ``h*`` where the state is
+#: finite (:data:`~swarm_envs.envs.common.FINITE_KEYS`), NaN where not (``"h_guard"``),
+#: and 1 in every row where ``h_guard ≥ dt`` for every swarm of the batch (``"calm"``):
+#: that says at once that the next step takes one substep each and that this one went
+#: stable, the host's only check in the common case.
+PACKED_KEYS = (*STAT_KEYS, "h_stable", "h_guard", "calm")
 
 
 def nearest_neighbors(rho: torch.Tensor, k: int) -> tuple[torch.Tensor, torch.Tensor]:
@@ -81,31 +105,62 @@ def _by_rank(planes: list[torch.Tensor]) -> torch.Tensor:
     return torch.stack(planes, dim=0).permute(1, 2, 0)
 
 
+def _passive(
+    geo: PairGeometry,
+    xs: list[torch.Tensor],
+    vs: list[torch.Tensor],
+    goal: torch.Tensor,
+    cfg: Any,
+    energy: bool,
+) -> tuple[list[torch.Tensor], torch.Tensor | None, torch.Tensor, torch.Tensor]:
+    """The passive force at ``(x, v)`` per component, the pair energy (``None`` without
+    ``energy``), and the goal sink's potential and distances per agent
+    (:func:`~swarm_envs.physics.social_potential.goal_terms`), for the numpy core's
+    semi-implicit Euler force."""
+    p = cfg.physics
+    fs, pairs = pair_terms(geo, vs, p, energy=energy)
+    if p.beta > 0:
+        fs = [fc - p.beta * vc for fc, vc in zip(fs, vs, strict=True)]
+    sink, potential, goal_distance = goal_terms(xs, p, goal)
+    if cfg.goal_in_physics and p.C_g > 0:
+        fs = [fc + gc for fc, gc in zip(fs, sink, strict=True)]
+    return fs, pairs, potential, goal_distance
+
+
+def _stable(geo: PairGeometry, cfg: Any) -> torch.Tensor:
+    """The stable substep ``h*`` ``(B,)`` of the state of ``geo`` (the shared rule)."""
+    p = cfg.physics
+    omega2, gamma = pair_rates(geo, p, sink=cfg.goal_in_physics and p.C_g > 0)
+    return stable_substep(omega2, gamma, torch)
+
+
 def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
     """The fused SwarmNav step for config ``cfg`` (social potential, semi-implicit Euler).
 
-    ``advance(x, v, f, goal, a, move, prev, start)`` with positions, velocities and the
-    passive force at ``(x, v)`` stored component first, ``(d, B, N)``, so that every
-    per-agent quantity is a contiguous ``(B, N)`` plane (the layout on which a compiler
-    vectorises the pair loop); goals ``(B, d)``; actions ``a`` ``(B, N, d)`` clipped to
-    [−1, 1]; ``move`` ``(B,)`` bool (false: keep that swarm's state, only measure it);
-    ``prev`` and ``start`` ``(B, S)``: the previous step's and the episode start's
-    statistics in the order of ``STAT_KEYS``. Returns ``(x', v', f' (d, B, N), obs (B, N,
-    obs_dim) float32, stats (B, S), reward (B,), ρ (B, N, N))``; the distances (``inf`` on
-    the diagonal) are returned only so that a compiler stores them once (callers drop
-    them).
+    ``advance(x, v, f, goal, a, h, substeps, prev, start)`` with positions, velocities
+    and the passive force at ``(x, v)`` stored component first, ``(d, B, N)``, so that
+    every per-agent quantity is a contiguous ``(B, N)`` plane (the layout on which a
+    compiler vectorises the pair loop); goals ``(B, d)``; actions ``a`` ``(B, N, d)``
+    clipped to [−1, 1]; ``h`` ``(B,)``: each swarm's (last) substep, ``dt`` when it takes
+    the step in one, 0 to keep its state and only measure it; ``substeps`` ``(B,)``: the
+    ``substeps`` statistic to report (the step's count, 0 after a reset); ``prev`` and
+    ``start`` ``(B, P)``: the previous step's and the episode start's packed rows
+    (:data:`PACKED_KEYS`). Returns ``(x', v', f' (d, B, N), obs (B, N, obs_dim) float32,
+    packed (B, P), reward (B,), ρ (B, N, N))``; the distances (``inf`` on the diagonal)
+    are returned only so that a compiler stores them once (callers drop them).
 
-    The step: ``v' = v + dt (f + u_max a)/m``, ``x' = x + dt v'``; then one pass over
-    the pairs of ``(x', v')`` gives the passive force carried into the next step and the
-    pair energy (:func:`~swarm_envs.physics.social_potential.pair_terms`); the ranked
-    neighbours come from the distances; the statistics, observation and reward are the
-    shared definitions.
+    The (last) substep: ``v' = v + h (f + u_max a)/m``, ``x' = x + h v'``; then one pass
+    over the pairs of ``(x', v')`` gives the passive force carried into the next step,
+    the pair energy (:func:`~swarm_envs.physics.social_potential.pair_terms`) and the
+    rates of the stable substep ``h*``
+    (:func:`~swarm_envs.physics.social_potential.pair_rates`); the ranked neighbours come
+    from the distances; the statistics, observation and reward are the shared
+    definitions.
     """
     xp = torch_namespace()
     p = cfg.physics
     N, d = cfg.n_agents, cfg.dim
     k_rank = ranked_neighbors(cfg)
-    physics_goal = cfg.goal_in_physics and p.C_g > 0
 
     def unpack(packed: torch.Tensor) -> dict[str, torch.Tensor]:
         return {key: packed[:, i] for i, key in enumerate(STAT_KEYS)}
@@ -116,15 +171,16 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
         f: torch.Tensor,
         goal: torch.Tensor,
         a: torch.Tensor,
-        move: torch.Tensor,
+        h: torch.Tensor,
+        substeps: torch.Tensor,
         prev: torch.Tensor,
         start: torch.Tensor,
     ) -> tuple[torch.Tensor, ...]:
         B = x.shape[1]
-        keep = move[:, None]
+        keep, step = (h > 0)[:, None], h[:, None]
         xs, vs = [], []
         for c in range(d):
-            xc, vc = euler_update(x[c], v[c], f[c] + cfg.u_max * a[..., c], cfg.dt, p.m)
+            xc, vc = euler_update(x[c], v[c], f[c] + cfg.u_max * a[..., c], step, p.m)
             xs.append(torch.where(keep, xc, x[c]))
             vs.append(torch.where(keep, vc, v[c]))
 
@@ -134,12 +190,8 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
         x_new, v_new = torch.stack(xs), torch.stack(vs)
         xs, vs = list(x_new.unbind(0)), list(v_new.unbind(0))
         geo = pair_geometry(xs)
-        fs, pairs = pair_terms(geo, vs, p)
-        if p.beta > 0:
-            fs = [fc - p.beta * vc for fc, vc in zip(fs, vs, strict=True)]
-        sink, potential, goal_distance = goal_terms(xs, p, goal)
-        if physics_goal:
-            fs = [fc + gc for fc, gc in zip(fs, sink, strict=True)]
+        fs, pairs, potential, goal_distance = _passive(geo, xs, vs, goal, cfg, energy=True)
+        h_stable = _stable(geo, cfg)
         xn, vn = x_new.permute(1, 2, 0), v_new.permute(1, 2, 0)
         energy = kinetic_energy(vn, p) + pairs
         if p.C_g > 0:  # the energy statistic includes the sink whenever it exists
@@ -154,9 +206,15 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
         else:
             near, nearest = None, torch.zeros(B, 1, dtype=x.dtype, device=x.device)
 
-        frame = Frame(xn, vn, goal, goal_distance, nearest, close, energy)
+        frame = Frame(xn, vn, goal, goal_distance, nearest, close, energy, substeps)
         stats = statistics(frame, cfg, xp)
-        packed = torch.stack([xp.astype(stats[key], x) for key in STAT_KEYS], dim=-1)
+        columns = [xp.astype(stats[key], x) for key in STAT_KEYS]
+        finite = torch.isfinite(columns[STAT_KEYS.index(FINITE_KEYS[0])])
+        for key in FINITE_KEYS[1:]:
+            finite = finite & torch.isfinite(columns[STAT_KEYS.index(key)])
+        guard = torch.where(finite, h_stable, math.nan)
+        calm = (guard.to(torch.float64) >= cfg.dt).all().to(x.dtype).expand(B)
+        packed = torch.stack([*columns, h_stable, guard, calm], dim=-1)
         obs = observation(xn, vn, goal, near, cfg, xp)
         effort = (a * a).sum((-2, -1))
         inputs = RewardInputs(stats, unpack(prev), unpack(start), effort, N, xp)
@@ -166,3 +224,97 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
         return x_new, v_new, torch.stack(fs), obs, packed, r, rho
 
     return advance
+
+
+def plan_substep(
+    remaining: Any, h_stable: Any, used: Any, cap: float, xp: Any
+) -> tuple[Any, Any, Any, Any]:
+    """The next substep of each swarm, as the numpy core plans it: ``(h, last, late,
+    wanted)`` per swarm from the time left of the step, the stable substep ``h*`` of the
+    state and the substeps taken (float64 arrays or tensors; ``xp``: ``np`` or ``torch``).
+
+    ``n, h`` from :func:`~swarm_envs.physics.integrators.substep_plan`; ``late`` where
+    ``n`` exceeds the substeps left under ``cap``: then ``h`` spreads the time left over
+    those (and the swarm is marked over the cap); ``last`` where that substep ends the
+    step (``n ≤ 1``; ``True`` too where no time is left, ``h = 0``); ``wanted = used +
+    n``, the substeps the swarm needs at least.
+
+    >>> import numpy as np
+    >>> h, last, late, wanted = plan_substep(
+    ...     np.array([0.1, 0.1, 0.0]), np.array([0.2, 0.03, 1.0]), np.zeros(3), 3.0, np
+    ... )
+    >>> [round(float(t), 4) for t in h], last.tolist(), late.tolist(), wanted.tolist()
+    ([0.1, 0.0333, 0.0], [True, False, True], [False, True, False], [1.0, 4.0, 0.0])
+    """
+    n, h = substep_plan(remaining, h_stable, xp)
+    left = cap - used
+    late = n > left
+    spread = xp.where(left > 1.0, left, 1.0)
+    h = xp.where(late, remaining / spread, h)
+    last = xp.where(late, spread, n) <= 1.0
+    return h, last, late, used + n
+
+
+def build_substep(cfg: Any) -> Callable[..., tuple[Any, ...]]:
+    """One substep of the step-size control for every swarm with time left, batched.
+
+    ``substep(x, v, f, goal, a, h_stable, remaining, used, over, needed)``: the state
+    and force as in :func:`build_advance` (``(d, B, N)``), goals, actions; then per
+    swarm, ``(B,)``: the stable substep ``h*`` of the state (its dtype), the time left of
+    the step, the substeps taken, whether it needed more than ``cfg.max_substeps``
+    (bool) and how many it needed at least (float64). Each swarm with time left plans
+    its substep (:func:`plan_substep`) and takes it, an Euler substep with the passive
+    force ``f`` and the control; the force and ``h*`` of the new state are computed (for
+    every swarm: one without time left keeps its state).
+
+    Returns ``(x', v', f', h*', remaining, used, over, needed, more, last)``: the same
+    advanced; ``more``, a 0-d bool, whether a swarm's next substep is not its last; and
+    ``last``, each swarm's next substep planned for the fused step
+    (:func:`build_advance`'s ``h`` and ``substeps``, in the state's dtype) with
+    the step's counts for the host ``stack([over, needed])`` once it is taken. No
+    statistics, no observations: the numpy core's
+    :meth:`~swarm_envs.envs.dynamics.SocialPotentialDynamics.step`, one substep per call.
+    """
+    p = cfg.physics
+    d, cap = cfg.dim, float(cfg.max_substeps)
+
+    def substep(
+        x: torch.Tensor,
+        v: torch.Tensor,
+        f: torch.Tensor,
+        goal: torch.Tensor,
+        a: torch.Tensor,
+        h_stable: torch.Tensor,
+        remaining: torch.Tensor,
+        used: torch.Tensor,
+        over: torch.Tensor,
+        needed: torch.Tensor,
+    ) -> tuple[Any, ...]:
+        wide = remaining.dtype
+        h, last, late, wanted = plan_substep(remaining, h_stable.to(wide), used, cap, torch)
+        over, needed = over | late, torch.maximum(needed, wanted)
+        active = remaining > 0
+        keep, step = active[:, None], h.to(x.dtype)[:, None]
+        xs, vs = [], []
+        for c in range(d):
+            xc, vc = euler_update(x[c], v[c], f[c] + cfg.u_max * a[..., c], step, p.m)
+            xs.append(torch.where(keep, xc, x[c]))
+            vs.append(torch.where(keep, vc, v[c]))
+        used = used + active.to(wide)
+        remaining = torch.where(active & ~last, remaining - h, 0.0)
+        x_new, v_new = torch.stack(xs), torch.stack(vs)
+        xs, vs = list(x_new.unbind(0)), list(v_new.unbind(0))
+        geo = pair_geometry(xs)
+        fs, _, _, _ = _passive(geo, xs, vs, goal, cfg, energy=False)
+        h_new = _stable(geo, cfg)
+        # The next substep, planned as the next call would plan it: for the fused step
+        # when it is every swarm's last.
+        h, last, late, wanted = plan_substep(remaining, h_new.to(wide), used, cap, torch)
+        left = remaining > 0
+        more = (left & ~last).any()
+        counts = torch.stack([(over | late).to(wide), torch.maximum(needed, wanted)])
+        final = (torch.where(left, h, 0.0).to(x.dtype), (used + left.to(wide)).to(x.dtype), counts)
+        f_new = torch.stack(fs)
+        return x_new, v_new, f_new, h_new, remaining, used, over, needed, more, final
+
+    return substep
