@@ -173,7 +173,8 @@ class SwarmNavCore:
         self._geometry = pair_geometry(self.x)
         substeps = self.dynamics.substeps.copy()
         substeps[idx] = 0.0  # the step was undone
-        self._measure(substeps=substeps)
+        with np.errstate(over="ignore", invalid="ignore"):
+            self._measure(substeps=substeps)
         if cfg.on_unstable == "raise":
             raise SwarmUnstableError(message)
         self._stats["unstable"][idx] = 1.0
