@@ -48,7 +48,12 @@ from swarm_envs.physics import (
     uniform_ball,
     verlet_step,
 )
-from swarm_envs.physics.integrators import euler_update, stable_substep, substep_plan
+from swarm_envs.physics.integrators import (
+    SubstepBudget,
+    euler_update,
+    stable_substep,
+    substep_plan,
+)
 from swarm_envs.physics.lagrangian import (
     lagrangian_frame,
     lagrangian_value,
@@ -187,23 +192,13 @@ class SocialPotentialDynamics(Dynamics):
         cfg = self.cfg
         assert self._force is not None
         goal = goal if self._sink else None
-        B, cap = self.batch, cfg.max_substeps
-        remaining = np.full(B, cfg.dt)
-        used = np.zeros(B)
-        over = np.zeros(B, dtype=bool)
-        needed = np.zeros(B)
+        B = self.batch
+        budget = SubstepBudget(B, cfg.dt, cfg.max_substeps)
         rows = np.arange(B)
         geometry: PairGeometry | None = None
         while True:
             every = rows.size == B  # no gather while every swarm is still stepping
-            n, h = substep_plan(remaining[rows], self._h_stable[rows])
-            needed[rows] = np.maximum(needed[rows], used[rows] + n)
-            left = cap - used[rows]
-            late = n > left
-            if late.any():  # the rest in the substeps left, and marked
-                over[rows[late]] = True
-                h = np.where(late, remaining[rows] / np.maximum(left, 1.0), h)
-                n = np.where(late, np.maximum(left, 1.0), n)
+            n, h = budget.plan(rows, self._h_stable[rows])
             hb = h[:, None, None].astype(self.dtype)
             xr, vr = (x, v) if every else (x[rows], v[rows])
             fr = self._force if every else self._force[rows]
@@ -223,11 +218,9 @@ class SocialPotentialDynamics(Dynamics):
                 x[rows], v[rows] = xr, vr
                 if self._verlet:
                     self._force[rows] = fr
-            used[rows] += 1
-            remaining[rows] = np.where(n <= 1, 0.0, remaining[rows] - h)
-            done = remaining[rows] == 0
+            done = budget.spend(rows, n, h)
             if done.all():
-                self._count(used, over, needed)
+                self._count(budget.used, budget.over, budget.needed)
                 return x, v, geometry if every else None
             rows = rows[~done]
             xr, vr = x[rows], v[rows]

@@ -75,7 +75,7 @@ from swarm_envs.envs.core import SwarmNavCore
 from swarm_envs.physics import compiled_pairs, goal_force, goal_potential, kinetic_energy
 from swarm_envs.physics._validation import check_real
 from swarm_envs.physics.cutoff import cutoff_radius
-from swarm_envs.physics.integrators import euler_update, stable_substep, substep_plan
+from swarm_envs.physics.integrators import SubstepBudget, euler_update, stable_substep
 from swarm_envs.physics.neighbors import knn
 from swarm_envs.physics.pair_sums import swarm_rates
 
@@ -423,23 +423,13 @@ class SparseSwarmNavCore(SwarmNavCore):
         verlet = cfg.integrator == "velocity_verlet"
         goal = self._physics_goal()
         ahead = B * cfg.n_agents >= KNN_AHEAD_MIN_AGENTS
-        remaining = np.full(B, cfg.dt)
-        used = np.zeros(B)
-        over = np.zeros(B, dtype=bool)
-        needed = np.zeros(B)
+        budget = SubstepBudget(B, cfg.dt, cap)
         rows = np.arange(B)
         x, v, f = self.x, self.v, self._f_passive
         moved = False  # self.x holds the step's final positions
         while True:
             every = rows.size == B  # no gather while every swarm is still stepping
-            n, h = substep_plan(remaining[rows], self._h_stable[rows])
-            needed[rows] = np.maximum(needed[rows], used[rows] + n)
-            left = cap - used[rows]
-            late = n > left
-            if late.any():  # the rest in the substeps left, and marked
-                over[rows[late]] = True
-                h = np.where(late, remaining[rows] / np.maximum(left, 1.0), h)
-                n = np.where(late, np.maximum(left, 1.0), n)
+            n, h = budget.plan(rows, self._h_stable[rows])
             hb = h[:, None, None].astype(self.dtype)
             xr, vr, fr = (x, v, f) if every else (x[rows], v[rows], f[rows])
             ur = control if control is None or every else control[rows]
@@ -472,16 +462,14 @@ class SparseSwarmNavCore(SwarmNavCore):
             else:
                 v[rows], f[rows] = vr, res.force
             self._keep(rows, res)
-            used[rows] += 1
-            remaining[rows] = np.where((n <= 1) | ~res.finite, 0.0, remaining[rows] - h)
-            done = remaining[rows] == 0
+            done = budget.spend(rows, n, h, stop=~res.finite)
             if done.all():
                 break
             rows = rows[~done]
         self.x, self.v, self._f_passive = x, v, f
         if not moved:
             self._state += 1
-        self.dynamics.record(used, over, needed)
+        self.dynamics.record(budget.used, budget.over, budget.needed)
 
     def _unstable(self, bad: np.ndarray, before: tuple[np.ndarray, np.ndarray]) -> None:
         """As the dense core's: raise :class:`SwarmUnstableError`, or put the swarms

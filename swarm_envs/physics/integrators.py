@@ -110,6 +110,53 @@ def substep_plan(remaining: Any, h_stable: Any, xp: Any = np) -> tuple[Any, Any]
     return n, h
 
 
+class SubstepBudget:
+    """The substeps of one step of length ``dt`` for ``batch`` swarms, at most ``cap`` each.
+
+    Per swarm: the time ``remaining``, the substeps ``used``, whether the step went
+    ``over`` the cap, and the substeps it ``needed`` (at least). :meth:`plan` gives the
+    next substep of the swarms ``rows`` (:func:`substep_plan`; a swarm that needs more than
+    it has left is marked over the cap and takes its remaining time in the substeps left);
+    :meth:`spend` books it and says which of them are done.
+
+    >>> budget = SubstepBudget(2, 0.1, cap=3)
+    >>> rows = np.arange(2)
+    >>> n, h = budget.plan(rows, np.array([0.2, 0.01]))
+    >>> n.tolist(), budget.over.tolist(), budget.needed.tolist()
+    ([1.0, 3.0], [False, True], [1.0, 10.0])
+    """
+
+    def __init__(self, batch: int, dt: float, cap: int) -> None:
+        self.cap = cap
+        self.remaining = np.full(batch, dt)
+        self.used = np.zeros(batch)
+        self.over = np.zeros(batch, dtype=bool)
+        self.needed = np.zeros(batch)
+
+    def plan(self, rows: np.ndarray, h_stable: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(n, h)`` of the swarms ``rows`` given their stable substeps ``h_stable``."""
+        remaining = self.remaining[rows]
+        n, h = substep_plan(remaining, h_stable)
+        self.needed[rows] = np.maximum(self.needed[rows], self.used[rows] + n)
+        left = self.cap - self.used[rows]
+        late = n > left
+        if late.any():
+            self.over[rows[late]] = True
+            h = np.where(late, remaining / np.maximum(left, 1.0), h)
+            n = np.where(late, np.maximum(left, 1.0), n)
+        return n, h
+
+    def spend(
+        self, rows: np.ndarray, n: np.ndarray, h: np.ndarray, stop: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Book one substep ``h`` of the swarms ``rows`` (``n``: what :meth:`plan` gave);
+        ``stop`` ends a swarm's step early. Returns which of ``rows`` are done."""
+        self.used[rows] += 1
+        last = n <= 1 if stop is None else (n <= 1) | stop
+        self.remaining[rows] = np.where(last, 0.0, self.remaining[rows] - h)
+        return self.remaining[rows] == 0
+
+
 def euler_update(x: Any, v: Any, accel: Any, dt: float, m: float) -> tuple[Any, Any]:
     """The semi-implicit Euler update with the force ``accel`` (passive + control):
     ``v' = v + dt · accel/m``, ``x' = x + dt v'``. numpy arrays or torch tensors."""
