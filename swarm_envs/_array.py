@@ -117,6 +117,9 @@ class ArrayNamespace:
     def ones(self, shape: tuple[int, ...], like: Array) -> Array:
         return np.ones(shape, dtype=like.dtype)
 
+    def eye(self, n: int, like: Array) -> Array:
+        return np.eye(n, dtype=like.dtype)
+
     def array(self, values: Sequence[float], like: Array) -> Array:
         """A 1-D array of ``values`` in the dtype (and on the device) of ``like``."""
         return np.asarray(values, dtype=like.dtype)
@@ -209,6 +212,9 @@ class TorchNamespace(ArrayNamespace):
 
     def ones(self, shape: tuple[int, ...], like: Array) -> Array:
         return self.torch.ones(shape, dtype=like.dtype, device=like.device)
+
+    def eye(self, n: int, like: Array) -> Array:
+        return self.torch.eye(n, dtype=like.dtype, device=like.device)
 
     def array(self, values: Sequence[float], like: Array) -> Array:
         return self.torch.tensor(values, dtype=like.dtype, device=like.device)

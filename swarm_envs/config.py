@@ -36,6 +36,7 @@ from swarm_envs.physics import (
     SocialPotentialParams,
     ZoneParams,
 )
+from swarm_envs.perturbations import Perturbations
 from swarm_envs.physics._validation import SUPPORTED_DIMS, check_real
 
 T = TypeVar("T")
@@ -204,8 +205,15 @@ class SwarmConfig:
     """Observed neighbour offsets are divided by this length."""
     obs_velocity_scale: float = 2.0
     """Observed velocities (own and relative) are divided by this speed."""
+    observe_status: bool = False
+    """If true each neighbour slot of an observation ends with a flag: 1 when that
+    neighbour is active, 0 when it has failed (and the central Gymnasium env appends
+    every agent's flag); see ``perturbations``."""
     reward: RewardWeights = field(default_factory=RewardWeights)
     """Reward weights."""
+    perturbations: Perturbations = field(default_factory=Perturbations)
+    """Agents that fail, join or are absent, and noise (:class:`~swarm_envs.perturbations.Perturbations`);
+    none by default."""
     backend: str = "auto"
     """How a step is computed, one of :data:`BACKENDS`: ``"numpy"`` (dense, every
     model), ``"sparse"`` (cut-off + cell list, large swarms), ``"native"`` (the step in
@@ -255,6 +263,21 @@ class SwarmConfig:
             raise ValueError(f"{owner}.reward must be RewardWeights")
         if not isinstance(self.goal_in_physics, bool):
             raise ValueError(f"{owner}.goal_in_physics must be true or false")
+        if not isinstance(self.observe_status, bool):
+            raise ValueError(f"{owner}.observe_status must be true or false")
+        if not isinstance(self.perturbations, Perturbations):
+            raise ValueError(f"{owner}.perturbations must be Perturbations")
+        if self.perturbations.needs_masks and self.dynamics != "social_potential":
+            raise ValueError(
+                f"{owner}.perturbations: removed, frozen, absent and joining agents need "
+                f"dynamics='social_potential' (the other models take failure_mode='passive' "
+                f"and the noise), got dynamics={self.dynamics!r}"
+            )
+        if self.perturbations.needs_masks and self.integrator != "semi_implicit_euler":
+            raise ValueError(
+                f"{owner}.perturbations: removed, frozen, absent and joining agents need "
+                f"integrator='semi_implicit_euler', got {self.integrator!r}"
+            )
         reals = {
             "dt": dict(low=0.0, low_inclusive=False),
             "init_radius": dict(low=0.0),

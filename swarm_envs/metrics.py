@@ -127,14 +127,36 @@ def _headings(v: Any, xp: ArrayNamespace) -> Any:
     return _unit(v, speed, speed > 0, xp)
 
 
-def _relative(x: Any, xp: ArrayNamespace) -> Any:
-    """``r_ic = r_i − r_c``, shaped like ``x``."""
-    return x - xp.mean_agents(x)[..., None, :]
+def _weights(members: Any, like: Any, xp: ArrayNamespace) -> tuple[Any, Any]:
+    """``(w (..., N), Σ w (...))``: the members as weights in the dtype of ``like``."""
+    w = xp.astype(members, like)
+    return w, xp.sum(w, axis=-1)
 
 
-def _unit_relative(x: Any, xp: ArrayNamespace) -> Any:
+def _mean_members(a: Any, members: Any | None, xp: ArrayNamespace) -> Any:
+    """The mean over the agents of vectors ``(..., N, d)``, or over the members only."""
+    if members is None:
+        return xp.mean_agents(a)
+    w, count = _weights(members, a, xp)
+    return xp.sum_agents(a * w[..., None]) / count[..., None]
+
+
+def _average(a: Any, members: Any | None, xp: ArrayNamespace) -> Any:
+    """The mean of values ``(..., N)`` over the agents, or over the members only."""
+    if members is None:
+        return xp.mean(a, axis=-1)
+    w, count = _weights(members, a, xp)
+    return xp.sum(xp.where(members, a, 0.0), axis=-1) / count
+
+
+def _relative(x: Any, xp: ArrayNamespace, members: Any | None = None) -> Any:
+    """``r_ic = r_i − r_c``, shaped like ``x`` (``r_c`` the members' centroid)."""
+    return x - _mean_members(x, members, xp)[..., None, :]
+
+
+def _unit_relative(x: Any, xp: ArrayNamespace, members: Any | None = None) -> Any:
     """``r̂_ic``, with the zero vector for an agent at the centre (to rounding)."""
-    r = _relative(x, xp)
+    r = _relative(x, xp, members)
     dist = _norm(r, xp)
     n = x.shape[-2]
     largest = xp.abs(x[..., 0])
@@ -188,7 +210,7 @@ def centroid(x: ArrayLike) -> np.ndarray:
     return namespace(x).mean_agents(x)
 
 
-def polarization(v: ArrayLike) -> np.ndarray:
+def polarization(v: ArrayLike, members: ArrayLike | None = None) -> np.ndarray:
     """Unit-heading polarization ``|Σ_i v̂_i| / N ∈ [0, 1]`` (Couzin 2002; Naterop eq. 8).
 
     1 when every agent heads the same way, near 0 when the headings cancel. It does not
@@ -198,6 +220,8 @@ def polarization(v: ArrayLike) -> np.ndarray:
 
     Args:
         v: velocities ``(..., N, d)``.
+        members: optional bool ``(..., N)``: the statistic of these agents only (the
+            swarm's members when agents fail, ``swarm_envs.envs.task.agent_status``).
 
     Returns:
         Shape ``(...)``, in the dtype of ``v``.
@@ -208,11 +232,16 @@ def polarization(v: ArrayLike) -> np.ndarray:
     0.0
     >>> float(polarization(np.array([[2.0, 0.0], [0.0, 0.0]])))  # resting agent adds 0
     0.5
+    >>> float(polarization(np.array([[2.0, 0.0], [0.0, 0.0]]), members=np.array([1, 0])))
+    1.0
     """
     v = _as_state("velocities", v)
     xp = namespace(v)
-    n = v.shape[-2]
-    return _result(xp.clip(_norm(xp.sum_agents(_headings(v, xp)), xp) / n, None, 1.0), v)
+    if members is None:
+        value = _norm(xp.sum_agents(_headings(v, xp)), xp) / v.shape[-2]
+    else:
+        value = _norm(_mean_members(_headings(v, xp), members, xp), xp)
+    return _result(xp.clip(value, None, 1.0), v)
 
 
 def velocity_polarization(v: ArrayLike) -> np.ndarray:
@@ -257,7 +286,9 @@ def spherical_variance(v: ArrayLike) -> np.ndarray:
     return _result(1 - p, p)
 
 
-def angular_momentum(x: ArrayLike, v: ArrayLike) -> np.ndarray:
+def angular_momentum(
+    x: ArrayLike, v: ArrayLike, members: ArrayLike | None = None
+) -> np.ndarray:
     """Unit-heading angular momentum ``|Σ_i r̂_ic × v̂_i| / N ∈ [0, 1]`` (Couzin 2002).
 
     ``r_ic = r_i − r_c`` with ``r_c`` the :func:`centroid`. 1 for a ring of agents
@@ -269,6 +300,7 @@ def angular_momentum(x: ArrayLike, v: ArrayLike) -> np.ndarray:
     Args:
         x: positions ``(..., N, d)``.
         v: velocities, same shape.
+        members: optional bool ``(..., N)``: these agents only (their own centroid).
 
     Returns:
         Shape ``(...)``, in the common dtype of ``x`` and ``v``.
@@ -283,8 +315,12 @@ def angular_momentum(x: ArrayLike, v: ArrayLike) -> np.ndarray:
     """
     x, v = _as_pair(x, v)
     xp = namespace(x, v)
-    n = x.shape[-2]
-    value = _cross_sum_norm(_unit_relative(x, xp), _headings(v, xp), xp) / n
+    r, heading = _unit_relative(x, xp, members), _headings(v, xp)
+    if members is None:
+        value = _cross_sum_norm(r, heading, xp) / x.shape[-2]
+    else:
+        w, count = _weights(members, r, xp)
+        value = _cross_sum_norm(r * w[..., None], heading, xp) / count
     return _result(xp.clip(value, None, 1.0), _common(x, v))
 
 
@@ -367,7 +403,7 @@ def nearest_neighbor_distance(x: ArrayLike) -> np.ndarray:
     return _result(np.sqrt(rho2.min(axis=-1)).mean(axis=-1), x)
 
 
-def expanse(x: ArrayLike) -> np.ndarray:
+def expanse(x: ArrayLike, members: ArrayLike | None = None) -> np.ndarray:
     """Group expanse ``ε_G = (1/N) Σ_i |r_i − r_c|`` (Mabrouk & McInnes §1.2; Naterop eq. 11).
 
     The mean distance of the agents from the :func:`centroid`, as the paper's text
@@ -377,6 +413,7 @@ def expanse(x: ArrayLike) -> np.ndarray:
 
     Args:
         x: positions ``(..., N, d)``.
+        members: optional bool ``(..., N)``: these agents only (their own centroid).
 
     Returns:
         Shape ``(...)``, in the dtype of ``x``.
@@ -387,7 +424,7 @@ def expanse(x: ArrayLike) -> np.ndarray:
     """
     x = _as_state("positions", x)
     xp = namespace(x)
-    return _result(xp.mean(_norm(_relative(x, xp), xp), axis=-1), x)
+    return _result(_average(_norm(_relative(x, xp, members), xp), members, xp), x)
 
 
 def packing_density(x: ArrayLike) -> np.ndarray:

@@ -71,12 +71,27 @@ def _core_class(backend: str) -> Any:
     return TorchSwarmNavCore
 
 
+#: The backends whose cores take agent statuses (``set_status``): removed, frozen,
+#: absent and joining agents, and ``observe_status``. The others run the perturbations
+#: that leave every agent in the physics (passive failures, noise, dropout).
+STATUS_BACKENDS = ("numpy",)
+
+
+def _needs_statuses(cfg: SwarmConfig) -> bool:
+    return cfg.perturbations.needs_masks or cfg.observe_status
+
+
 def unsupported(cfg: SwarmConfig, backend: str) -> str | None:
     """Why ``backend`` cannot run ``cfg`` here (``None`` if it can).
 
     >>> unsupported(SwarmConfig(dynamics="zone"), "torch")
     "supports dynamics='social_potential' only, got 'zone'"
     """
+    if backend not in STATUS_BACKENDS and _needs_statuses(cfg):
+        return (
+            "does not take agent statuses (removed, frozen, absent or joining agents, "
+            f"observe_status); {', '.join(map(repr, STATUS_BACKENDS))} does"
+        )
     if backend == "numpy":
         return None if cfg.device == "cpu" else f"runs on the CPU only, got device={cfg.device!r}"
     if backend == "sparse":
@@ -88,6 +103,16 @@ def unsupported(cfg: SwarmConfig, backend: str) -> str | None:
 
 def _auto(cfg: SwarmConfig, batch: int) -> tuple[str, str | None]:
     """``auto``'s pick and, if the C step would have been picked but cannot run, why."""
+    pick, why = _auto_by_speed(cfg, batch)
+    if _needs_statuses(cfg) and unsupported(cfg, pick) is not None:
+        for name in ("native", "numpy", "torch"):
+            if unsupported(cfg, name) is None:
+                return name, None
+        raise ValueError(f"no backend can run this config: {pick!r} {unsupported(cfg, pick)}")
+    return pick, why
+
+
+def _auto_by_speed(cfg: SwarmConfig, batch: int) -> tuple[str, str | None]:
     if cfg.device != "cpu":
         return "torch", None
     if cfg.dynamics == "social_potential" and cfg.n_agents >= SPARSE_MIN_AGENTS:
@@ -176,5 +201,11 @@ def make_core(cfg: SwarmConfig, batch: int = 1, dtype: Any = np.float64) -> Core
     backend = resolve_backend(cfg, batch)
     cls = _core_class(backend)
     if backend == "torch":
-        return cls(cfg, batch=batch, dtype=dtype, device=cfg.device)
-    return cls(cfg, batch=batch, dtype=dtype)
+        core = cls(cfg, batch=batch, dtype=dtype, device=cfg.device)
+    else:
+        core = cls(cfg, batch=batch, dtype=dtype)
+    if cfg.perturbations.any:
+        from swarm_envs.envs.perturbed import PerturbedCore
+
+        return PerturbedCore(core)
+    return core

@@ -39,6 +39,7 @@ from swarm_envs.envs.common import (
     wide_dtypes,
 )
 from swarm_envs.envs.dynamics import make_dynamics
+from swarm_envs.envs.task.agent_status import masks
 from swarm_envs.envs.task import (
     OBS_BOUND,
     STAT_KEYS,
@@ -52,6 +53,7 @@ from swarm_envs.envs.task import (
     success_count,
 )
 from swarm_envs.physics import PairGeometry, pair_geometry
+from swarm_envs.physics.social_potential import present_geometry
 
 __all__ = [
     "NON_FINITE_ACTIONS",
@@ -100,6 +102,10 @@ class SwarmNavCore:
         self._start = self._empty_stats()  # each episode's first statistics
         self._geometry: PairGeometry | None = None
         self._near: np.ndarray | None = None  # ranked neighbours of the current state
+        #: Each agent's status ``(B, N)`` int8 (:mod:`~swarm_envs.envs.task.agent_status`),
+        #: ``None`` while every agent is active and always will be.
+        self.status: np.ndarray | None = None
+        self._members: np.ndarray | None = None
 
     def _empty_stats(self) -> dict[str, np.ndarray]:
         return {key: np.zeros(self.batch, dt) for key, dt in self._wide.items()}
@@ -170,7 +176,7 @@ class SwarmNavCore:
         idx = np.flatnonzero(bad)
         self.x[idx], self.v[idx] = before[0][idx], before[1][idx]
         self.dynamics.restore(self.x, self.v, self.goal, idx)
-        self._geometry = pair_geometry(self.x)
+        self._geometry = self._pair_geometry(self.x)
         substeps = self.dynamics.substeps.copy()
         substeps[idx] = 0.0  # the step was undone
         with np.errstate(over="ignore", invalid="ignore"):
@@ -185,13 +191,61 @@ class SwarmNavCore:
     def _after_reset(self, idx: np.ndarray, rng: np.random.Generator) -> None:
         """Model state for the swarms ``idx`` after their starts were drawn."""
         self.dynamics.reset(self.x, self.v, self.goal, idx, rng)
-        self._geometry = pair_geometry(self.x)
+        self._geometry = self._pair_geometry(self.x)
 
     def _advance(self, control: np.ndarray | None) -> None:
         """Advance ``x, v`` by one step with the control ``u_max · a`` (None: zero)."""
         goal = self.goal if self.cfg.goal_in_physics else None
         self.x, self.v, geometry = self.dynamics.step(self.x, self.v, goal, control)
-        self._geometry = pair_geometry(self.x) if geometry is None else geometry
+        self._geometry = self._pair_geometry(self.x) if geometry is None else geometry
+
+    def _pair_geometry(self, x: np.ndarray) -> PairGeometry:
+        """The pair geometry of ``x``, pairs with an agent not present at infinity."""
+        return present_geometry(pair_geometry(x), self.dynamics.present)
+
+    # ------------------------------------------------------------------ agents
+    def set_status(
+        self,
+        status: np.ndarray,
+        place: np.ndarray | None = None,
+        at: np.ndarray | None = None,
+        *,
+        rows: np.ndarray | None = None,
+        start: bool = False,
+    ) -> None:
+        """Give the agents new statuses ``(B, N)`` (agent_status) between steps.
+
+        ``place`` ``(B, N)`` bool: agents put at ``at`` ``(B, N, d)`` (joining agents).
+        Agents that no longer move and placed agents are at rest. The swarms whose
+        statuses or places changed, and those in ``rows`` ``(B,)``, are measured again, and their previous statistics
+        become these (``start=True``: their episode's start too), so that the next
+        reward compares like with like.
+        """
+        old = self.status
+        changed = np.ones(self.batch, dtype=bool) if old is None else (old != status).any(-1)
+        rows = changed if rows is None else changed | rows
+        if place is not None:
+            rows |= place.any(axis=-1)
+            self.x = np.where(place[..., None], at, self.x).astype(self.dtype, copy=False)
+        self.status = np.array(status, dtype=np.int8)
+        mask = masks(self.status)
+        self.v = np.where(mask.mobile[..., None], self.v, 0.0).astype(self.dtype, copy=False)
+        if place is not None:
+            self.v[place] = 0.0
+        self._members = mask.mobile
+        if self.cfg.perturbations.needs_masks:
+            self.dynamics.present, self.dynamics.mobile = mask.present, mask.mobile
+        if not rows.any():
+            return
+        idx = np.flatnonzero(rows)
+        self.dynamics.restore(self.x, self.v, self.goal, idx)
+        self._geometry = self._pair_geometry(self.x)
+        with np.errstate(over="ignore", invalid="ignore"):
+            self._measure(substeps=self._stats["substeps"])
+        for key, value in self._stats.items():
+            self._prev[key][idx] = value[idx]
+            if start:
+                self._start[key][idx] = value[idx]
 
     def _pair_measures(self) -> tuple[np.ndarray | None, np.ndarray, np.ndarray, np.ndarray]:
         """``(ranked neighbours (B, N, k') or None, nearest distance (B, N), close
@@ -201,12 +255,17 @@ class SwarmNavCore:
         rho = self._geometry.rho.copy()
         diag = np.arange(cfg.n_agents)
         rho[:, diag, diag] = np.inf
-        close = np.count_nonzero(rho < cfg.collision_radius, axis=(-2, -1)) // 2
+        close_pairs = rho < cfg.collision_radius
+        if self._members is not None:  # a pair of agents at rest does not collide
+            close_pairs &= self._members[..., :, None] | self._members[..., None, :]
+        close = np.count_nonzero(close_pairs, axis=(-2, -1)) // 2
         energy = self.dynamics.measure(self.x, self.v, self.goal, self._geometry)
         if cfg.n_agents == 1:
             return None, np.zeros((self.batch, 1), self.dtype), close, energy
         near = _rank_neighbors(rho, ranked_neighbors(cfg))
         nearest = np.take_along_axis(rho, near[..., :1], axis=-1)[..., 0]
+        if self.dynamics.present is not None:  # an agent alone in the physics: 0
+            nearest = np.where(np.isfinite(nearest), nearest, 0.0).astype(self.dtype)
         return near, nearest, close, energy
 
     # ------------------------------------------------------------------ measures
@@ -225,6 +284,7 @@ class SwarmNavCore:
             close,
             energy,
             np.zeros(self.batch) if substeps is None else substeps,
+            self._members,
         )
         self._stats = {
             key: np.asarray(value, dtype=self._wide[key]).reshape(self.batch)
@@ -242,11 +302,15 @@ class SwarmNavCore:
         ``(B,)``): those swarms' observations only, ``(n, N, obs_dim)``. Every call
         returns a new array.
         """
+        status = self.status
         if which is None:
-            return observation(self.x, self.v, self.goal, self._near, self.cfg, NUMPY)
+            return observation(self.x, self.v, self.goal, self._near, self.cfg, NUMPY, status)
         idx = np.flatnonzero(which)
         near = None if self._near is None else self._near[idx]
-        return observation(self.x[idx], self.v[idx], self.goal[idx], near, self.cfg, NUMPY)
+        status = None if status is None else status[idx]
+        return observation(
+            self.x[idx], self.v[idx], self.goal[idx], near, self.cfg, NUMPY, status
+        )
 
 
 def _rank_neighbors(rho: np.ndarray, k: int) -> np.ndarray:

@@ -61,7 +61,12 @@ from swarm_envs.physics.lagrangian import (
     pair_clearance,
 )
 from swarm_envs.physics.piecewise import interaction_forces, piecewise_rates, random_force
-from swarm_envs.physics.social_potential import goal_terms, pair_rates, pair_terms
+from swarm_envs.physics.social_potential import (
+    goal_terms,
+    pair_rates,
+    pair_terms,
+    present_geometry,
+)
 from swarm_envs.physics.zone import (
     ZoneAgentParams,
     draw_agent_params,
@@ -86,6 +91,10 @@ class Dynamics(ABC):
         self.substeps = np.ones(batch)
         self.over_cap = np.zeros(batch, dtype=bool)
         self.needed = np.ones(batch)
+        #: Agents in the physics and agents that move, ``(B, N)`` bool, set by the core
+        #: when agents can leave or stop (``None``: every agent; agent_status).
+        self.present: np.ndarray | None = None
+        self.mobile: np.ndarray | None = None
 
     def reset(
         self,
@@ -173,6 +182,14 @@ class SocialPotentialDynamics(Dynamics):
                 x[idx], v[idx], self.cfg.physics, None if g is None else g[idx]
             )
 
+    def _mobile_force(self, f: np.ndarray, rows: np.ndarray | None) -> np.ndarray:
+        """The total force with the agents that do not move held at rest (zero force:
+        their velocity is zero, so they keep their position)."""
+        if self.mobile is None:
+            return f
+        mobile = self.mobile if rows is None else self.mobile[rows]
+        return np.where(mobile[..., None], f, 0.0).astype(f.dtype, copy=False)
+
     def _rates(self, geometry: PairGeometry) -> np.ndarray:
         omega2, gamma = pair_rates(geometry, self.cfg.physics, sink=self._sink)
         return stable_substep(omega2, gamma)
@@ -209,7 +226,8 @@ class SocialPotentialDynamics(Dynamics):
                     xr, vr, fr, cfg.physics, dt=hb, goal=gr, control=ur
                 )
             else:
-                xr, vr = euler_update(xr, vr, fr if ur is None else fr + ur, hb, cfg.physics.m)
+                total = self._mobile_force(fr if ur is None else fr + ur, None if every else rows)
+                xr, vr = euler_update(xr, vr, total, hb, cfg.physics.m)
             if every:
                 x, v = xr, vr  # new arrays: the caller's are never written
                 if self._verlet:
@@ -224,7 +242,9 @@ class SocialPotentialDynamics(Dynamics):
                 return x, v, geometry if every else None
             rows = rows[~done]
             xr, vr = x[rows], v[rows]
-            geo = pair_geometry(xr)
+            geo = present_geometry(
+                pair_geometry(xr), None if self.present is None else self.present[rows]
+            )
             if not self._verlet:
                 self._force[rows] = self._passive(xr, vr, None if goal is None else goal[rows], geo)
             self._h_stable[rows] = self._rates(geo)
@@ -240,6 +260,8 @@ class SocialPotentialDynamics(Dynamics):
         phi = kinetic_energy(v, p) + pairs
         if p.C_g > 0:
             sink, potential, _ = goal_terms(x, p, goal)
+            if self.present is not None:
+                potential = np.where(self.present, potential, 0.0)
             phi = phi + potential.sum(axis=-1)
             if self.cfg.goal_in_physics:
                 fs = [fc + gc for fc, gc in zip(fs, sink, strict=True)]

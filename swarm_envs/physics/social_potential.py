@@ -327,6 +327,21 @@ def pair_geometry(x: Array) -> PairGeometry:
     return PairGeometry(dx, xp.sqrt_temp(rho2))
 
 
+def present_geometry(geometry: PairGeometry, present: Array | None) -> PairGeometry:
+    """``geometry`` with every pair that has a member not in ``present`` ``(..., N)``
+    at infinite distance: such a pair has no force, energy or rate (every law here
+    decays to exactly 0), is nobody's near neighbour and never collides. The diagonal
+    keeps ``ρ_ii = 0``. ``present=None`` returns ``geometry``."""
+    if present is None:
+        return geometry
+    rho = geometry.rho
+    xp = namespace(rho)
+    n = rho.shape[-1]
+    pairs = present[..., :, None] & present[..., None, :]
+    eye = xp.eye(n, like=rho) > 0
+    return PairGeometry(geometry.dx, xp.where(pairs | eye, rho, xp.inf))
+
+
 def pair_terms(
     geometry: PairGeometry,
     v: Array | None,

@@ -11,12 +11,16 @@ for each of the k nearest neighbours j, nearest first:
   offset ``(r_j − r_i) / obs_neighbor_scale``                  ``d``
   relative velocity ``(v_j − v_i) / obs_velocity_scale``       ``d``
   mask: 1 for a real neighbour, 0 for a padding slot           ``1``
+  with ``observe_status``: 1 if that neighbour is active, 0      ``1``
+  if it has failed (:mod:`~swarm_envs.envs.task.agent_status`)
 ========================================  ====================================
 
 "Nearest first" orders by ``(ρ_ij, j)``: equal distances by the lower index. When
 ``N − 1 < k`` the last ``k − (N − 1)`` slots are padding (all zeros). Every entry is
 clipped to ``[−OBS_BOUND, OBS_BOUND]``; observations are float32 whatever the state's
-dtype. :func:`observation` computes this from the state and each agent's neighbour
+dtype. Only agents present in the physics are neighbours: a slot whose ranked agent is
+absent (fewer present agents than ``k``) is padding. An agent's own features do not say
+whether it has failed: a failed agent no longer acts, and the adapters stop asking it. :func:`observation` computes this from the state and each agent's neighbour
 indices, on numpy arrays or torch tensors; the C step writes the same layout.
 """
 
@@ -25,6 +29,7 @@ from __future__ import annotations
 from typing import Any
 
 from swarm_envs._array import ArrayNamespace
+from swarm_envs.envs.task.agent_status import ACTIVE, FROZEN
 
 Array = Any
 
@@ -40,10 +45,20 @@ LAYOUT = (
 )
 
 
+def block_size(task: Any) -> int:
+    """Entries per neighbour slot: ``2d + 1`` (offset, velocity, mask), one more with
+    ``observe_status``."""
+    return 2 * task.dim + 1 + int(getattr(task, "observe_status", False))
+
+
 def observation_size(task: Any) -> int:
-    """``2d + k (2d + 1)``: goal offset, own velocity, k × (offset, velocity, mask)."""
-    d = task.dim
-    return 2 * d + task.n_neighbors * (2 * d + 1)
+    """``2d + k · block``: goal offset, own velocity, k neighbour slots (:func:`block_size`)."""
+    return 2 * task.dim + task.n_neighbors * block_size(task)
+
+
+def layout(task: Any) -> str:
+    """:data:`LAYOUT`, with ``,status`` ending each neighbour block under ``observe_status``."""
+    return LAYOUT + (",status" if getattr(task, "observe_status", False) else "")
 
 
 def ranked_neighbors(task: Any) -> int:
@@ -53,7 +68,13 @@ def ranked_neighbors(task: Any) -> int:
 
 
 def observation(
-    x: Array, v: Array, goal: Array, near: Array | None, task: Any, xp: ArrayNamespace
+    x: Array,
+    v: Array,
+    goal: Array,
+    near: Array | None,
+    task: Any,
+    xp: ArrayNamespace,
+    status: Array | None = None,
 ) -> Array:
     """Observations ``(B, N, obs_dim)`` float32 (the layout of the module docstring).
 
@@ -65,10 +86,13 @@ def observation(
             ``None`` when no neighbour is observed.
         task: the :class:`~swarm_envs.config.SwarmConfig`.
         xp: the array namespace of ``x``.
+        status: each agent's status ``(B, N)`` (``None``: every agent active); the
+            neighbour ranking must put agents not present last.
     """
     B, N, d = x.shape
     k = task.n_neighbors
     k_real = min(k, N - 1)
+    block = block_size(task)
     parts = [(goal[:, None, :] - x) / task.obs_goal_scale, v / task.obs_velocity_scale]
     if k_real > 0:
         assert near is not None
@@ -78,14 +102,25 @@ def observation(
         index = near[..., :k_real]
         columns = [x[..., c] for c in range(d)] + [v[..., c] for c in range(d)]
         scales = [1.0 / task.obs_neighbor_scale] * d + [1.0 / task.obs_velocity_scale] * d
-        gathered = xp.gather_agents(columns, index)
+        flag_columns = []
+        if status is not None:
+            flag_columns = [xp.astype(status <= FROZEN, x), xp.astype(status == ACTIVE, x)]
+        gathered = xp.gather_agents(columns + flag_columns, index)
+        flags = gathered[2 * d :]
+        gathered = gathered[: 2 * d]
         features = [
             (g - col[..., None]) * scale
             for g, col, scale in zip(gathered, columns, scales, strict=True)
         ]
-        features.append(xp.ones((B, N, k_real), like=x))
-        parts.append(xp.stack(features, axis=-1).reshape(B, N, k_real * (2 * d + 1)))
+        if status is None:
+            features.append(xp.ones((B, N, k_real), like=x))
+        else:
+            real, active = flags  # a slot holds a neighbour where it is present
+            features = [f * real for f in features] + [real]
+        if getattr(task, "observe_status", False):
+            features.append(xp.ones((B, N, k_real), like=x) if status is None else active * real)
+        parts.append(xp.stack(features, axis=-1).reshape(B, N, k_real * block))
     if k > k_real:
-        parts.append(xp.zeros((B, N, (k - k_real) * (2 * d + 1)), like=x))
+        parts.append(xp.zeros((B, N, (k - k_real) * block), like=x))
     obs = xp.concat(parts, axis=-1)
     return xp.float32(xp.clip(obs, -OBS_BOUND, OBS_BOUND))

@@ -38,6 +38,10 @@ class Frame(NamedTuple):
         energy: the model's energy statistic ``(B,)`` (``swarm_envs.envs.dynamics``).
         substeps: integration substeps the step took ``(B,)`` (step-size control;
             ``None``: none, as after a reset).
+        members: which agents are the swarm's members ``(B, N)`` bool, the mobile ones
+            (:mod:`~swarm_envs.envs.task.agent_status`); ``None``: every agent. The
+            group statistics and the task count the members only; ``nearest_distance``
+            is then each agent's distance to its nearest present other.
     """
 
     x: Array
@@ -48,6 +52,7 @@ class Frame(NamedTuple):
     close_pairs: Array
     energy: Array
     substeps: Array | None = None
+    members: Array | None = None
 
 
 @dataclass(frozen=True)
@@ -79,17 +84,41 @@ def success_count(n_agents: int, success_fraction: float) -> int:
 
 
 def _arrived_count(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
-    return xp.sum(xp.astype(f.goal_distance <= task.arrival_radius, f.goal_distance), axis=-1)
+    arrived = f.goal_distance <= task.arrival_radius
+    if f.members is not None:
+        arrived = arrived & f.members
+    return xp.sum(xp.astype(arrived, f.goal_distance), axis=-1)
+
+
+def _member_count(f: Frame, task: Any, xp: ArrayNamespace) -> Array | int:
+    if f.members is None:
+        return task.n_agents
+    return xp.sum(xp.astype(f.members, f.goal_distance), axis=-1)
+
+
+def _mean(values: Array, f: Frame, xp: ArrayNamespace) -> Array:
+    """The mean of per-agent values ``(B, N)`` over the members."""
+    if f.members is None:
+        return xp.mean(values, axis=-1)
+    return xp.sum(xp.where(f.members, values, 0.0), axis=-1) / _member_count(f, None, xp)
 
 
 def _centroid_distance(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
-    offset = xp.mean_agents(f.x) - f.goal
-    return xp.norm(offset)
+    if f.members is None:
+        centre = xp.mean_agents(f.x)
+    else:
+        w = xp.astype(f.members, f.x)
+        centre = xp.sum_agents(f.x * w[..., None]) / xp.sum(w, axis=-1)[..., None]
+    return xp.norm(centre - f.goal)
 
 
 def _success(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
-    need = success_count(task.n_agents, task.success_fraction)
-    return xp.astype(_arrived_count(f, task, xp) >= need, f.goal_distance)
+    if f.members is None:
+        need = success_count(task.n_agents, task.success_fraction)
+        return xp.astype(_arrived_count(f, task, xp) >= need, f.goal_distance)
+    # success_count's rule, c / n ≥ success_fraction − 1e-9, for each swarm's n members
+    fraction = _arrived_count(f, task, xp) / _member_count(f, task, xp)
+    return xp.astype(fraction >= task.success_fraction - 1e-9, f.goal_distance)
 
 
 def _substeps(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
@@ -103,28 +132,29 @@ STATISTICS: tuple[Statistic, ...] = (
     Statistic(
         "polarization",
         "unit-heading polarization |Σ v̂_i|/N (metrics.polarization)",
-        lambda f, task, xp: metrics.polarization(f.v),
+        lambda f, task, xp: metrics.polarization(f.v, f.members),
     ),
     Statistic(
         "angular_momentum",
         "unit-heading angular momentum |Σ r̂_ic × v̂_i|/N (metrics.angular_momentum)",
-        lambda f, task, xp: metrics.angular_momentum(f.x, f.v),
+        lambda f, task, xp: metrics.angular_momentum(f.x, f.v, f.members),
     ),
     Statistic(
         "expanse",
         "mean distance to the centroid (metrics.expanse)",
-        lambda f, task, xp: metrics.expanse(f.x),
+        lambda f, task, xp: metrics.expanse(f.x, f.members),
     ),
     Statistic(
         "nearest_neighbor_distance",
         "mean distance to the nearest other agent (0 for N = 1)",
-        lambda f, task, xp: xp.mean(f.nearest_distance, axis=-1),
+        lambda f, task, xp: _mean(f.nearest_distance, f, xp),
     ),
     Statistic("energy", "the model's energy", lambda f, task, xp: f.energy),
     Statistic(
         "fraction_arrived",
-        "fraction of agents within the arrival radius of the goal (SwarmConfig.arrival_radius)",
-        lambda f, task, xp: _arrived_count(f, task, xp) / task.n_agents,
+        "fraction of the members within the arrival radius of the goal "
+        "(SwarmConfig.arrival_radius)",
+        lambda f, task, xp: _arrived_count(f, task, xp) / _member_count(f, task, xp),
         wide=True,
     ),
     Statistic(
@@ -137,11 +167,11 @@ STATISTICS: tuple[Statistic, ...] = (
     Statistic(
         "mean_goal_distance",
         "mean agent-to-goal distance",
-        lambda f, task, xp: xp.mean(f.goal_distance, axis=-1),
+        lambda f, task, xp: _mean(f.goal_distance, f, xp),
     ),
     Statistic(
         "success",
-        "1 when at least success_fraction of the agents have arrived",
+        "1 when at least success_fraction of the members have arrived",
         _success,
         wide=True,
     ),
