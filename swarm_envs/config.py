@@ -29,6 +29,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+from swarm_envs.perturbations import Perturbations
 from swarm_envs.physics import (
     INTEGRATORS,
     LagrangianParams,
@@ -36,7 +37,6 @@ from swarm_envs.physics import (
     SocialPotentialParams,
     ZoneParams,
 )
-from swarm_envs.perturbations import Perturbations
 from swarm_envs.physics._validation import SUPPORTED_DIMS, check_real
 
 T = TypeVar("T")
@@ -212,8 +212,8 @@ class SwarmConfig:
     reward: RewardWeights = field(default_factory=RewardWeights)
     """Reward weights."""
     perturbations: Perturbations = field(default_factory=Perturbations)
-    """Agents that fail, join or are absent, and noise (:class:`~swarm_envs.perturbations.Perturbations`);
-    none by default."""
+    """Agents that fail, join or are absent, and noise
+    (:class:`~swarm_envs.perturbations.Perturbations`); none by default."""
     backend: str = "auto"
     """How a step is computed, one of :data:`BACKENDS`: ``"numpy"`` (dense, every
     model), ``"sparse"`` (cut-off + cell list, large swarms), ``"native"`` (the step in

@@ -145,7 +145,7 @@ def _average(a: Any, members: Any | None, xp: ArrayNamespace) -> Any:
     """The mean of values ``(..., N)`` over the agents, or over the members only."""
     if members is None:
         return xp.mean(a, axis=-1)
-    w, count = _weights(members, a, xp)
+    _, count = _weights(members, a, xp)
     return xp.sum(xp.where(members, a, 0.0), axis=-1) / count
 
 
@@ -286,9 +286,7 @@ def spherical_variance(v: ArrayLike) -> np.ndarray:
     return _result(1 - p, p)
 
 
-def angular_momentum(
-    x: ArrayLike, v: ArrayLike, members: ArrayLike | None = None
-) -> np.ndarray:
+def angular_momentum(x: ArrayLike, v: ArrayLike, members: ArrayLike | None = None) -> np.ndarray:
     """Unit-heading angular momentum ``|Σ_i r̂_ic × v̂_i| / N ∈ [0, 1]`` (Couzin 2002).
 
     ``r_ic = r_i − r_c`` with ``r_c`` the :func:`centroid`. 1 for a ring of agents

@@ -99,7 +99,12 @@ class Perturbations:
         fractions = ("failed_fraction", "absent_fraction", "join_fraction", "neighbor_dropout")
         for name in fractions:
             value = _ranged(
-                owner, name, getattr(self, name), integer=False, low=0.0, high=1.0,
+                owner,
+                name,
+                getattr(self, name),
+                integer=False,
+                low=0.0,
+                high=1.0,
                 high_inclusive=False,
             )
             object.__setattr__(self, name, value)
@@ -146,9 +151,11 @@ class Perturbations:
     @property
     def any(self) -> bool:
         """Whether anything is perturbed."""
-        return any(self.bounds(f.name)[1] > 0 for f in fields(self) if f.name not in (
-            "failure_mode", "failure_time", "join_time"
-        ))
+        return any(
+            self.bounds(f.name)[1] > 0
+            for f in fields(self)
+            if f.name not in ("failure_mode", "failure_time", "join_time")
+        )
 
 
 def agent_count(fraction: float, n_agents: int) -> int:
@@ -157,4 +164,4 @@ def agent_count(fraction: float, n_agents: int) -> int:
     >>> agent_count(0.3, 10), agent_count(0.29, 100), agent_count(0.5, 3)
     (3, 29, 1)
     """
-    return int(math.floor(fraction * n_agents + 1e-9))
+    return math.floor(fraction * n_agents + 1e-9)

@@ -39,7 +39,6 @@ from swarm_envs.envs.common import (
     wide_dtypes,
 )
 from swarm_envs.envs.dynamics import make_dynamics
-from swarm_envs.envs.task.agent_status import masks
 from swarm_envs.envs.task import (
     OBS_BOUND,
     STAT_KEYS,
@@ -52,6 +51,7 @@ from swarm_envs.envs.task import (
     statistics,
     success_count,
 )
+from swarm_envs.envs.task.agent_status import masks
 from swarm_envs.physics import PairGeometry, pair_geometry
 from swarm_envs.physics.social_potential import present_geometry
 
@@ -217,9 +217,9 @@ class SwarmNavCore:
 
         ``place`` ``(B, N)`` bool: agents put at ``at`` ``(B, N, d)`` (joining agents).
         Agents that no longer move and placed agents are at rest. The swarms whose
-        statuses or places changed, and those in ``rows`` ``(B,)``, are measured again, and their previous statistics
-        become these (``start=True``: their episode's start too), so that the next
-        reward compares like with like.
+        statuses or places changed, and those in ``rows`` ``(B,)``, are measured
+        again, and their previous statistics become these (``start=True``: their
+        episode's start too), so that the next reward compares like with like.
         """
         old = self.status
         changed = np.ones(self.batch, dtype=bool) if old is None else (old != status).any(-1)
@@ -308,9 +308,7 @@ class SwarmNavCore:
         idx = np.flatnonzero(which)
         near = None if self._near is None else self._near[idx]
         status = None if status is None else status[idx]
-        return observation(
-            self.x[idx], self.v[idx], self.goal[idx], near, self.cfg, NUMPY, status
-        )
+        return observation(self.x[idx], self.v[idx], self.goal[idx], near, self.cfg, NUMPY, status)
 
 
 def _rank_neighbors(rho: np.ndarray, k: int) -> np.ndarray:
