@@ -27,6 +27,7 @@ from swarm_envs.envs.inputs import (
 )
 from swarm_envs.envs.protocol import Core as SwarmNavCore
 from swarm_envs.envs.task import OBS_BOUND
+from swarm_envs.envs.task.agent_status import ACTIVE
 
 RENDER_MODES = ("rgb_array", "human")
 
@@ -231,12 +232,25 @@ class _SwarmState:
 
     @property
     def active(self) -> np.ndarray:
-        """Which agents take part in the episode, ``(N,)`` bool, in agent order.
-
-        All of them: no agent leaves an episode early (PettingZoo's ``agents`` empties
-        only when the whole episode ends)."""
+        """Which agents act, ``(N,)`` bool, in agent order: those whose status is active
+        (every agent unless ``perturbations`` fail, remove or hold back some; see
+        :attr:`status`)."""
         self._require_state("active")
-        return np.ones(self.cfg.n_agents, dtype=bool)
+        return self._status() == ACTIVE
+
+    @property
+    def status(self) -> np.ndarray:
+        """Each agent's status, ``(N,)`` int8: 0 active, 1 failed (passive), 2 frozen,
+        3 absent (removed, absent for the episode or not yet joined);
+        :mod:`swarm_envs.envs.task.agent_status`."""
+        self._require_state("status")
+        return self._status().copy()
+
+    def _status(self) -> np.ndarray:
+        status = getattr(self.core, "status", None)
+        if status is None:
+            return np.zeros(self.cfg.n_agents, dtype=np.int8)
+        return np.asarray(status[0])
 
     def _kinematics(self) -> dict[str, np.ndarray]:
         """``pos``, ``vel``, ``goal_offset`` (``r_g − r_i``), each ``(N, d)`` float32."""
@@ -370,7 +384,8 @@ class SwarmNavParallelEnv(_SwarmState, _Rendering, ParallelEnv):
             self._np_random, _ = seeding.np_random(seed)
         self.core.reset(self._np_random)
         self._has_state = True
-        self.agents = list(self.possible_agents)
+        active = self._status() == ACTIVE
+        self.agents = [a for a, on in zip(self.possible_agents, active, strict=True) if on]
         self._needs_reset = False
         obs = self.core.observe()[0]
         stats = {k: float(v[0]) for k, v in self.core.stats().items()}
@@ -402,12 +417,23 @@ class SwarmNavParallelEnv(_SwarmState, _Rendering, ParallelEnv):
                 f"unknown {sorted(unknown)}"
             )
         n, d = self.cfg.n_agents, self.cfg.dim
-        stacked = stack_agent_actions(actions, self.possible_agents, d)  # docs/inputs.md
+        agents = self.agents
+        if len(agents) == n:
+            stacked = stack_agent_actions(actions, self.possible_agents, d)  # docs/inputs.md
+        else:  # agents that do not act take no action (the core ignores theirs)
+            stacked = np.zeros((n, d))
+            rows = [self._agent_index[a] for a in agents]
+            stacked[rows] = stack_agent_actions(actions, agents, d)
         reward, terminated, truncated, stats = self.core.step(stacked.reshape(1, n, d))
         obs = self.core.observe()[0]
         r, term, trunc = float(reward[0]), bool(terminated[0]), bool(truncated[0])
         info = {k: float(v[0]) for k, v in stats.items()}
-        agents = self.agents
+        active = self._status() == ACTIVE
+        ended = [a for a in agents if not active[self._agent_index[a]]]  # failed, removed
+        joined = [
+            a for a, on in zip(self.possible_agents, active, strict=True) if on and a not in agents
+        ]
+        agents = agents + joined
         result = (
             {a: obs[self._agent_index[a]] for a in agents},
             dict.fromkeys(agents, r),
@@ -415,9 +441,16 @@ class SwarmNavParallelEnv(_SwarmState, _Rendering, ParallelEnv):
             dict.fromkeys(agents, trunc),
             self._agent_infos(agents, info),
         )
+        for a in ended:
+            result[2][a] = True
+        for a in joined:  # it took no part in this step
+            result[1][a] = 0.0
         if term or trunc:
             self.agents = []
             self._needs_reset = True
+        else:
+            gone = set(ended)
+            self.agents = [a for a in agents if a not in gone]
         self._after_step_render()
         return result
 
@@ -449,9 +482,8 @@ class SwarmNavEnv(_SwarmState, _Rendering, gymnasium.Env):
         self.info_kinematics = _check_info_kinematics(info_kinematics)
         self.core = make_core(self.cfg, batch=1)
         n, d = self.cfg.n_agents, self.cfg.dim
-        self.observation_space = spaces.Box(
-            -OBS_BOUND, OBS_BOUND, (n * self.core.obs_dim,), np.float32
-        )
+        size = n * self.core.obs_dim + (n if self.cfg.observe_status else 0)
+        self.observation_space = spaces.Box(-OBS_BOUND, OBS_BOUND, (size,), np.float32)
         self.action_space = spaces.Box(-1.0, 1.0, (n * d,), np.float32)
         self._needs_reset = True
 
@@ -466,7 +498,15 @@ class SwarmNavEnv(_SwarmState, _Rendering, gymnasium.Env):
         self._has_state = True
         self._needs_reset = False
         self._after_reset_render()
-        return self.core.observe().reshape(-1), self._info(self.core.stats())
+        return self._observe(), self._info(self.core.stats())
+
+    def _observe(self) -> np.ndarray:
+        """Every agent's observation, concatenated; with ``observe_status``, then every
+        agent's flag (1 active, 0 not)."""
+        obs = self.core.observe().reshape(-1)
+        if not self.cfg.observe_status:
+            return obs
+        return np.concatenate([obs, (self._status() == ACTIVE).astype(np.float32)])
 
     def _info(self, stats: Mapping[str, np.ndarray]) -> dict[str, Any]:
         """The statistics, plus every agent's kinematics ``(N, d)`` if ``info_kinematics``."""
@@ -486,7 +526,7 @@ class SwarmNavEnv(_SwarmState, _Rendering, gymnasium.Env):
         a = as_action(action, self.action_space.shape).reshape(1, n, d)
         reward, terminated, truncated, stats = self.core.step(a)
         self._needs_reset = bool(terminated[0] or truncated[0])
-        obs = self.core.observe().reshape(-1)
+        obs = self._observe()
         self._after_step_render()
         return (
             obs,

@@ -79,6 +79,7 @@ from swarm_envs.envs.inputs import as_action, check_seed, check_tensor_action, i
 from swarm_envs.envs.protocol import Core as SwarmNavCore
 from swarm_envs.envs.swarm_nav import make_config
 from swarm_envs.envs.task import OBS_BOUND
+from swarm_envs.envs.task.agent_status import ACTIVE
 
 
 class SwarmNavVecEnv(VecEnv):
@@ -137,6 +138,8 @@ class SwarmNavVecEnv(VecEnv):
         self._terminal_infos = TerminalInfoPool(self.n_swarms, self.n_agents)
         self._quiet_infos = QuietInfos(self.num_envs)  # each step's list starts as a copy
         self._t_start = time.time()  # the "t" of the episode infos, as VecMonitor's
+        #: Which slots' agents act ``(B, N)``; ``None`` while every agent always does.
+        self._active: np.ndarray | None = None
 
     def _check_threads(self, n_threads: int | None) -> int:
         """Worker threads: given, or 1 per 512 swarms up to the CPU count (at least 1)."""
@@ -200,7 +203,18 @@ class SwarmNavVecEnv(VecEnv):
         self.episode_lengths[:] = 0
         self.last_stats = self._stats()
         self.reset_infos = [{} for _ in range(self.num_envs)]
-        return self._observe().reshape(self.num_envs, -1)
+        obs = self._observe()
+        self._active = self._statuses()
+        if self._active is not None:
+            obs[~self._active] = 0.0
+        return obs.reshape(self.num_envs, -1)
+
+    def _statuses(self) -> np.ndarray | None:
+        """Which agents act now ``(B, N)`` (``None``: the cores have no statuses)."""
+        parts = [getattr(core, "status", None) for core in self.cores]
+        if parts[0] is None:
+            return None
+        return np.concatenate(parts, axis=0) == ACTIVE
 
     def seed(self, seed: int | None = None) -> Sequence[int | None]:
         """Seed the next :meth:`reset`: ``None`` or a non-negative integer (Python or
@@ -247,8 +261,9 @@ class SwarmNavVecEnv(VecEnv):
         # fresh dicts per step would cost more than the fused step itself.
         infos = self._quiet_infos.infos()
         infos[::N] = self._swarm_infos.infos(stats)  # read on access; see the pool
+        was_active = self._active
         if done.any():
-            self._end_episodes(done, truncated & ~terminated, stats, infos)
+            self._end_episodes(done, truncated & ~terminated, stats, infos, was_active)
         obs_parts = [
             core.observe() if p[4] is None else p[4]
             for core, p in zip(self.cores, parts, strict=True)
@@ -256,7 +271,46 @@ class SwarmNavVecEnv(VecEnv):
         obs = obs_parts[0] if len(obs_parts) == 1 else np.concatenate(obs_parts, axis=0)
         rewards = np.repeat(reward.astype(np.float32), N)
         dones = np.repeat(done, N)
+        if was_active is not None:
+            self._inactive_slots(obs, rewards, dones, infos, done, was_active)
         return obs.reshape(self.num_envs, -1), rewards, dones, infos
+
+    def _inactive_slots(
+        self,
+        obs: np.ndarray,
+        rewards: np.ndarray,
+        dones: np.ndarray,
+        infos: list[Any],
+        done: np.ndarray,
+        was_active: np.ndarray,
+    ) -> None:
+        """The slots of agents that do not act (failed, removed, absent, not yet joined).
+
+        Such a slot's own episode ends when its agent stops acting: that step is done,
+        with its last observation as ``terminal_observation``. From then on, every step
+        of the slot is a one-step episode that ends at once: observation all zeros,
+        reward 0, done, ``terminal_observation`` zeros, ``TimeLimit.truncated`` false
+        (an absorbing state of value 0 for PPO's and SAC's targets). A joining agent's
+        slot starts a new episode with its first real observation. These slots report
+        no ``episode`` info: only the swarm's episode is counted.
+        """
+        N = self.n_agents
+        active = self._statuses()
+        assert active is not None
+        self._active = active
+        going = ~done[:, None]
+        stopped = going & was_active & ~active  # its last step as an acting agent
+        idle = ~was_active  # it did not act in this step
+        for b, i in zip(*np.nonzero(stopped | (going & idle)), strict=True):
+            slot = int(b) * N + int(i)
+            last = obs[b, i].copy() if stopped[b, i] else np.zeros_like(obs[b, i])
+            info = dict(infos[slot])
+            info["terminal_observation"] = last
+            info["TimeLimit.truncated"] = False
+            infos[slot] = info
+        rewards[idle.reshape(-1)] = 0.0
+        dones[(stopped | (going & idle)).reshape(-1)] = True
+        obs[~active] = 0.0
 
     def _end_episodes(
         self,
@@ -264,17 +318,24 @@ class SwarmNavVecEnv(VecEnv):
         time_limit: np.ndarray,
         stats: dict[str, np.ndarray],
         infos: list[Any],
+        was_active: np.ndarray | None = None,
     ) -> None:
         """Terminal infos for the swarms ``done`` (into ``infos``), then reset them.
 
         Their last observations are copied out first (only their rows), so that each
-        core's reset writes the new rows in place of the old ones.
+        core's reset writes the new rows in place of the old ones; a slot whose agent
+        did not act in the step ends with the zero observation.
         """
         N = self.n_agents
         ended = np.flatnonzero(done)  # only the swarms that just ended
         swarms = ended.tolist()
         cores = self._cores_with(done)
         last = [core.observe(which=done[sl]) for core, sl in cores]
+        if was_active is not None:
+            last = [
+                np.where(was_active[sl][done[sl]][..., None], rows, 0.0).astype(rows.dtype)
+                for rows, (_, sl) in zip(last, cores, strict=True)
+            ]
         now = round(time.time() - self._t_start, 6)
         record = TerminalRecord(
             obs=dict(zip(swarms, itertools.chain.from_iterable(last), strict=True)),
