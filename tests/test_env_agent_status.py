@@ -48,7 +48,7 @@ def test_failed_agents_are_terminated_and_leave_and_joiners_enter():
     for _ in range(40):
         before = list(env.agents)
         actions = {a: np.zeros(2, np.float32) for a in before}
-        obs, rew, term, trunc, _ = env.step(actions)
+        obs, rew, term, _, _ = env.step(actions)
         if not env.agents:
             break
         left = [a for a in before if a not in env.agents]
@@ -60,7 +60,9 @@ def test_failed_agents_are_terminated_and_leave_and_joiners_enter():
             assert a in obs and rew[a] == 0.0 and not term[a]
             seen_join = True
         assert np.array_equal(env.active, env.status == ACTIVE)
-        assert set(env.agents) == {a for a, on in zip(env.possible_agents, env.active) if on}
+        assert set(env.agents) == {
+            a for a, on in zip(env.possible_agents, env.active, strict=True) if on
+        }
     assert seen_leave and seen_join
 
 
@@ -159,8 +161,10 @@ def test_ppo_and_sac_train_with_agents_failing_and_joining(algo: type):
         "join_time": [1, 20],
     }
     venv = VecCheckNan(_vec(perturbations=perturbations, observe_status=True), raise_exception=True)
-    extra = dict(n_steps=32, batch_size=64, n_epochs=1) if algo is PPO else dict(
-        learning_starts=64, batch_size=64, buffer_size=5000
+    extra = (
+        dict(n_steps=32, batch_size=64, n_epochs=1)
+        if algo is PPO
+        else dict(learning_starts=64, batch_size=64, buffer_size=5000)
     )
     model = algo("MlpPolicy", venv, policy_kwargs={"net_arch": [16]}, seed=0, device="cpu", **extra)
     model.learn(total_timesteps=1536)
