@@ -86,6 +86,10 @@ SWARM_NAV_DOC = """
     | 6 + 5m – 7 + 5m               | its relative velocity ``(v_j − v_i) / obs_velocity_scale``  |
     | 8 + 5m                        | mask: 1 for a real neighbour, 0 for padding (N − 1 < k) |
 
+    With ``observe_status=True`` each neighbour block has a sixth entry (blocks of
+    ``2d + 2``): 1 when that neighbour is active, 0 when it has failed; the Gymnasium
+    env then ends its observation with every agent's flag (``N`` more entries).
+
     ## Rewards
 
     Cooperative: every agent receives the same reward each step,
@@ -106,8 +110,9 @@ SWARM_NAV_DOC = """
 
     ## Episode End
 
-    Terminated (success) when at least ``success_fraction`` of the agents are within
-    ``goal_radius`` of the goal at once; truncated after ``max_steps`` steps
+    Terminated (success) when at least ``success_fraction`` of the swarm's members
+    (every agent, unless ``perturbations`` fail some: then the agents that still move,
+    active or failed passively) are within ``goal_radius`` of the goal at once; truncated after ``max_steps`` steps
     (``max_cycles`` in PettingZoo). ``gym.make`` adds no ``TimeLimit``: ``max_steps`` is
     the only episode length (a ``max_episode_steps`` given to ``gym.make`` adds one).
 
@@ -142,10 +147,23 @@ SWARM_NAV_DOC = """
     unclipped): ``(d,)`` in each agent's info in PettingZoo, ``(N, d)`` in Gymnasium —
     the node positions and velocities a graph policy builds its edges from.
 
+    ## Perturbations
+
+    ``perturbations={...}`` (docs/perturbations.md): agents that fail
+    (``failed_fraction``, ``failure_mode`` ``"passive"``/``"removed"``/``"frozen"``,
+    ``failure_time``), are absent (``absent_fraction``) or join (``join_fraction``,
+    ``join_time``), and ``obs_noise``, ``action_noise``, ``neighbor_dropout``; numbers
+    or ``[low, high]`` ranges drawn per episode from the env's generator. A failed agent
+    no longer acts: PettingZoo terminates it and it leaves ``env.agents`` (a joining
+    agent enters it, with reward 0 for the step it joined in); the Gymnasium env ignores
+    its actions. The statistics in the info are over the members. An agent does not
+    observe its own failure.
+
     ## State accessors
 
     ``positions`` ``(N, d)``, ``velocities`` ``(N, d)``, ``goal`` ``(d,)`` (float64
-    copies) and ``active`` ``(N,)`` bool (every agent: none leaves an episode early),
+    copies), ``active`` ``(N,)`` bool (the agents that act) and ``status`` ``(N,)`` int8
+    (0 active, 1 failed, 2 frozen, 3 absent),
     on both envs (``gym.make(...).unwrapped.positions``; the AEC env's
     ``.unwrapped`` is the parallel env); defined after the first ``reset()``, else
     ``RuntimeError``.
