@@ -7,6 +7,9 @@ Usage::
         --episodes 20 --seed 0 --out runs/eval
     swarm-eval --policies runs/ppo/model.zip analytic zero \\
         --n-agents 10 31 100 300 1000 --episodes 20 --out runs/eval_sizes
+    swarm-eval --policies runs/ppo/model.zip analytic zero \\
+        --failed-fraction 0 0.1 0.3 0.5 --failure-mode frozen --obs-noise 0 0.5 1 \\
+        --episodes 20 --out runs/eval_robustness
 
 Policies are built-in names (``potential``, ``informed``, ``goal_force``,
 ``lyapunov``, ``zero``, ``random``, see :data:`agents.CONTROLLERS`; and ``analytic``,
@@ -30,6 +33,18 @@ GIFs (:mod:`train.evaluate.transfer`). Only shared per-agent policies transfer: 
 model trained on the Gymnasium env (whole-swarm observation) is refused. ``--set
 n_agents=...`` does not combine with ``--n-agents``.
 
+Robustness: ``--failed-fraction``, ``--obs-noise``, ``--action-noise`` and
+``--neighbor-dropout`` each list values of that perturbation (``SwarmConfig.perturbations``,
+``swarm_envs.perturbations``); ``--failure-mode passive|removed|frozen`` and
+``--failure-time T`` (or ``LOW HIGH``, drawn per agent) say how and when agents fail.
+Each option listing several values is swept, one row per value with the other options
+at 0 (an option given one value keeps it in every row; where no option lists several,
+each given option is swept); every policy runs each row on the same seeded episodes, in
+the config with only its ``perturbations`` replaced (the observation layout is kept:
+``observe_status`` is not switched on). Writes ``results.json``, ``summary.md`` (one
+table row per option, policy and value), ``robustness.csv`` and ``robustness.png``
+(:mod:`train.evaluate.robustness`). It does not combine with ``--n-agents``.
+
 Unstable steps (step-size control): unless the config file or a ``--set`` names
 ``on_unstable``, the episodes run with ``on_unstable="truncate"``, so an episode whose
 step goes unstable ends there and is counted in the ``unstable`` column (with
@@ -40,16 +55,19 @@ in the tables.
 
 ``--out`` must be new or empty; ``--overwrite`` removes an earlier evaluation's files
 there first (``results.json``, ``summary.md``, ``curves.png``, the GIFs, a demo's
-``report.md``, ``transfer.csv``, ``transfer.png``) and keeps anything else, such as a
+``report.md``, ``transfer.csv``, ``transfer.png``, ``robustness.csv``,
+``robustness.png``) and keeps anything else, such as a
 run's ``model.zip``.
 
 Exit status: 0 on success; 2 with one line on stderr for a bad flag (``--seed`` outside
 [0, 2**32 - 1], ``--episodes`` < 1, an unavailable ``--device``, ...), an unknown
 policy name, a missing or unreadable model file, a model whose spaces do not fit the
-env (with what it was trained on), a central policy with ``--n-agents``, an env
-``device`` that is unavailable or needs another backend, an unknown env id, a bad config
-(YAML syntax included, or one not valid at a size of ``--n-agents``), an unstable step
-with ``on_unstable=raise``, or an ``--out`` that is a file or holds files (without
+env (with what it was trained on), a central policy with ``--n-agents``, a perturbation
+value out of its range (the message names the option and the range), ``--n-agents``
+with a perturbation sweep, an env ``device`` that is unavailable or needs another
+backend, an unknown env id, a bad config (YAML syntax included, or one not valid at a
+size of ``--n-agents`` or a value of a sweep), an unstable step with
+``on_unstable=raise``, or an ``--out`` that is a file or holds files (without
 ``--overwrite``); 130 on Ctrl-C.
 """
 
@@ -65,6 +83,12 @@ from typing import Any
 
 from swarm_envs import ENV_ID, tune_allocator
 from train.cli_common import CliError, OneLineParser, check_device, check_seed, fail, one_line
+from train.cli_eval_robustness import (
+    add_robustness_arguments,
+    failure_options,
+    robustness_configs,
+    robustness_sweeps,
+)
 from train.config import DEFAULT_TORCH_THREADS
 
 PROG = "swarm-eval"
@@ -76,7 +100,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog=PROG,
         description="Evaluate policies (analytic controllers, SB3 models) on the same seeded "
         "SwarmNav episodes; write results.json, summary.md, curves.png and GIFs (with "
-        "--n-agents: at several swarm sizes, transfer.csv and transfer.png).",
+        "--n-agents: at several swarm sizes, transfer.csv and transfer.png; with a "
+        "perturbation sweep: robustness.csv and robustness.png).",
     )
     p.add_argument("--env", default=ENV_ID, help=f"Gymnasium env id (default {ENV_ID})")
     p.add_argument(
@@ -103,6 +128,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="size transfer: evaluate every policy unchanged at each of these swarm sizes "
         "(shared per-agent policies only); writes transfer.csv and transfer.png",
     )
+    add_robustness_arguments(p)
     p.add_argument(
         "--policies",
         nargs="+",
@@ -322,6 +348,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _main(args: Any) -> int:
+    from train.evaluate.robustness import ROBUSTNESS_FILES
     from train.evaluate.transfer import TRANSFER_FILES
     from train.outdir import EVAL_FILES, OutDirError, check_out_dir, prepare_out_dir
 
@@ -338,6 +365,7 @@ def _main(args: Any) -> int:
             raise CliError(f"--torch-threads must be >= 0, got {args.torch_threads}")
         check_out_dir(out, overwrite=args.overwrite)
         overrides = _parse_overrides(args.overrides, args.max_steps)
+        sweeps = robustness_sweeps(args)
         if args.n_agents is not None and "n_agents" in overrides:
             raise CliError("--n-agents and --set n_agents=... both set the swarm size; use one")
         if args.n_agents and all(isinstance(n, int) and n >= 1 for n in args.n_agents):
@@ -347,13 +375,16 @@ def _main(args: Any) -> int:
         if not _user_sets("on_unstable", args.config, overrides):
             # count unstable episodes instead of stopping at the first
             cfg = dataclasses.replace(cfg, on_unstable="truncate")
-        if args.n_agents is None:
-            check_backend(cfg, args.episodes)
-        else:
+        if args.n_agents is not None:
             _size_configs(cfg, args.n_agents, args.episodes)
+        elif sweeps:
+            for row_cfg in robustness_configs(cfg, args, sweeps):
+                check_backend(row_cfg, args.episodes)
+        else:
+            check_backend(cfg, args.episodes)
         transfer = args.n_agents is not None
         policies = _load_policies(args.policies, cfg, args.seed, args.device, transfer=transfer)
-        patterns = tuple(dict.fromkeys(EVAL_FILES + TRANSFER_FILES))
+        patterns = tuple(dict.fromkeys(EVAL_FILES + TRANSFER_FILES + ROBUSTNESS_FILES))
         prepare_out_dir(out, overwrite=args.overwrite, patterns=patterns, prog=PROG)
     except (CliError, OutDirError) as err:
         return fail(PROG, err)
@@ -370,7 +401,7 @@ def _main(args: Any) -> int:
         warnings.simplefilter("always", TrainedEnvWarning)
         warnings.showwarning = _one_line_warning
         try:
-            table, written = _evaluate(args, policies, cfg, out)
+            table, written = _evaluate(args, policies, cfg, out, sweeps)
         except SwarmUnstableError as err:
             return fail(PROG, f"{err} (on_unstable=raise is set in the config or a --set)")
     print(table)
@@ -382,11 +413,15 @@ def _one_line_warning(message: Any, category: type, *_args: Any, **_kw: Any) -> 
     print(f"{PROG}: warning: {one_line(str(message))}", file=sys.stderr)
 
 
-def _evaluate(args: Any, policies: dict[str, Any], cfg: Any, out: Path) -> tuple[str, str]:
+def _evaluate(
+    args: Any, policies: dict[str, Any], cfg: Any, out: Path, sweeps: dict[str, list[float]]
+) -> tuple[str, str]:
     """Run the evaluation ``args`` ask for; return its table and what it wrote."""
     from train.evaluate import (
         evaluate_policies,
+        evaluate_robustness,
         evaluate_transfer,
+        format_robustness_table,
         format_table,
         format_transfer_table,
     )
@@ -409,6 +444,20 @@ def _evaluate(args: Any, policies: dict[str, Any], cfg: Any, out: Path) -> tuple
         if not args.no_plots:
             written += f", {out / 'transfer.png'}"
         return format_transfer_table(results), written
+    if sweeps:
+        results = evaluate_robustness(
+            policies,
+            cfg,
+            sweeps,
+            args.episodes,
+            args.seed,
+            **failure_options(args),
+            **common,
+        )
+        written += f", {out / 'robustness.csv'}"
+        if not args.no_plots:
+            written += f", {out / 'robustness.png'}"
+        return format_robustness_table(results), written
     results = evaluate_policies(
         policies,
         cfg,

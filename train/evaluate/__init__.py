@@ -42,6 +42,10 @@ Size transfer (:func:`evaluate_transfer`): every shared policy, unchanged, at se
 swarm sizes N, with a table, ``transfer.csv`` and ``transfer.png`` against N; a central
 policy (fixed whole-swarm observation) is refused with :class:`CentralPolicyError`.
 
+Robustness (:func:`evaluate_robustness`): every policy on the same seeded episodes at
+each value of a perturbation sweep (failed agents, observation and action noise,
+neighbour dropout), with a table, ``robustness.csv`` and ``robustness.png``.
+
 Python API::
 
     from train.evaluate import evaluate_policies
@@ -59,6 +63,7 @@ Modules:
 - :mod:`train.evaluate.measures`: :func:`summarize` and :data:`METRIC_DOCS`;
 - :mod:`train.evaluate.harness`: :func:`evaluate_policies`;
 - :mod:`train.evaluate.transfer`: :func:`evaluate_transfer` and its outputs;
+- :mod:`train.evaluate.robustness`: :func:`evaluate_robustness` and its outputs;
 - :mod:`train.evaluate.report`: :func:`write_outputs`, :func:`format_table`;
 - :mod:`train.evaluate.figures`: ``curves.png``, the GIFs and ``transfer.png``.
 """
@@ -76,6 +81,11 @@ from train.evaluate.policies import (
     trained_env_record,
 )
 from train.evaluate.report import TABLE_COLUMNS, format_table, write_json, write_outputs
+from train.evaluate.robustness import (
+    ROBUSTNESS_FILES,
+    evaluate_robustness,
+    format_robustness_table,
+)
 from train.evaluate.transfer import (
     TRANSFER_FILES,
     CentralPolicyError,
@@ -87,6 +97,7 @@ __all__ = [
     "CURVE_KEYS",
     "FINAL_KEYS",
     "METRIC_DOCS",
+    "ROBUSTNESS_FILES",
     "TABLE_COLUMNS",
     "TRAINED_ENV",
     "TRANSFER_FILES",
@@ -96,7 +107,9 @@ __all__ = [
     "TrainedEnvWarning",
     "check_policies",
     "evaluate_policies",
+    "evaluate_robustness",
     "evaluate_transfer",
+    "format_robustness_table",
     "format_table",
     "format_transfer_table",
     "json_safe",

@@ -17,6 +17,8 @@ import numpy as np
 from agents.base import swarm_config_of
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.backends import make_core
+from swarm_envs.envs.perturbed import PerturbedCore
+from swarm_envs.envs.task.agent_status import ACTIVE
 from train.evaluate.policies import SpaceMismatchError, policy_mode
 
 __all__ = ["CURVE_KEYS", "FINAL_KEYS", "EpisodeBatch", "run_episodes"]
@@ -49,6 +51,11 @@ class EpisodeBatch:
     (``info["unstable"] = 1``, truncated with ``on_unstable="truncate"``);
     ``substeps`` sums ``info["substeps"]`` over each episode's integrated steps and
     ``integrated`` counts those steps (an unstable step is undone, so not counted).
+
+    Perturbations (``cfg.perturbations``): ``effort`` counts the actions of the agents
+    that act in each step only (a failed, frozen, removed or absent agent's action is
+    ignored by the core, so it costs nothing), still divided by ``N`` as the reward's
+    effort term is.
     """
 
     name: str
@@ -153,8 +160,10 @@ def run_episodes(
                     f"{(B * N, d) if mode == 'shared' else (B, N * d)}"
                 )
             a = a.reshape(B, N, d)
-            reward, terminated, truncated, stats = core.step(a)  # validates, clips
             clipped = np.clip(a.astype(np.float64), -1.0, 1.0)
+            if isinstance(core, PerturbedCore):  # the statuses before the step: who acts
+                clipped = np.where((core.status == ACTIVE)[..., None], clipped, 0.0)
+            reward, terminated, truncated, stats = core.step(a)  # validates, clips
             live = ~done
             returns[live] += reward[live]
             lengths[live] += 1

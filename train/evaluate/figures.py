@@ -1,5 +1,6 @@
 """The figures of an evaluation: ``curves.png`` and one GIF of episode 0 per policy;
-``transfer.png`` of a size-transfer evaluation (:func:`plot_transfer`).
+``transfer.png`` of a size-transfer evaluation (:func:`plot_transfer`); ``robustness.png``
+of a robustness sweep (:func:`plot_robustness`).
 
 matplotlib and :mod:`swarm_envs.render` are imported when a figure is drawn, not with
 this module.
@@ -8,14 +9,21 @@ this module.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from swarm_envs.config import SwarmConfig
 from train.evaluate.episodes import CURVE_KEYS, EpisodeBatch
 
-__all__ = ["TRANSFER_PANELS", "plot_curves", "plot_transfer", "write_episode_gif"]
+__all__ = [
+    "ROBUSTNESS_PANELS",
+    "TRANSFER_PANELS",
+    "plot_curves",
+    "plot_robustness",
+    "plot_transfer",
+    "write_episode_gif",
+]
 
 
 def plot_curves(batches: Mapping[str, EpisodeBatch], cfg: SwarmConfig, path: Path) -> Path:
@@ -86,6 +94,60 @@ TRANSFER_PANELS = (
 )
 
 
+def _draw_panel(
+    ax: Any,
+    xs: Any,
+    entries: Sequence[Mapping[str, Any]],
+    names: Sequence[str],
+    key: str,
+    spread: str | None,
+    where: str,
+) -> None:
+    """One panel: ``key`` of each policy against ``xs`` (one measures mapping per x in
+    ``entries[i]["policies"]``), its spread as a band (``success_ci95``: the interval;
+    another key: ± that std; ``None``: no band). An undefined value leaves a gap; a
+    panel with no defined value says so ("undefined at every <where>")."""
+    import numpy as np
+
+    def value(x: Any) -> float:
+        return np.nan if x is None else float(x)
+
+    defined = False
+    for name in names:
+        ms = [e["policies"].get(name, {}) for e in entries]
+        mean = np.array([value(m.get(key)) for m in ms])
+        defined |= bool(np.isfinite(mean).any())
+        (line,) = ax.plot(xs, mean, marker="o", ms=4, lw=1.6, label=name)
+        if spread is None:
+            continue
+        if spread == "success_ci95":
+            ci = [m.get(spread) or (None, None) for m in ms]
+            low = np.array([value(c[0]) for c in ci])
+            high = np.array([value(c[1]) for c in ci])
+        else:
+            std = np.array([value(m.get(spread)) for m in ms])
+            low, high = mean - std, mean + std
+        ax.fill_between(xs, low, high, color=line.get_color(), alpha=0.15)
+    if not defined:
+        ax.text(
+            0.5,
+            0.5,
+            f"undefined at every {where}",
+            ha="center",
+            va="center",
+            transform=ax.transAxes,
+            color="0.4",
+        )
+    ax.grid(alpha=0.3)
+
+
+def _policy_names(entries: Sequence[Mapping[str, Any]]) -> list[str]:
+    names: list[str] = []
+    for e in entries:
+        names += [n for n in e["policies"] if n not in names]
+    return names
+
+
 def plot_transfer(results: Mapping[str, Any], path: Path) -> Path:
     """Four panels against the swarm size N (success rate, return, time to goal,
     collisions), one line per policy with its spread as a band; an undefined value
@@ -95,44 +157,15 @@ def plot_transfer(results: Mapping[str, Any], path: Path) -> Path:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    def value(x: Any) -> float:
-        return np.nan if x is None else float(x)
-
     sizes = results["sizes"]
     ns = np.array([s["n_agents"] for s in sizes], dtype=float)
-    names: list[str] = []
-    for s in sizes:
-        names += [n for n in s["policies"] if n not in names]
+    names = _policy_names(sizes)
     fig = Figure(figsize=(9.0, 6.5), dpi=100, layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(2, 2, sharex=True).ravel()
     for ax, (key, spread, title) in zip(axes, TRANSFER_PANELS, strict=True):
-        defined = False
-        for name in names:
-            ms = [s["policies"].get(name, {}) for s in sizes]
-            mean = np.array([value(m.get(key)) for m in ms])
-            if spread == "success_ci95":
-                ci = [m.get(spread) or (None, None) for m in ms]
-                low = np.array([value(c[0]) for c in ci])
-                high = np.array([value(c[1]) for c in ci])
-            else:
-                std = np.array([value(m.get(spread)) for m in ms])
-                low, high = mean - std, mean + std
-            defined |= bool(np.isfinite(mean).any())
-            (line,) = ax.plot(ns, mean, marker="o", ms=4, lw=1.6, label=name)
-            ax.fill_between(ns, low, high, color=line.get_color(), alpha=0.15)
-        if not defined:
-            ax.text(
-                0.5,
-                0.5,
-                "undefined at every N",
-                ha="center",
-                va="center",
-                transform=ax.transAxes,
-                color="0.4",
-            )
+        _draw_panel(ax, ns, sizes, names, key, spread, "N")
         ax.set_title(title, fontsize=10)
-        ax.grid(alpha=0.3)
         if ns.size and ns.max() >= 10 * ns.min():
             ax.set_xscale("log")
         ax.set_xticks(ns, [str(int(n)) for n in ns])
@@ -144,6 +177,52 @@ def plot_transfer(results: Mapping[str, Any], path: Path) -> Path:
     fig.suptitle(
         f"size transfer: {results['episodes']} episodes per policy and N, "
         f"on_unstable={results['on_unstable']}",
+        fontsize=10,
+    )
+    fig.savefig(path)
+    return path
+
+
+#: The panels of ``robustness.png``: (measure, its spread or None, title).
+ROBUSTNESS_PANELS = (
+    ("success_rate", "success_ci95", "success rate (95 % Wilson)"),
+    ("mean_return", "std_return", "return (mean ± std)"),
+    ("mean_time_to_goal", "std_time_to_goal", "time to goal, s"),
+    ("collisions_per_episode", "std_collisions", "collisions per episode"),
+    ("final_fraction_arrived", None, "fraction of members arrived"),
+)
+
+
+def plot_robustness(results: Mapping[str, Any], path: Path) -> Path:
+    """One row of five panels per swept option (success rate, return, time to goal,
+    collisions, fraction of the members arrived) against the option's value, one line
+    per policy with its spread as a band (the time to goal: ± std over successes); an
+    undefined value leaves a gap."""
+    import numpy as np
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    options = list(results["sweeps"])
+    names = _policy_names(results["rows"])
+    cols = len(ROBUSTNESS_PANELS)
+    fig = Figure(figsize=(3.0 * cols, 0.6 + 2.6 * len(options)), dpi=100, layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(len(options), cols, squeeze=False)
+    for r, option in enumerate(options):
+        entries = [row for row in results["rows"] if row["option"] == option]
+        xs = np.array([row["value"] for row in entries], dtype=float)
+        for ax, (key, spread, title) in zip(axes[r], ROBUSTNESS_PANELS, strict=True):
+            _draw_panel(ax, xs, entries, names, key, spread, "value")
+            ax.set_title(title, fontsize=9)
+            ax.set_xticks(xs, [f"{x:g}" for x in xs])
+            ax.set_xlabel(option)
+            if key in ("success_rate", "final_fraction_arrived"):
+                ax.set_ylim(-0.05, 1.05)
+    axes[0][0].legend(fontsize=8)
+    fig.suptitle(
+        f"robustness: {results['episodes']} episodes per policy and value, seed "
+        f"{results['seed']}, the same episodes at every value; on_unstable="
+        f"{results['on_unstable']}",
         fontsize=10,
     )
     fig.savefig(path)

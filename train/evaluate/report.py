@@ -19,7 +19,15 @@ from train.evaluate.episodes import EpisodeBatch
 from train.evaluate.figures import plot_curves, write_episode_gif
 from train.evaluate.measures import METRIC_DOCS, json_safe
 
-__all__ = ["MISSING", "TABLE_COLUMNS", "format_cell", "format_table", "write_json", "write_outputs"]
+__all__ = [
+    "MISSING",
+    "TABLE_COLUMNS",
+    "csv_cell",
+    "format_cell",
+    "format_table",
+    "write_json",
+    "write_outputs",
+]
 
 #: Columns of the summary table: (key, header, format).
 TABLE_COLUMNS = (
@@ -60,6 +68,16 @@ def format_cell(measures: Mapping[str, Any], key: str, spec: str) -> str:
     if cell != MISSING and std_key is not None and measures.get(std_key) is not None:
         cell += " ± " + _fmt(measures[std_key], spec)
     return cell
+
+
+def csv_cell(measures: Mapping[str, Any], key: str) -> Any:
+    """One CSV cell: the measure ``key`` (``success_ci95_low`` / ``_high``: an end of
+    the interval), or an empty cell where it is undefined."""
+    if key.startswith("success_ci95_"):
+        ci = measures.get("success_ci95")
+        return "" if ci is None else ci[0 if key.endswith("low") else 1]
+    value = measures.get(key)
+    return "" if value is None else value
 
 
 def format_table(results: Mapping[str, Any]) -> str:

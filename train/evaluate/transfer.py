@@ -37,7 +37,7 @@ from train.evaluate.episodes import run_episodes
 from train.evaluate.harness import check_policies
 from train.evaluate.measures import METRIC_DOCS, summarize
 from train.evaluate.policies import SpaceMismatchError, describe_trained_env, policy_mode
-from train.evaluate.report import STD_OF, format_cell, write_json
+from train.evaluate.report import STD_OF, csv_cell, format_cell, write_json
 
 __all__ = [
     "TRANSFER_COLUMNS",
@@ -277,14 +277,6 @@ def format_transfer_table(results: Mapping[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _csv_value(m: Mapping[str, Any], key: str) -> Any:
-    if key.startswith("success_ci95_"):
-        ci = m.get("success_ci95")
-        return "" if ci is None else ci[0 if key.endswith("low") else 1]
-    value = m.get(key)
-    return "" if value is None else value
-
-
 def write_transfer_csv(results: Mapping[str, Any], path: Path) -> Path:
     """``transfer.csv``: one row per policy and size (:data:`TRANSFER_CSV_KEYS`)."""
     with path.open("w", newline="", encoding="utf-8") as fh:
@@ -292,7 +284,7 @@ def write_transfer_csv(results: Mapping[str, Any], path: Path) -> Path:
         writer.writerow(["policy", "n_agents", "backend", "episodes", *TRANSFER_CSV_KEYS])
         for name, size, m in _rows(results):
             row = [name, size["n_agents"], size["backend"], results["episodes"]]
-            writer.writerow(row + [_csv_value(m, k) for k in TRANSFER_CSV_KEYS])
+            writer.writerow(row + [csv_cell(m, k) for k in TRANSFER_CSV_KEYS])
     return path
 
 
