@@ -19,7 +19,7 @@ from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.backends import make_core
 from swarm_envs.envs.perturbed import PerturbedCore
 from swarm_envs.envs.task.agent_status import ACTIVE
-from train.evaluate.policies import SpaceMismatchError, policy_mode
+from train.evaluate.policies import SpaceMismatchError, config_for_policy, policy_mode
 
 __all__ = ["CURVE_KEYS", "FINAL_KEYS", "EpisodeBatch", "run_episodes"]
 
@@ -110,6 +110,7 @@ def run_episodes(
     cfg = swarm_config_of(cfg)
     if isinstance(episodes, bool) or int(episodes) != episodes or episodes < 1:
         raise ValueError(f"episodes must be an integer >= 1, got {episodes!r}")
+    cfg = config_for_policy(policy, cfg)
     mode = policy_mode(policy, cfg)
     B, N, d = int(episodes), cfg.n_agents, cfg.dim
     core = make_core(cfg, batch=B)  # the config's backend and device
@@ -139,8 +140,12 @@ def run_episodes(
         for _ in range(cfg.max_steps):
             obs = core.observe()
             if mode == "central":
+                central = obs.reshape(B, -1)
+                if cfg.observe_status:  # the central env's layout: every agent's flag last
+                    flags = (getattr(core, "status", np.zeros((B, N))) == ACTIVE).astype(np.float32)
+                    central = np.concatenate([central, flags], axis=1)
                 action, state = policy.predict(
-                    obs.reshape(B, -1),
+                    central,
                     state=state,
                     episode_start=episode_start,
                     deterministic=deterministic,

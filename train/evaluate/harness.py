@@ -15,6 +15,7 @@ from train.evaluate.measures import METRIC_DOCS, summarize
 from train.evaluate.policies import (
     TRAINED_ENV,
     SpaceMismatchError,
+    config_for_policy,
     describe_trained_env,
     policy_mode,
     trained_env_differences,
@@ -42,13 +43,14 @@ def check_policies(policies: Mapping[str, Any], cfg: SwarmConfig) -> None:
     if not policies:
         raise ValueError("no policies to evaluate")
     for name, policy in policies.items():
+        fitted = config_for_policy(policy, cfg)  # its own observe_status
         try:
-            policy_mode(policy, cfg)
+            policy_mode(policy, fitted)
         except SpaceMismatchError as err:
             trained = describe_trained_env(policy)
             extra = f"; the model was {trained}" if trained else ""
             raise SpaceMismatchError(f"policy {name!r}: {err}{extra}") from None
-        differences = trained_env_differences(getattr(policy, TRAINED_ENV, None), cfg)
+        differences = trained_env_differences(getattr(policy, TRAINED_ENV, None), fitted)
         if differences:
             warnings.warn(
                 f"policy {name!r} is evaluated on another env than it was trained on: "

@@ -7,6 +7,7 @@ are. Stable-Baselines3 is imported by :func:`load_sb3_model` only.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Mapping
 from pathlib import Path
@@ -16,7 +17,7 @@ import numpy as np
 
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.core import observation_size
-from swarm_envs.envs.task.observation import LAYOUT
+from swarm_envs.envs.task.observation import layout
 
 __all__ = [
     "TRAINED_ENV",
@@ -67,12 +68,14 @@ def policy_mode(policy: Any, cfg: SwarmConfig) -> str:
     if obs_space is None and act_space is None:
         return "shared"
     n, d, k = cfg.n_agents, cfg.dim, observation_size(cfg)
-    layouts = {"shared": ((k,), (d,)), "central": ((n * k,), (n * d,))}
+    flags = n if cfg.observe_status else 0  # the central env appends every agent's flag
+    layouts = {"shared": ((k,), (d,)), "central": ((n * k + flags,), (n * d,))}
     obs_shape = getattr(obs_space, "shape", None)
     act_shape = getattr(act_space, "shape", None)
     expected = (
         f"the env's per-agent spaces (observation ({k},), action ({d},)) or its flat "
-        f"spaces (observation ({n * k},), action ({n * d},)), both with actions in [-1, 1]"
+        f"spaces (observation ({n * k + flags},), action ({n * d},)), both with actions in "
+        "[-1, 1]"
     )
     found = (
         f"observation space {obs_space}, action space {act_space}"
@@ -89,11 +92,31 @@ def policy_mode(policy: Any, cfg: SwarmConfig) -> str:
     raise SpaceMismatchError(f"{found}; expected {expected}")
 
 
+def config_for_policy(policy: Any, cfg: SwarmConfig) -> SwarmConfig:
+    """``cfg`` with ``observe_status`` as ``policy``'s observation space has it.
+
+    The status flags are part of the observation layout, not of the scenario: a policy
+    trained without them runs, blind to failures, on a scenario whose agents fail, and
+    one trained with them sees them on a scenario where none fail. ``cfg`` itself where
+    it fits or where neither layout does (:func:`policy_mode` then says why).
+    """
+    try:
+        policy_mode(policy, cfg)
+        return cfg
+    except SpaceMismatchError:
+        other = dataclasses.replace(cfg, observe_status=not cfg.observe_status)
+        try:
+            policy_mode(policy, other)
+        except SpaceMismatchError:
+            return cfg
+        return other
+
+
 def trained_env_record(cfg: SwarmConfig, env_id: str) -> dict[str, Any]:
     """What a model trained on ``cfg`` records about its env (plain JSON data).
 
     ``env_id``, ``dynamics``, ``n_agents``, ``dim``, ``n_neighbors``,
-    ``observation_size`` (per agent), ``observation_layout`` (``LAYOUT`` of
+    ``observation_size`` (per agent), ``observation_layout`` (:func:`layout` of
     :mod:`swarm_envs.envs.task.observation`), the observation scales, ``u_max`` and the
     whole resolved ``env_config``.
     """
@@ -106,7 +129,7 @@ def trained_env_record(cfg: SwarmConfig, env_id: str) -> dict[str, Any]:
         "dim": cfg.dim,
         "n_neighbors": cfg.n_neighbors,
         "observation_size": observation_size(cfg),
-        "observation_layout": LAYOUT,
+        "observation_layout": layout(cfg),
         "obs_goal_scale": cfg.obs_goal_scale,
         "obs_neighbor_scale": cfg.obs_neighbor_scale,
         "obs_velocity_scale": cfg.obs_velocity_scale,

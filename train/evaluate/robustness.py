@@ -11,13 +11,15 @@ value in every row (where no option lists several, each given option is a sweep 
 values). The rest of the section (absent and joining agents) stays as the config says.
 
 Each row's config is the given config with only its ``perturbations`` replaced
-(``dataclasses.replace``): the observation layout stays as it is (``observe_status``
-is not switched on), so a model trained without status flags is evaluated with the
-observations it knows, failed agents included. Every policy runs each row on the same
-seeded episodes (:func:`~train.evaluate.episodes.run_episodes`, the same seed in every
-row): the same starts, and, the perturbations being drawn from the episodes' generator,
-the same failing agents and noise for every policy. A failed, frozen, removed or absent
-agent's action is ignored by the core, so what a policy asks of it does not matter.
+(``dataclasses.replace``); each policy then runs with the observation layout it was
+trained on (``observe_status`` as its observation space has it,
+:func:`~train.evaluate.policies.config_for_policy`), so a model trained without status
+flags is evaluated, blind to failures, beside one trained with them. Every policy runs
+each row on the same seeded episodes (:func:`~train.evaluate.episodes.run_episodes`, the
+same seed in every row): the same starts, and, the perturbations being drawn from the
+episodes' generator, the same failing agents and noise for every policy. A failed,
+frozen, removed or absent agent's action is ignored by the core, so what a policy asks
+of it does not matter.
 
 Measures per row and policy (:func:`~train.evaluate.measures.summarize`): success
 rate, return, time to goal, collisions and the fraction of the swarm's members (the

@@ -104,6 +104,10 @@ HOST_CONFIG_FIELDS = {
     "backend": "selects the core",
     "device": "the C step runs on the CPU",
     "on_unstable": "the guard after the step runs in Python (it raises, or undoes the step)",
+    "perturbations": "actions and observations are perturbed around the core (PerturbedCore); "
+    "configs that need agent statuses are refused (backends.STATUS_BACKENDS)",
+    "observe_status": "a layout with status flags needs agent statuses: refused "
+    "(backends.STATUS_BACKENDS)",
 }
 
 #: Or'ed into the C step's return value where a swarm of the call went over the cap or
