@@ -272,7 +272,7 @@ def _load_policies(
     to be shared per-agent policies (a central one is refused)."""
     from agents import CONTROLLERS, analytic_name, make_controller
     from train.evaluate import CentralPolicyError, SpaceMismatchError, load_sb3_model, policy_mode
-    from train.evaluate.policies import describe_trained_env
+    from train.evaluate.policies import config_for_policy, describe_trained_env
     from train.evaluate.transfer import check_transferable
 
     policies: dict[str, Any] = {}
@@ -288,7 +288,7 @@ def _load_policies(
             rllib_policy = _load_rllib(path, seed)
             name = _unique(rllib_policy.name, set(policies))
             try:
-                policy_mode(rllib_policy, cfg)
+                policy_mode(rllib_policy, config_for_policy(rllib_policy, cfg))
             except SpaceMismatchError as err:
                 raise CliError(f"checkpoint {spec} does not fit the env: {err}") from None
             policies[name] = rllib_policy
@@ -313,7 +313,7 @@ def _load_policies(
             except SpaceMismatchError:
                 pass  # reported below, as without --n-agents
         try:
-            policy_mode(model, cfg)
+            policy_mode(model, config_for_policy(model, cfg))
         except SpaceMismatchError as err:
             trained = describe_trained_env(model)
             extra = f"; it was {trained}" if trained else ""
