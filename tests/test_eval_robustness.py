@@ -278,3 +278,37 @@ def test_cli_robustness_errors(tmp_path, capsys, argv, message):
     assert len(err.splitlines()) == 1 and err.startswith("swarm-eval: error:")
     assert message in err
     assert not (tmp_path / "o").exists()
+
+
+@pytest.fixture(scope="module")
+def flagged_model(tmp_path_factory) -> Path:
+    """A tiny PPO whose observations carry the neighbours' status flags."""
+    from train.config import train_config_from_mapping
+    from train.train import train
+
+    tc = train_config_from_mapping(
+        {
+            "env": {"n_agents": 3, "max_steps": 10, "n_neighbors": 2, "observe_status": True},
+            "n_swarms": 1,
+            "total_timesteps": 1,
+            "hyperparams": {"n_steps": 8, "batch_size": 8, "n_epochs": 1},
+            "checkpoint_seconds": 0,
+        }
+    )
+    out = tmp_path_factory.mktemp("flagged")
+    train(tc, out, progress_bar=False, tensorboard=False, verbose=0, handle_signals=False)
+    return out / "model.zip"
+
+
+def test_models_with_and_without_status_flags_run_side_by_side(
+    shared_model: Path, flagged_model: Path, tmp_path
+):
+    out = tmp_path / "both"
+    argv = ["--policies", str(shared_model), str(flagged_model), "analytic"]
+    argv += ["--failed-fraction", "0", "0.5", "--failure-mode", "frozen", "--episodes", "2"]
+    argv += ["--max-steps", "8", "--set", "n_neighbors=2", "--set", "n_agents=4"]
+    assert main([*argv, "--no-progress", "--out", str(out)]) == 0
+    res = _no_nan((out / "results.json").read_text())
+    for row in res["rows"]:
+        assert len(row["policies"]) == 3
+        assert all(m["mode"] == "shared" for m in row["policies"].values())
