@@ -74,7 +74,7 @@ def _core_class(backend: str) -> Any:
 #: The backends whose cores take agent statuses (``set_status``): removed, frozen,
 #: absent and joining agents, and ``observe_status``. The others run the perturbations
 #: that leave every agent in the physics (passive failures, noise, dropout).
-STATUS_BACKENDS = ("numpy",)
+STATUS_BACKENDS = ("numpy", "torch")
 
 
 def _needs_statuses(cfg: SwarmConfig) -> bool:
@@ -90,7 +90,7 @@ def unsupported(cfg: SwarmConfig, backend: str) -> str | None:
     if backend not in STATUS_BACKENDS and _needs_statuses(cfg):
         return (
             "does not take agent statuses (removed, frozen, absent or joining agents, "
-            f"observe_status); {', '.join(map(repr, STATUS_BACKENDS))} does"
+            f"observe_status); backends that do: {', '.join(map(repr, STATUS_BACKENDS))}"
         )
     if backend == "numpy":
         return None if cfg.device == "cpu" else f"runs on the CPU only, got device={cfg.device!r}"

@@ -41,6 +41,12 @@ torch_compile.CudaGraphed`) and replayed each step: one launch instead of one pe
 The substep function runs compiled but not captured (its count varies from step to
 step), and the state before a step is kept for the unstable guard (the graph's inputs,
 or a copy when substeps follow).
+
+Agent statuses (:mod:`swarm_envs.envs.torch_statuses`): where the config needs them
+(agents that are removed, frozen, absent or join, or ``observe_status``), the statuses
+are kept on the device and passed to both functions, which apply the numpy core's masks
+(:mod:`swarm_envs.envs.torch_step`); :meth:`TorchSwarmNavCore.set_status` takes new ones
+between steps. Otherwise the functions run without them.
 """
 
 from __future__ import annotations
@@ -62,6 +68,7 @@ from swarm_envs.envs.common import (
     wide_dtypes,
 )
 from swarm_envs.envs.task import STAT_KEYS, observation_size
+from swarm_envs.envs.torch_statuses import StatusControl
 from swarm_envs.envs.torch_step import PACKED_KEYS, build_advance, build_substep
 from swarm_envs.envs.torch_substeps import UNSTABLE, SubstepControl
 
@@ -104,7 +111,7 @@ def _device(device: Any) -> torch.device:
     return dev
 
 
-class TorchSwarmNavCore(SubstepControl):
+class TorchSwarmNavCore(SubstepControl, StatusControl):
     """State and dynamics of ``batch`` independent SwarmNav swarms, in torch.
 
     A :class:`~swarm_envs.envs.protocol.Core` (numpy in, numpy out) for
@@ -129,7 +136,9 @@ class TorchSwarmNavCore(SubstepControl):
 
     ``x``, ``v``, ``goal`` read as fresh read-only numpy arrays; assigning one of them
     (a whole array) moves it to the device and re-measures the state. ``t`` is the
-    numpy step-counter array itself, writable in place as in the numpy core.
+    numpy step-counter array itself, writable in place as in the numpy core. ``status``:
+    each agent's status ``(B, N)`` int8 as last given to :meth:`set_status` (``None``
+    before).
 
     >>> from swarm_envs.config import SwarmConfig
     >>> core = TorchSwarmNavCore(SwarmConfig(n_agents=4), batch=2, compile=False)
@@ -180,6 +189,7 @@ class TorchSwarmNavCore(SubstepControl):
         # reset), and the swarms its step truncated as unstable (host indices, or None).
         self._counted = self._none_each
         self._flagged: np.ndarray | None = None
+        self._init_statuses()
         self._compile_request = compile
         self._advance = self._build(self.batch, compile, "TorchSwarmNavCore.step")
         self._substep = self._build(
@@ -287,6 +297,7 @@ class TorchSwarmNavCore(SubstepControl):
             self._counted,
             self._prev,
             self._start,
+            *self._status_arg(),
         )
 
     def _run(
@@ -326,9 +337,10 @@ class TorchSwarmNavCore(SubstepControl):
             self._goal[rows],
             self._no_action[:n],
             self._no_step[:n],
-            self._none_each[:n],
+            self._counted[rows],
             self._prev[rows],
             self._start[rows],
+            *self._status_arg(rows),
         )
 
     def _measure_rows(self, rows: torch.Tensor) -> None:
@@ -336,8 +348,8 @@ class TorchSwarmNavCore(SubstepControl):
 
         The rows are padded to ``reset_batch`` with copies of the first; the results of
         the real ones are written into the force, observations and statistics; the
-        ``unstable`` statistic of every swarm becomes 0, as a reset's measure of the
-        whole batch makes it.
+        ``unstable`` statistic of every swarm but those :attr:`_flagged` becomes 0, as
+        the measure of the whole batch makes it (a reset clears the flags first).
         """
         assert self._advance_part is not None and self.reset_batch is not None
         n = rows.shape[0]
@@ -351,6 +363,8 @@ class TorchSwarmNavCore(SubstepControl):
         self._obs[rows] = obs[:n]
         self._packed = self._packed.index_put((rows,), packed[:n])  # a new tensor
         self._packed[:, UNSTABLE] = 0.0
+        if self._flagged is not None:
+            self._packed[torch.as_tensor(self._flagged, device=self.device), UNSTABLE] = 1.0
         self._host_packed(whole=False)
 
     # ------------------------------------------------------------------ reset
@@ -537,9 +551,10 @@ class TorchSwarmNavCore(SubstepControl):
             "compile": self._compile_request,
             "t": self.t.copy(),
             "flagged": self._flagged,
+            "status": None if self.status is None else self.status.copy(),
             "tensors": {
                 name: getattr(self, name).detach().cpu()
-                for name in ("_x", "_v", "_goal", "_prev", "_start", "_counted")
+                for name in ("_x", "_v", "_goal", "_prev", "_start", "_counted", "_status")
             },
         }
 
@@ -548,6 +563,7 @@ class TorchSwarmNavCore(SubstepControl):
             state["cfg"], state["batch"], state["dtype"], state["device"], state["compile"]
         )
         self.t, self._flagged = state["t"], state["flagged"]
+        self.status = state.get("status")
         for name, tensor in state["tensors"].items():
             setattr(self, name, tensor.to(self.device))
         self._measure()

@@ -15,6 +15,17 @@ step whose swarms all fit in one substep is that one fused call; otherwise
 :func:`build_substep` takes the substeps but the last, each swarm its own count
 (:func:`plan_substep`), and the fused function takes each swarm's last one and measures
 the result.
+
+Agent statuses (:mod:`~swarm_envs.envs.task.agent_status`): both functions take an
+optional last argument, each agent's status ``(B, N)``, passed when the config needs
+statuses (``perturbations.needs_masks`` or ``observe_status``). With it, a pair with an
+agent not present is at infinite distance
+(:func:`~swarm_envs.physics.social_potential.present_geometry`: no force, rate, energy,
+collision or neighbour), the total force of an agent that does not move is zero, the
+sink's potential counts the present agents, the statistics count the members (the
+mobile agents) and the observation shows the statuses; the physics masks apply where
+``perturbations.needs_masks``, as in the numpy core. Without it the functions are those
+of a config without statuses, operation for operation.
 """
 
 from __future__ import annotations
@@ -36,6 +47,7 @@ from swarm_envs.envs.task import (
     reward,
     statistics,
 )
+from swarm_envs.envs.task.agent_status import masks
 from swarm_envs.physics import kinetic_energy
 from swarm_envs.physics.integrators import euler_update, stable_substep, substep_plan
 from swarm_envs.physics.social_potential import (
@@ -44,6 +56,7 @@ from swarm_envs.physics.social_potential import (
     pair_geometry,
     pair_rates,
     pair_terms,
+    present_geometry,
 )
 
 __all__ = ["PACKED_KEYS", "build_advance", "build_substep", "nearest_neighbors", "plan_substep"]
@@ -57,7 +70,9 @@ __all__ = ["PACKED_KEYS", "build_advance", "build_substep", "nearest_neighbors",
 PACKED_KEYS = (*STAT_KEYS, "h_stable", "h_guard", "calm")
 
 
-def nearest_neighbors(rho: torch.Tensor, k: int) -> tuple[torch.Tensor, torch.Tensor]:
+def nearest_neighbors(
+    rho: torch.Tensor, k: int, strict: bool = False
+) -> tuple[torch.Tensor, torch.Tensor]:
     """The ``k`` nearest neighbours of every agent from symmetric distances ``(B, N, N)``.
 
     Returns ``(distance (B, N, k), index (B, N, k) int64)``, nearest first; ties break by
@@ -70,7 +85,10 @@ def nearest_neighbors(rho: torch.Tensor, k: int) -> tuple[torch.Tensor, torch.Te
 
     float32: one reduction per pass over exact int64 keys ``bits(ρ) · 2³² + j`` (for
     ``ρ ≥ 0`` the bit pattern orders as the value). float64: two reductions per pass
-    (the minimum, then the smallest index holding it).
+    (the minimum, then the smallest index holding it); ``strict`` orders the agents at
+    infinite distance (pairs masked out by statuses) by index too, as the keys do:
+    without it a pass past the last finite distance repeats the lowest index, which
+    no caller reads while every pair is finite and ``k ≤ N − 1``.
     """
     n = rho.shape[-1]
     rows = torch.arange(n, device=rho.device)[:, None]  # j, along the reduced axis
@@ -88,13 +106,18 @@ def nearest_neighbors(rho: torch.Tensor, k: int) -> tuple[torch.Tensor, torch.Te
         return _by_rank(dists), _by_rank(indices)
     columns = rows.to(rho.dtype)
     cand = rho
+    later: torch.Tensor | None = None  # (strict) the entries after the last pass's
     for s in range(k):
         if s > 0:
             d, i = dists[-1][:, None, :], indices[-1][:, None, :]
-            cand = torch.where((rho > d) | ((rho == d) & (columns > i)), rho, math.inf)
+            later = (rho > d) | ((rho == d) & (columns > i))
+            cand = torch.where(later, rho, math.inf)
         dist = cand.amin(-2)
         dists.append(dist)
-        indices.append(torch.where(cand == dist[:, None, :], columns, math.inf).amin(-2))
+        holds = cand == dist[:, None, :]
+        if strict and later is not None:
+            holds = holds & later
+        indices.append(torch.where(holds, columns, math.inf).amin(-2))
     return _by_rank(dists), _by_rank(indices).to(torch.int64)
 
 
@@ -134,10 +157,29 @@ def _stable(geo: PairGeometry, cfg: Any) -> torch.Tensor:
     return stable_substep(omega2, gamma, torch)
 
 
+def _masks(
+    status: torch.Tensor | None, physics: bool
+) -> tuple[torch.Tensor | None, torch.Tensor | None, torch.Tensor | None]:
+    """``(members, present, mobile)`` ``(B, N)`` of ``status`` (each ``None`` without
+    statuses; ``present`` and ``mobile`` also without ``physics`` masks)."""
+    if status is None:
+        return None, None, None
+    mask = masks(status)
+    if not physics:
+        return mask.mobile, None, None
+    return mask.mobile, mask.present, mask.mobile
+
+
+def _held(total: torch.Tensor, mobile: torch.Tensor | None) -> torch.Tensor:
+    """The total force on each agent, zero on those that do not move (``mobile``
+    ``None``: every agent moves)."""
+    return total if mobile is None else torch.where(mobile, total, 0.0)
+
+
 def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
     """The fused SwarmNav step for config ``cfg`` (social potential, semi-implicit Euler).
 
-    ``advance(x, v, f, goal, a, h, substeps, prev, start)`` with positions, velocities
+    ``advance(x, v, f, goal, a, h, substeps, prev, start[, status])`` with positions, velocities
     and the passive force at ``(x, v)`` stored component first, ``(d, B, N)``, so that
     every per-agent quantity is a contiguous ``(B, N)`` plane (the layout on which a
     compiler vectorises the pair loop); goals ``(B, d)``; actions ``a`` ``(B, N, d)``
@@ -145,7 +187,8 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
     the step in one, 0 to keep its state and only measure it; ``substeps`` ``(B,)``: the
     ``substeps`` statistic to report (the step's count, 0 after a reset); ``prev`` and
     ``start`` ``(B, P)``: the previous step's and the episode start's packed rows
-    (:data:`PACKED_KEYS`). Returns ``(x', v', f' (d, B, N), obs (B, N, obs_dim) float32,
+    (:data:`PACKED_KEYS`); ``status`` ``(B, N)`` int8, each agent's status (module
+    docstring; ``None``: none). Returns ``(x', v', f' (d, B, N), obs (B, N, obs_dim) float32,
     packed (B, P), reward (B,), ρ (B, N, N))``; the distances (``inf`` on the diagonal)
     are returned only so that a compiler stores them once (callers drop them).
 
@@ -161,6 +204,7 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
     p = cfg.physics
     N, d = cfg.n_agents, cfg.dim
     k_rank = ranked_neighbors(cfg)
+    physics_masks = cfg.perturbations.needs_masks
 
     def unpack(packed: torch.Tensor) -> dict[str, torch.Tensor]:
         return {key: packed[:, i] for i, key in enumerate(STAT_KEYS)}
@@ -175,12 +219,16 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
         substeps: torch.Tensor,
         prev: torch.Tensor,
         start: torch.Tensor,
+        status: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, ...]:
         B = x.shape[1]
+        members, present, mobile = _masks(status, physics_masks)
         keep, step = (h > 0)[:, None], h[:, None]
         xs, vs = [], []
         for c in range(d):
-            xc, vc = euler_update(x[c], v[c], f[c] + cfg.u_max * a[..., c], step, p.m)
+            xc, vc = euler_update(
+                x[c], v[c], _held(f[c] + cfg.u_max * a[..., c], mobile), step, p.m
+            )
             xs.append(torch.where(keep, xc, x[c]))
             vs.append(torch.where(keep, vc, v[c]))
 
@@ -189,24 +237,31 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
         # pair inside the pair loop); the shared definitions read (B, N, d) views of it.
         x_new, v_new = torch.stack(xs), torch.stack(vs)
         xs, vs = list(x_new.unbind(0)), list(v_new.unbind(0))
-        geo = pair_geometry(xs)
+        geo = present_geometry(pair_geometry(xs), present)
         fs, pairs, potential, goal_distance = _passive(geo, xs, vs, goal, cfg, energy=True)
         h_stable = _stable(geo, cfg)
         xn, vn = x_new.permute(1, 2, 0), v_new.permute(1, 2, 0)
         energy = kinetic_energy(vn, p) + pairs
         if p.C_g > 0:  # the energy statistic includes the sink whenever it exists
+            if present is not None:  # over the agents present
+                potential = torch.where(present, potential, 0.0)
             energy = energy + potential.sum(-1)
 
         agents = torch.arange(N, device=x.device)
         rho = torch.where(agents[:, None] == agents[None, :], math.inf, geo.rho)
-        close = torch.floor((rho < cfg.collision_radius).to(x.dtype).sum(-2).sum(-1) * 0.5)
+        close_pairs = rho < cfg.collision_radius
+        if members is not None:  # a pair of agents at rest does not collide
+            close_pairs = close_pairs & (members[..., :, None] | members[..., None, :])
+        close = torch.floor(close_pairs.to(x.dtype).sum(-2).sum(-1) * 0.5)
         if N > 1:
-            near_dist, near = nearest_neighbors(rho, k_rank)
+            near_dist, near = nearest_neighbors(rho, k_rank, strict=status is not None)
             nearest = near_dist[..., 0]
+            if present is not None:  # an agent alone in the physics: 0
+                nearest = torch.where(torch.isfinite(nearest), nearest, 0.0)
         else:
             near, nearest = None, torch.zeros(B, 1, dtype=x.dtype, device=x.device)
 
-        frame = Frame(xn, vn, goal, goal_distance, nearest, close, energy, substeps)
+        frame = Frame(xn, vn, goal, goal_distance, nearest, close, energy, substeps, members)
         stats = statistics(frame, cfg, xp)
         columns = [xp.astype(stats[key], x) for key in STAT_KEYS]
         finite = torch.isfinite(columns[STAT_KEYS.index(FINITE_KEYS[0])])
@@ -215,7 +270,7 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
         guard = torch.where(finite, h_stable, math.nan)
         calm = (guard.to(torch.float64) >= cfg.dt).all().to(x.dtype).expand(B)
         packed = torch.stack([*columns, h_stable, guard, calm], dim=-1)
-        obs = observation(xn, vn, goal, near, cfg, xp)
+        obs = observation(xn, vn, goal, near, cfg, xp, status)
         effort = (a * a).sum((-2, -1))
         inputs = RewardInputs(stats, unpack(prev), unpack(start), effort, N, xp)
         r = reward(cfg.reward, inputs) + torch.zeros(B, dtype=x.dtype, device=x.device)
@@ -258,14 +313,15 @@ def plan_substep(
 def build_substep(cfg: Any) -> Callable[..., tuple[Any, ...]]:
     """One substep of the step-size control for every swarm with time left, batched.
 
-    ``substep(x, v, f, goal, a, h_stable, remaining, used, over, needed)``: the state
+    ``substep(x, v, f, goal, a, h_stable, remaining, used, over, needed[, status])``: the state
     and force as in :func:`build_advance` (``(d, B, N)``), goals, actions; then per
     swarm, ``(B,)``: the stable substep ``h*`` of the state (its dtype), the time left of
     the step, the substeps taken, whether it needed more than ``cfg.max_substeps``
     (bool) and how many it needed at least (float64). Each swarm with time left plans
     its substep (:func:`plan_substep`) and takes it, an Euler substep with the passive
     force ``f`` and the control; the force and ``h*`` of the new state are computed (for
-    every swarm: one without time left keeps its state).
+    every swarm: one without time left keeps its state). ``status``: each agent's
+    status, as in :func:`build_advance`.
 
     Returns ``(x', v', f', h*', remaining, used, over, needed, more, last)``: the same
     advanced; ``more``, a 0-d bool, whether a swarm's next substep is not its last; and
@@ -277,6 +333,7 @@ def build_substep(cfg: Any) -> Callable[..., tuple[Any, ...]]:
     """
     p = cfg.physics
     d, cap = cfg.dim, float(cfg.max_substeps)
+    physics_masks = cfg.perturbations.needs_masks
 
     def substep(
         x: torch.Tensor,
@@ -289,7 +346,9 @@ def build_substep(cfg: Any) -> Callable[..., tuple[Any, ...]]:
         used: torch.Tensor,
         over: torch.Tensor,
         needed: torch.Tensor,
+        status: torch.Tensor | None = None,
     ) -> tuple[Any, ...]:
+        _, present, mobile = _masks(status, physics_masks)
         wide = remaining.dtype
         h, last, late, wanted = plan_substep(remaining, h_stable.to(wide), used, cap, torch)
         over, needed = over | late, torch.maximum(needed, wanted)
@@ -297,14 +356,16 @@ def build_substep(cfg: Any) -> Callable[..., tuple[Any, ...]]:
         keep, step = active[:, None], h.to(x.dtype)[:, None]
         xs, vs = [], []
         for c in range(d):
-            xc, vc = euler_update(x[c], v[c], f[c] + cfg.u_max * a[..., c], step, p.m)
+            xc, vc = euler_update(
+                x[c], v[c], _held(f[c] + cfg.u_max * a[..., c], mobile), step, p.m
+            )
             xs.append(torch.where(keep, xc, x[c]))
             vs.append(torch.where(keep, vc, v[c]))
         used = used + active.to(wide)
         remaining = torch.where(active & ~last, remaining - h, 0.0)
         x_new, v_new = torch.stack(xs), torch.stack(vs)
         xs, vs = list(x_new.unbind(0)), list(v_new.unbind(0))
-        geo = pair_geometry(xs)
+        geo = present_geometry(pair_geometry(xs), present)
         fs, _, _, _ = _passive(geo, xs, vs, goal, cfg, energy=False)
         h_new = _stable(geo, cfg)
         # The next substep, planned as the next call would plan it: for the fused step

@@ -123,7 +123,8 @@ class SubstepControl:
         no_swarm = torch.zeros(self.batch, dtype=torch.bool, device=self.device)
         h_stable = self._packed[:, _H_STABLE].contiguous()
         x, v, f, goal = self._x, self._v, self._f, self._goal
-        return (x, v, f, goal, a, h_stable, remaining, used, no_swarm, needed)
+        status = self._status_arg()
+        return (x, v, f, goal, a, h_stable, remaining, used, no_swarm, needed, *status)
 
     def _substeps(self, a: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
         """Take the step's substeps, every swarm until its ``dt`` is spent (at most
@@ -131,10 +132,11 @@ class SubstepControl:
         one host read per substep), the last ones in the fused step, which measures
         the new state. Sets the state and :attr:`_counted`; returns ``(over_cap,
         needed)`` per swarm on the host, as the numpy core counts them."""
-        x, v, f, goal, _, h_stable, remaining, used, over, needed = self._substep_inputs(a)
+        inputs = self._substep_inputs(a)
+        x, v, f, goal, _, h_stable, remaining, used, over, needed, *status = inputs
         for _ in range(self.cfg.max_substeps):
             x, v, f, h_stable, remaining, used, over, needed, more, last = self._substep(
-                x, v, f, goal, a, h_stable, remaining, used, over, needed
+                x, v, f, goal, a, h_stable, remaining, used, over, needed, *status
             )
             if not bool(more):
                 break
