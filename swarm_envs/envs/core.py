@@ -240,8 +240,10 @@ class SwarmNavCore:
         idx = np.flatnonzero(rows)
         self.dynamics.restore(self.x, self.v, self.goal, idx)
         self._geometry = self._pair_geometry(self.x)
+        unstable = self._stats["unstable"].copy()  # a truncated swarm stays marked
         with np.errstate(over="ignore", invalid="ignore"):
             self._measure(substeps=self._stats["substeps"])
+        self._stats["unstable"] = unstable
         for key, value in self._stats.items():
             self._prev[key][idx] = value[idx]
             if start:

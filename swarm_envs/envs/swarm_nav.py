@@ -112,9 +112,10 @@ SWARM_NAV_DOC = """
 
     Terminated (success) when at least ``success_fraction`` of the swarm's members
     (every agent, unless ``perturbations`` fail some: then the agents that still move,
-    active or failed passively) are within ``goal_radius`` of the goal at once; truncated after ``max_steps`` steps
-    (``max_cycles`` in PettingZoo). ``gym.make`` adds no ``TimeLimit``: ``max_steps`` is
-    the only episode length (a ``max_episode_steps`` given to ``gym.make`` adds one).
+    active or failed passively) are within ``goal_radius`` of the goal at once;
+    truncated after ``max_steps`` steps (``max_cycles`` in PettingZoo). ``gym.make``
+    adds no ``TimeLimit``: ``max_steps`` is the only episode length (a
+    ``max_episode_steps`` given to ``gym.make`` adds one).
 
     ## Arguments
 

@@ -116,7 +116,12 @@ def observation(
         if status is None:
             features.append(xp.ones((B, N, k_real), like=x))
         else:
-            real, active = flags  # a slot holds a neighbour where it is present
+            # A slot holds a neighbour where that agent is present and not the observer
+            # itself (with fewer present others than k, the ranking runs on into the
+            # agents at infinite distance, the observer among them).
+            present, active = flags
+            own = xp.arange(N, like=x)[None, :, None]
+            real = present * xp.astype(index != own, x)
             features = [f * real for f in features] + [real]
         if getattr(task, "observe_status", False):
             features.append(xp.ones((B, N, k_real), like=x) if status is None else active * real)
