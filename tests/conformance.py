@@ -6,7 +6,9 @@ automatic resets of ended swarms, on the variant and on the reference (the numpy
 float64), and returns the mismatches it finds, each naming the quantity (an observation
 feature, a statistic, the reward, a flag). A variant that cannot run the config must
 refuse it up front with a reason (``unsupported``); :func:`check` then returns that
-reason instead.
+reason instead. A config with perturbations runs both cores inside
+:class:`~swarm_envs.envs.perturbed.PerturbedCore`, which draws the failures, joins and
+noise from the reset's generator: the same seed gives both the same perturbations.
 
 Comparisons stop at the first step whose outcome the reference cannot decide to the
 variant's precision: a pair at the collision radius, an agent at the goal radius, two
@@ -28,7 +30,11 @@ from hypothesis import strategies as st
 from swarm_envs.config import DYNAMICS, INTEGRATORS, SwarmConfig, config_from_mapping
 from swarm_envs.envs import backends
 from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.perturbed import PerturbedCore
 from swarm_envs.envs.task import STAT_KEYS, ranked_neighbors
+from swarm_envs.envs.task.agent_status import masks
+from swarm_envs.envs.task.observation import block_size
+from swarm_envs.perturbations import FAILURE_MODES
 
 #: Tolerances against the float64 reference, per state dtype (float64: round-off).
 TOLERANCE = {
@@ -76,13 +82,28 @@ class Variant:
             return backends.unsupported(cfg, self.backend)
 
     def make(self, cfg: SwarmConfig) -> Any:
+        """This variant's core for ``cfg``, inside :class:`PerturbedCore` where ``cfg``
+        perturbs (as ``make_core`` builds it)."""
         with self.environment():
             cls = backends._core_class(self.backend)
             if self.backend == "torch":
-                return cls(cfg, batch=BATCH, dtype=self.dtype, compile=False)
-            if self.backend == "sparse":  # a cut-off past every pair: exact up to round-off
-                return cls(cfg, batch=BATCH, dtype=self.dtype, cutoff_tol=1e-300)
-            return cls(cfg, batch=BATCH, dtype=self.dtype)
+                core = cls(cfg, batch=BATCH, dtype=self.dtype, compile=False)
+            elif self.backend == "sparse":  # a cut-off past every pair: exact up to round-off
+                core = cls(cfg, batch=BATCH, dtype=self.dtype, cutoff_tol=1e-300)
+            else:
+                core = cls(cfg, batch=BATCH, dtype=self.dtype)
+            return perturbed(core)
+
+
+def perturbed(core: Any) -> Any:
+    """``core`` with its config's perturbations (:class:`PerturbedCore`), as
+    ``make_core`` wraps it; ``core`` itself where nothing is perturbed."""
+    return PerturbedCore(core) if core.cfg.perturbations.any else core
+
+
+def reference(cfg: SwarmConfig) -> Any:
+    """The reference for ``cfg``: the numpy core in float64 (with its perturbations)."""
+    return perturbed(SwarmNavCore(cfg, batch=BATCH, dtype=np.float64))
 
 
 VARIANTS = (
@@ -102,6 +123,33 @@ VARIANTS = (
 
 def _real(low: float, high: float) -> st.SearchStrategy[float]:
     return st.floats(low, high, allow_nan=False, allow_infinity=False)
+
+
+def _ranged(values: st.SearchStrategy[Any]) -> st.SearchStrategy[Any]:
+    """A value, or a range ``(low, high)`` of two (a value drawn per episode)."""
+    return st.one_of(values, st.tuples(values, values).map(lambda r: tuple(sorted(r))))
+
+
+def perturbation_strategies() -> dict[str, Any]:
+    """A strategy per :class:`~swarm_envs.perturbations.Perturbations` field.
+
+    Each of the three agent fractions stays at or below 0.3 (together below 1, as the
+    config requires); the failure and join steps fall inside the drawn episodes
+    (``max_steps`` up to 10) and the suite's rollouts.
+    """
+    fraction = st.one_of(st.just(0.0), _real(0.0, 0.3))
+    noise = st.one_of(st.just(0.0), _real(0.0, 0.5))
+    return {
+        "failed_fraction": _ranged(fraction),
+        "failure_mode": st.sampled_from(FAILURE_MODES),
+        "failure_time": _ranged(st.integers(0, 12)),
+        "absent_fraction": _ranged(fraction),
+        "join_fraction": _ranged(fraction),
+        "join_time": _ranged(st.integers(1, 12)),
+        "obs_noise": _ranged(noise),
+        "action_noise": _ranged(noise),
+        "neighbor_dropout": _ranged(st.one_of(st.just(0.0), _real(0.0, 0.9))),
+    }
 
 
 def field_strategies(dynamics: tuple[str, ...] = ("social_potential",)) -> dict[str, Any]:
@@ -138,6 +186,8 @@ def field_strategies(dynamics: tuple[str, ...] = ("social_potential",)) -> dict[
         "obs_goal_scale": _real(0.5, 20.0),
         "obs_neighbor_scale": _real(0.2, 5.0),
         "obs_velocity_scale": _real(0.2, 5.0),
+        "observe_status": st.booleans(),
+        "perturbations": perturbation_strategies(),
         "reward": {
             name: weight
             for name in ("progress", "arrival", "success", "collision", "effort", "time")
@@ -157,11 +207,29 @@ def field_strategies(dynamics: tuple[str, ...] = ("social_potential",)) -> dict[
     }
 
 
+#: The fields drawn only for the perturbed share of the configs (about one in
+#: :data:`PERTURBED_ONE_IN`); the others keep their defaults (nothing perturbed).
+PERTURBED_FIELDS = ("observe_status", "perturbations")
+PERTURBED_ONE_IN = 3
+
+#: The perturbations that take agents out of the physics or stop them (the config
+#: allows them with the social potential and semi-implicit Euler only).
+_MASK_DEFAULTS = {"failure_mode": "passive", "absent_fraction": 0.0, "join_fraction": 0.0}
+
+
 @st.composite
 def configs(draw: Any, dynamics: tuple[str, ...] = ("social_potential",)) -> SwarmConfig:
-    """A random valid config: every field of :func:`field_strategies` drawn."""
+    """A random valid config: every field of :func:`field_strategies` drawn.
+
+    Roughly one config in :data:`PERTURBED_ONE_IN` is perturbed (``observe_status`` and
+    the ``perturbations`` section drawn); the others perturb nothing, so the draws share
+    the examples with the rest of the config rather than adding a pass of their own.
+    """
+    perturb = draw(st.integers(0, PERTURBED_ONE_IN - 1)) == PERTURBED_ONE_IN - 1
     fields: dict[str, Any] = {}
     for name, strategy in field_strategies(dynamics).items():
+        if name in PERTURBED_FIELDS and not perturb:
+            continue
         if isinstance(strategy, dict):
             fields[name] = {key: draw(s) for key, s in strategy.items()}
         else:
@@ -173,6 +241,9 @@ def configs(draw: Any, dynamics: tuple[str, ...] = ("social_potential",)) -> Swa
         fields["init_radius"] = max(fields["init_radius"], 0.1 * fields["n_agents"])
     if fields["init_density"] is not None:
         fields.pop("init_radius")  # one of the two sets the start radius
+    physical = fields["dynamics"] == "social_potential"
+    if perturb and not (physical and fields["integrator"] == "semi_implicit_euler"):
+        fields["perturbations"].update(_MASK_DEFAULTS)  # passive failures and noise only
     return config_from_mapping(SwarmConfig, fields)
 
 
@@ -212,30 +283,44 @@ def rollout(core: Any, seed: int, steps: int = STEPS) -> list[tuple]:
     return out
 
 
-def _undecidable(core: SwarmNavCore, margin: float) -> str | None:
-    """What makes the reference's current state undecidable at ``margin``, if anything."""
+def _undecidable(core: Any, margin: float) -> str | None:
+    """What makes the reference's current state undecidable at ``margin``, if anything.
+
+    With agent statuses, only what the definitions read counts: the members (mobile
+    agents) for the centroid and the goal radius, and the pairs of present agents for
+    the collision radius and the neighbour ranking."""
     cfg, x, goal = core.cfg, core.x, core.goal
     n = cfg.n_agents
+    status = getattr(core, "status", None)
+    if status is None:
+        members = present = np.ones(x.shape[:-1], dtype=bool)
+    else:
+        _, members, present = masks(status)
     scale = max(1.0, float(np.abs(x).max()))
     tol = margin * scale
     speed = np.linalg.norm(core.v, axis=-1)
-    if ((speed > 0) & (speed < 1e-30)).any():
+    if ((speed > 0) & (speed < 1e-30) & members).any():
         return "a speed below float32's range (no heading in float32)"
-    radius = np.linalg.norm(x - x.mean(axis=-2, keepdims=True), axis=-1)
-    if n > 1 and ((radius > 0) & (radius < 1e3 * np.finfo(np.float32).eps * scale)).any():
+    weight = members[..., None].astype(np.float64)
+    centre = (x * weight).sum(axis=-2, keepdims=True) / np.maximum(weight.sum(-2, keepdims=True), 1)
+    radius = np.linalg.norm(x - centre, axis=-1)
+    near_centre = (radius > 0) & (radius < 1e3 * np.finfo(np.float32).eps * scale) & members
+    if n > 1 and near_centre.any():
         return "an agent at the centroid to float32's precision (no radial direction)"
     gd = np.linalg.norm(goal[:, None, :] - x, axis=-1)
-    if (np.abs(gd - cfg.arrival_radius) < tol).any():
+    if ((np.abs(gd - cfg.arrival_radius) < tol) & members).any():
         return "an agent at the goal radius"
     if n > 1:
         rho = np.linalg.norm(x[:, :, None] - x[:, None, :], axis=-1)
+        rho[~(present[:, :, None] & present[:, None, :])] = np.inf
         rho[:, np.arange(n), np.arange(n)] = np.inf
         if (np.abs(rho - cfg.collision_radius) < tol).any():
             return "a pair at the collision radius"
         k = min(ranked_neighbors(cfg) + 1, n - 1)
         ranked = np.sort(rho, axis=-1)[..., :k]
-        if (np.diff(ranked, axis=-1) < tol).any():
-            return "two neighbours at the same distance"
+        with np.errstate(invalid="ignore"):  # inf - inf: absent agents, ranked last
+            if (np.diff(ranked, axis=-1) < tol).any():
+                return "two neighbours at the same distance"
     return None
 
 
@@ -250,15 +335,16 @@ def check(variant: Variant, cfg: SwarmConfig, seed: int = 0) -> list[str]:
         return [f"refused: {reason}"] if reason.strip() else ["refused without a reason"]
     dtype = np.dtype(variant.dtype)
     tol, margin = TOLERANCE[dtype], MARGIN[dtype]
-    ref_core = SwarmNavCore(cfg, batch=BATCH, dtype=np.float64)
+    ref_core = reference(cfg)
     ours_core = variant.make(cfg)
     return compare(ours_core, ref_core, seed, tol, margin)
 
 
-def compare(
-    ours_core: Any, ref_core: SwarmNavCore, seed: int, tol: dict, margin: float
-) -> list[str]:
-    """Step both cores in lockstep and name what differs (see :func:`check`)."""
+def compare(ours_core: Any, ref_core: Any, seed: int, tol: dict, margin: float) -> list[str]:
+    """Step both cores in lockstep and name what differs (see :func:`check`).
+
+    Both draw their starts, perturbations and noise from generators of the same seed,
+    so with the same actions they see the same failures, joins, noise and dropout."""
     cfg = ref_core.cfg
     rng, ref_rng = np.random.default_rng(seed), np.random.default_rng(seed)
     ours_core.reset(rng)
@@ -305,6 +391,8 @@ def observation_features(cfg: SwarmConfig) -> list[str]:
         names += [f"neighbor{s}.offset.{a}" for a in axes]
         names += [f"neighbor{s}.relative_velocity.{a}" for a in axes]
         names.append(f"neighbor{s}.mask")
+        if block_size(cfg) > 2 * d + 1:
+            names.append(f"neighbor{s}.status")
     return names
 
 

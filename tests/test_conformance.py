@@ -1,10 +1,11 @@
 """Every backend executes the same definitions: the conformance suite.
 
 For random valid configs (hypothesis: every numeric field of the env config — reward
-weights, observation scales, k, d, dt, u_max, the goal radius, the physics — and the
-state's dtype), every backend either matches the reference, the numpy core in float64
-(float64: to round-off; float32: to 2e-3), through automatic resets, or refuses the
-config up front with a reason. The C step runs in its default build and in a portable
+weights, observation scales, k, d, dt, u_max, the goal radius, the physics, and for a
+share of the configs the perturbations and ``observe_status`` — and the state's dtype),
+every backend either matches the reference, the numpy core in float64 (float64: to
+round-off; float32: to 2e-3), through automatic resets, or refuses the config up front
+with a reason. The C step runs in its default build and in a portable
 ``x86-64-v3`` build (no AVX-512 branches). ``tests/conformance.py`` holds the machinery;
 the tests at the end show that it catches one backend's perturbed term.
 """
@@ -25,6 +26,7 @@ from conformance import (
     compare,
     configs,
     field_strategies,
+    perturbed,
     rollout,
 )
 from hypothesis import HealthCheck, given, settings
@@ -34,6 +36,7 @@ from swarm_envs.config import DYNAMICS, RewardWeights, SwarmConfig
 from swarm_envs.envs import backends
 from swarm_envs.envs.core import SwarmNavCore
 from swarm_envs.envs.task import REWARD_TERMS
+from swarm_envs.perturbations import Perturbations
 from swarm_envs.physics import SocialPotentialParams
 
 SETTINGS = settings(
@@ -98,18 +101,78 @@ def test_the_torch_core_matches_the_reference_through_substeps_and_the_cap(varia
         assert check(variant, cfg) == [], cfg
 
 
+#: Perturbed configs every variant runs or refuses: failures (passive, frozen, removed)
+#: at drawn steps, absent and joining agents, noise and dropout, observed statuses. A
+#: backend without agent statuses refuses the ones that need them, and only those. (The
+#: sizes are ones whose seeded rollouts stay decidable in float32 through every step.)
+PERTURBED_CONFIGS = (
+    SwarmConfig(
+        n_agents=8,
+        max_steps=6,
+        perturbations=Perturbations(
+            failed_fraction=0.25,
+            failure_time=[0, 4],
+            obs_noise=0.05,
+            action_noise=[0.1, 0.3],
+            neighbor_dropout=0.3,
+        ),
+    ),
+    SwarmConfig(
+        n_agents=8,
+        max_steps=8,
+        goal_in_physics=True,
+        observe_status=True,
+        perturbations=Perturbations(
+            failed_fraction=0.25,
+            failure_mode="frozen",
+            failure_time=[1, 5],
+            absent_fraction=0.1,
+            join_fraction=0.2,
+            join_time=[1, 6],
+        ),
+    ),
+    SwarmConfig(
+        n_agents=12,
+        dim=3,
+        max_steps=8,
+        perturbations=Perturbations(
+            failed_fraction=[0.1, 0.3], failure_mode="removed", failure_time=2, obs_noise=0.1
+        ),
+    ),
+)
+
+
+def _needs_statuses(cfg: SwarmConfig) -> bool:
+    return cfg.observe_status or cfg.perturbations.needs_masks
+
+
+@pytest.mark.parametrize("variant", VARIANTS, ids=lambda v: v.name)
+def test_every_backend_runs_the_perturbations_it_takes(variant):
+    if variant.backend == "native" and variant.unsupported(SwarmConfig()):
+        pytest.skip(f"C step unavailable: {variant.unsupported(SwarmConfig())}")
+    for cfg in PERTURBED_CONFIGS:
+        reason = variant.unsupported(cfg)
+        if reason is None:
+            assert check(variant, cfg) == [], cfg
+        else:
+            assert _needs_statuses(cfg), reason
+            assert variant.backend not in backends.STATUS_BACKENDS, reason
+
+
 @SETTINGS
 @given(cfg=configs(dynamics=DYNAMICS))
 def test_other_models_are_refused_with_a_reason_and_run_on_numpy(cfg):
     # The zone, piecewise and Lagrangian models run on the numpy core only; their
     # discrete rules (zones, turning limits) make float32 and float64 diverge, so they
     # are checked for finite results in both, not against each other.
+    # With observe_status a backend without agent statuses may name that first.
     for backend in ("sparse", "torch", "native"):
         reason = backends.unsupported(cfg, backend)
         if cfg.dynamics != "social_potential":
-            assert reason and "social_potential" in reason
+            assert reason and ("social_potential" in reason or "statuses" in reason)
     for dtype in (np.float32, np.float64):
-        for obs, reward, _, _, stats in rollout(SwarmNavCore(cfg, batch=3, dtype=dtype), 0):
+        core = perturbed(SwarmNavCore(cfg, batch=3, dtype=dtype))
+        for obs, reward, _, _, stats in rollout(core, 0):
             assert np.isfinite(obs).all() and all(np.isfinite(v).all() for v in stats.values())
             assert reward is None or np.isfinite(reward).all()
 
@@ -133,6 +196,7 @@ def test_the_suite_draws_every_field_of_the_env_config():
     assert set(drawn) | set(NOT_DRAWN) == names
     assert set(drawn["reward"]) == {f.name for f in dataclasses.fields(RewardWeights)}
     assert set(drawn["physics"]) == {f.name for f in dataclasses.fields(SocialPotentialParams)}
+    assert set(drawn["perturbations"]) == {f.name for f in dataclasses.fields(Perturbations)}
 
 
 def test_reward_terms_and_weights_are_the_same_list():
@@ -189,6 +253,21 @@ def test_a_perturbed_numpy_term_is_caught(monkeypatch):
     monkeypatch.setattr(numpy_core, "reward", broken)
     problems = check(Variant("numpy", np.float32), BROKEN_CONFIG)
     assert problems and "reward" in problems[0]
+
+
+def test_frozen_agents_that_move_in_one_backend_are_caught(monkeypatch):
+    # The float32 numpy core integrating the frozen agents too (its mobile mask ignored).
+    from swarm_envs.envs import dynamics
+
+    right = dynamics.SocialPotentialDynamics._mobile_force
+
+    def broken(self, f, rows):
+        return f if f.dtype == np.float32 else right(self, f, rows)
+
+    monkeypatch.setattr(dynamics.SocialPotentialDynamics, "_mobile_force", broken)
+    assert check(Variant("numpy", np.float64), PERTURBED_CONFIGS[1]) == []
+    problems = check(Variant("numpy", np.float32), PERTURBED_CONFIGS[1])
+    assert problems and not problems[0].startswith("refused")
 
 
 @pytest.mark.parametrize("column", ["energy", "collisions"])

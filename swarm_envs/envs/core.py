@@ -240,11 +240,11 @@ class SwarmNavCore:
         idx = np.flatnonzero(rows)
         self.dynamics.restore(self.x, self.v, self.goal, idx)
         self._geometry = self._pair_geometry(self.x)
-        unstable = self._stats["unstable"].copy()  # a truncated swarm stays marked
+        before = self._stats
         with np.errstate(over="ignore", invalid="ignore"):
-            self._measure(substeps=self._stats["substeps"])
-        self._stats["unstable"] = unstable
+            self._measure(substeps=before["substeps"])
         for key, value in self._stats.items():
+            value[~rows] = before[key][~rows]  # the others keep theirs (an `unstable` flag)
             self._prev[key][idx] = value[idx]
             if start:
                 self._start[key][idx] = value[idx]

@@ -19,8 +19,9 @@ for each of the k nearest neighbours j, nearest first:
 ``N − 1 < k`` the last ``k − (N − 1)`` slots are padding (all zeros). Every entry is
 clipped to ``[−OBS_BOUND, OBS_BOUND]``; observations are float32 whatever the state's
 dtype. Only agents present in the physics are neighbours: a slot whose ranked agent is
-absent (fewer present agents than ``k``) is padding. An agent's own features do not say
-whether it has failed: a failed agent no longer acts, and the adapters stop asking it.
+absent, or the agent itself (fewer present others than ``k``), is padding. An agent's own
+features do not say whether it has failed: a failed agent no longer acts, and the
+adapters stop asking it.
 :func:`observation` computes this from the state and each agent's neighbour indices, on
 numpy arrays or torch tensors; the C step writes the same layout.
 """
