@@ -251,7 +251,7 @@ def evaluate_robustness(
     check_policies(policies, cfg)  # warns where a model's env meant something else
     entries = []
     for row in rows:
-        measures, backend = {}, ""
+        measures, backends = {}, []
         for name, policy in policies.items():
             batch = run_episodes(
                 policy,
@@ -263,14 +263,14 @@ def evaluate_robustness(
                 progress=progress,
                 record_episode=False,
             )
-            backend = batch.backend
+            backends.append(batch.backend)  # a policy with status flags may need another
             measures[name] = summarize(batch)
         entries.append(
             {
                 "option": row.option,
                 "value": row.value,
                 "perturbations": as_dict(row.cfg.perturbations),
-                "backend": backend,
+                "backend": ", ".join(dict.fromkeys(backends)),
                 "policies": measures,
             }
         )
