@@ -120,10 +120,6 @@ class ArrayNamespace:
     def eye(self, n: int, like: Array) -> Array:
         return np.eye(n, dtype=like.dtype)
 
-    def arange(self, n: int, like: Array) -> Array:
-        """``0, 1, ..., n − 1`` as integers (on the device of ``like``)."""
-        return np.arange(n)
-
     def array(self, values: Sequence[float], like: Array) -> Array:
         """A 1-D array of ``values`` in the dtype (and on the device) of ``like``."""
         return np.asarray(values, dtype=like.dtype)
@@ -219,9 +215,6 @@ class TorchNamespace(ArrayNamespace):
 
     def eye(self, n: int, like: Array) -> Array:
         return self.torch.eye(n, dtype=like.dtype, device=like.device)
-
-    def arange(self, n: int, like: Array) -> Array:
-        return self.torch.arange(n, device=like.device)
 
     def array(self, values: Sequence[float], like: Array) -> Array:
         return self.torch.tensor(values, dtype=like.dtype, device=like.device)

@@ -488,7 +488,7 @@ def test_a_config_the_kernel_does_not_implement_is_refused():
     info = contract.KernelInfo(
         physics=("C_a", "C_r", "l_a", "l_r"),  # as if alignment were missing
         statistics=(),
-        obs_layout="another layout",
+        obs_layouts=("another layout",),
         kmax=64,
     )
     cfg = SwarmConfig()
@@ -501,7 +501,8 @@ def test_a_config_the_kernel_does_not_implement_is_refused():
 @needs_native
 def test_the_kernel_declares_what_it_implements():
     info = build.load_library().info
-    assert info.obs_layout == contract.LAYOUT
+    assert info.obs_layouts == (contract.LAYOUT, contract.LAYOUT + ",status")
+    assert set(info.statuses) == set(contract.STATUS_MASKS)
     assert info.kmax == 64
     assert set(info.statistics) <= set(contract.PACKED_COLUMNS)
     from swarm_envs.physics import SocialPotentialParams

@@ -74,7 +74,7 @@ def _core_class(backend: str) -> Any:
 #: The backends whose cores take agent statuses (``set_status``): removed, frozen,
 #: absent and joining agents, and ``observe_status``. The others run the perturbations
 #: that leave every agent in the physics (passive failures, noise, dropout).
-STATUS_BACKENDS = ("numpy", "torch")
+STATUS_BACKENDS = ("native", "numpy", "torch")
 
 
 def _needs_statuses(cfg: SwarmConfig) -> bool:

@@ -1,8 +1,9 @@
 """Building and loading the C step: compiled at first use into a per-user cache.
 
-The first use compiles ``fused_step.c`` (with ``fused_step_body.h`` and the header
-:func:`~swarm_envs.envs.native.contract.header` generates) with the C compiler (``$CC``,
-else ``cc`` or ``gcc``) into ``$SWARM_ENVS_CACHE`` (default ``~/.cache/swarm_envs``) as
+The first use compiles ``fused_step.c`` (with ``fused_step_body.h``,
+``fused_step_members.h`` and the header :func:`~swarm_envs.envs.native.contract.header`
+generates) with the C compiler (``$CC``, else ``cc`` or ``gcc``) into
+``$SWARM_ENVS_CACHE`` (default ``~/.cache/swarm_envs``) as
 ``fused_step-<sources>-<compiler>.so``: ``<sources>`` hashes the sources, the generated
 header, the flags, the machine and, for ``-march=native``, the CPU; ``<compiler>`` the
 compiler's resolved path. Later processes load the cached library at once.
@@ -95,7 +96,7 @@ CC_TIMEOUT_ENV = "SWARM_ENVS_CC_TIMEOUT"
 #: compiler is still stopped.
 DEFAULT_CC_TIMEOUT = 600.0
 _BASE_FLAGS = ("-O3", "-fopenmp", "-fno-math-errno", "-fno-trapping-math", "-fPIC", "-shared")
-_SOURCES = ("fused_step.c", "fused_step_body.h")
+_SOURCES = ("fused_step.c", "fused_step_body.h", "fused_step_members.h")
 
 _LOCK = threading.Lock()
 _LIBRARIES: dict[tuple[str, ...], Library] = {}
@@ -112,19 +113,21 @@ class Library:
 
     def __init__(self, lib: ctypes.CDLL, path: Path) -> None:
         self.lib, self.path = lib, path
-        for name in ("fused_step_physics", "fused_step_stats", "fused_step_obs_layout"):
-            getattr(lib, name).restype = ctypes.c_char_p
+        names = ("physics", "stats", "obs_layouts", "statuses")
+        for name in names:
+            getattr(lib, f"fused_step_{name}").restype = ctypes.c_char_p
         lib.fused_step_layout.restype = ctypes.c_longlong
         self.info = KernelInfo(
             physics=tuple(lib.fused_step_physics().decode().split()),
             statistics=tuple(lib.fused_step_stats().decode().split()),
-            obs_layout=lib.fused_step_obs_layout().decode(),
+            obs_layouts=tuple(lib.fused_step_obs_layouts().decode().split("\n")),
             kmax=int(lib.fused_step_kmax()),
+            statuses=tuple(lib.fused_step_statuses().decode().split()),
         )
         self.f32, self.f64 = lib.fused_step_f32, lib.fused_step_f64
         for fn in (self.f32, self.f64):
             fn.restype = ctypes.c_int
-            fn.argtypes = [ctypes.c_void_p, ctypes.c_int64, ctypes.c_int64] + [ctypes.c_void_p] * 14
+            fn.argtypes = [ctypes.c_void_p, ctypes.c_int64, ctypes.c_int64] + [ctypes.c_void_p] * 15
 
 
 def build_flags() -> tuple[str, ...]:

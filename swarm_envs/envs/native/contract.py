@@ -46,7 +46,7 @@ from swarm_envs.envs.task import (
     ranked_neighbors,
     success_count,
 )
-from swarm_envs.envs.task.observation import LAYOUT
+from swarm_envs.envs.task.observation import LAYOUT, layout
 from swarm_envs.metrics import CENTRE_RTOL
 from swarm_envs.physics import SocialPotentialParams
 from swarm_envs.physics.integrators import STEP_SAFETY
@@ -57,6 +57,7 @@ __all__ = [
     "HOST_CONFIG_FIELDS",
     "KERNEL_CONFIG_FIELDS",
     "PACKED_COLUMNS",
+    "STATUS_MASKS",
     "UNSOUND",
     "Field",
     "KernelInfo",
@@ -81,6 +82,7 @@ KERNEL_CONFIG_FIELDS = (
     "obs_velocity_scale",
     "goal_in_physics",
     "max_substeps",
+    "observe_status",
 )
 
 #: The :class:`SwarmConfig` fields the C step does not read, and why.
@@ -104,10 +106,8 @@ HOST_CONFIG_FIELDS = {
     "backend": "selects the core",
     "device": "the C step runs on the CPU",
     "on_unstable": "the guard after the step runs in Python (it raises, or undoes the step)",
-    "perturbations": "actions and observations are perturbed around the core (PerturbedCore); "
-    "configs that need agent statuses are refused (backends.STATUS_BACKENDS)",
-    "observe_status": "a layout with status flags needs agent statuses: refused "
-    "(backends.STATUS_BACKENDS)",
+    "perturbations": "drawn and applied in Python (PerturbedCore: the schedule, the noise, "
+    "the dropout); the agents' statuses reach the kernel as an array (set_status)",
 }
 
 #: Or'ed into the C step's return value where a swarm of the call went over the cap or
@@ -147,6 +147,12 @@ DERIVED: tuple[tuple[str, str, Callable[[SwarmConfig, np.dtype], float], str], .
         "int64_t",
         lambda c, dt: int(c.goal_in_physics and c.physics.C_g > 0),
         "the sink acts passively",
+    ),
+    (
+        "success_threshold",
+        "double",
+        lambda c, dt: c.success_fraction - 1e-9,  # success_count's rule
+        "success: arrived members / members at least this",
     ),
     ("obs_bound", "double", lambda c, dt: OBS_BOUND, "observation clip"),
     ("rho_floor", "double", lambda c, dt: RHO_FLOOR, "distance floor"),
@@ -246,15 +252,23 @@ class KernelInfo:
     Attributes:
         physics: the ``SocialPotentialParams`` fields its force law uses.
         statistics: the statistics it writes (the others are computed in Python).
-        obs_layout: its observation layout (:data:`~swarm_envs.envs.task.observation.
-            LAYOUT` when it matches the shared definition).
+        obs_layouts: the observation layouts it writes (each compared with
+            :func:`~swarm_envs.envs.task.observation.layout` of a config).
         kmax: the most neighbours it ranks.
+        statuses: the agents' masks it applies where agents have statuses
+            (:mod:`~swarm_envs.envs.task.agent_status`): ``present``, ``mobile``,
+            ``members``, ``active``; all four for a config that needs statuses.
     """
 
     physics: tuple[str, ...]
     statistics: tuple[str, ...]
-    obs_layout: str
+    obs_layouts: tuple[str, ...]
     kmax: int
+    statuses: tuple[str, ...] = ()
+
+
+#: The masks of agent statuses a kernel must apply to run a config that needs statuses.
+STATUS_MASKS = ("present", "mobile", "members", "active")
 
 
 def unsupported(cfg: SwarmConfig, kernel: KernelInfo) -> str | None:
@@ -275,8 +289,12 @@ def unsupported(cfg: SwarmConfig, kernel: KernelInfo) -> str | None:
             default, f.name
         ):
             return f"physics.{f.name} is not implemented in the C step"
-    if kernel.obs_layout != LAYOUT:
-        return f"its observation layout {kernel.obs_layout!r} is not {LAYOUT!r}"
+    if layout(cfg) not in kernel.obs_layouts:
+        return f"writes the observation layouts {kernel.obs_layouts!r}, not {layout(cfg)!r}"
+    if cfg.perturbations.needs_masks or cfg.observe_status:  # set_status is called
+        missing = [mask for mask in STATUS_MASKS if mask not in kernel.statuses]
+        if missing:
+            return f"does not apply the agents' statuses ({', '.join(missing)})"
     if ranked_neighbors(cfg) > kernel.kmax:
         return (
             f"ranks at most {kernel.kmax} neighbours, got n_neighbors={cfg.n_neighbors} "

@@ -19,6 +19,11 @@ before the step is still at hand when the guard undoes an unstable step
 <swarm_envs.envs.core.SwarmNavCore.step>`). Observations are written into buffers that
 are recycled once nobody else holds them (:class:`_BufferPool`), so a step allocates no
 large array. A reset of a few swarms re-measures those swarms only, in place.
+
+Agent statuses (:meth:`NativeSwarmNavCore.set_status`, from the perturbations' wrapper)
+are kept as a ``(B, N)`` int8 array that the C step reads, with the numpy core's
+semantics (:mod:`swarm_envs.envs.task.agent_status`); until the first call the kernel
+gets none and applies no masks.
 """
 
 from __future__ import annotations
@@ -52,6 +57,7 @@ from swarm_envs.envs.task import (
     observation_size,
     reward,
 )
+from swarm_envs.envs.task.agent_status import masks
 
 __all__ = ["UNAVAILABLE", "NativeSwarmNavCore"]
 
@@ -139,6 +145,9 @@ class NativeSwarmNavCore:
         self._stats: dict[str, np.ndarray] = {}
         self._prev: dict[str, np.ndarray] = {}
         self._start: dict[str, np.ndarray] = {}
+        #: Each agent's status ``(B, N)`` int8 (agent_status), ``None`` while every agent
+        #: is active and always will be (then the kernel applies no masks).
+        self._status: np.ndarray | None = None
         self._bind()
         self._extra = tuple(s for s in STATISTICS if s.name not in library.info.statistics)
         self._measure()
@@ -187,6 +196,7 @@ class NativeSwarmNavCore:
             goal,
             actions.ctypes.data,
             move.ctypes.data,
+            None if self._status is None else self._status.ctypes.data,
             x_out,
             v_out,
             f_out,
@@ -248,8 +258,14 @@ class NativeSwarmNavCore:
         x, v = self.x, self.v
         rho = np.linalg.norm(x[:, :, None, :] - x[:, None, :, :], axis=-1)
         n = self.cfg.n_agents
+        members = None
+        if self._status is not None:  # pairs with an agent not present: none
+            present, members = masks(self._status).present, masks(self._status).mobile
+            rho = np.where(present[:, :, None] & present[:, None, :], rho, np.inf)
         rho[:, np.arange(n), np.arange(n)] = np.inf
         nearest = rho.min(axis=-1) if n > 1 else np.zeros((self.batch, 1), self.dtype)
+        if members is not None:  # no present other: 0
+            nearest = np.where(np.isfinite(nearest), nearest, 0.0).astype(self.dtype)
         offset = self.goal[:, None, :] - x
         return Frame(
             x,
@@ -259,6 +275,8 @@ class NativeSwarmNavCore:
             nearest,
             packed[:, STAT_KEYS.index("collisions")],
             packed[:, STAT_KEYS.index("energy")],
+            packed[:, STAT_KEYS.index("substeps")],
+            members,
         )
 
     # ------------------------------------------------------------------ reset
@@ -281,6 +299,56 @@ class NativeSwarmNavCore:
         for key, value in self._stats.items():
             self._prev[key][idx] = value[idx]
             self._start[key][idx] = value[idx]
+
+    # ------------------------------------------------------------------ agents
+    def set_status(
+        self,
+        status: np.ndarray,
+        place: np.ndarray | None = None,
+        at: np.ndarray | None = None,
+        *,
+        rows: np.ndarray | None = None,
+        start: bool = False,
+    ) -> None:
+        """Give the agents new statuses ``(B, N)`` (agent_status) between steps, as
+        :meth:`SwarmNavCore.set_status <swarm_envs.envs.core.SwarmNavCore.set_status>`.
+
+        ``place`` ``(B, N)`` bool: agents put at ``at`` ``(B, N, d)`` (joining agents).
+        Agents that no longer move and placed agents are at rest. The swarms whose
+        statuses or places changed, and those in ``rows`` ``(B,)``, are measured again
+        (their last step's substep count kept), and their previous statistics become
+        these (``start=True``: their episode's start too). From then on the C step
+        applies the statuses' masks: pairs with an agent not present, updates of agents
+        that do not move, statistics over the members, the observed status flags.
+        """
+        B, N = self.batch, self.cfg.n_agents
+        status = np.ascontiguousarray(status, dtype=np.int8)
+        if status.shape != (B, N):
+            raise ValueError(f"status must have shape {(B, N)}, got {status.shape}")
+        old = self._status
+        changed = np.ones(B, dtype=bool) if old is None else (old != status).any(-1)
+        rows = changed if rows is None else changed | np.asarray(rows, dtype=bool)
+        if place is not None:
+            place = np.asarray(place, dtype=bool)
+            rows = rows | place.any(axis=-1)
+            self._x[:, place] = np.asarray(at, dtype=self.dtype)[place].T
+            self._v[:, place] = 0.0
+        if old is None:
+            self._status = status.copy()
+        else:
+            old[...] = status  # in place: the kernel's array
+        self._v[:, ~masks(status).mobile] = 0.0
+        if not rows.any():
+            return
+        idx = np.flatnonzero(rows)
+        substeps = self._packed[:, _SUBSTEPS].copy()  # a measure takes none
+        self._measure(None if idx.size == B else idx.astype(np.int64))
+        self._packed[idx, _SUBSTEPS] = substeps[idx]
+        self._stats["substeps"][idx] = substeps[idx]
+        for key, value in self._stats.items():
+            self._prev[key][idx] = value[idx]
+            if start:
+                self._start[key][idx] = value[idx]
 
     # ------------------------------------------------------------------ step
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:

@@ -10,8 +10,8 @@
  * The parameters arrive in StepParams, and the output columns are PK_*, both from the
  * header step_params.h that swarm_envs/envs/native/contract.py generates from the config
  * dataclasses at build time. What this kernel implements it declares below
- * (KERNEL_PHYSICS, KERNEL_STATS, KERNEL_OBS_LAYOUT); Python refuses configs that need
- * more.
+ * (KERNEL_PHYSICS, KERNEL_STATS, KERNEL_OBS_LAYOUTS, KERNEL_STATUSES); Python refuses
+ * configs that need more.
  *
  * Compiled at first use by swarm_envs/envs/native/build.py with the system C compiler
  * (-O3 -march=<SWARM_ENVS_NATIVE_ARCH, default native> -fopenmp, plus $CFLAGS): the loops
@@ -41,9 +41,20 @@ double exp(double);
     "polarization angular_momentum expanse nearest_neighbor_distance energy "              \
     "fraction_arrived collisions centroid_distance mean_goal_distance success substeps "   \
     "unstable"
+/* The observation layouts it writes, one per line: without and with observe_status. */
 #define KERNEL_OBS_LAYOUT                                                                   \
     "goal_offset/obs_goal_scale,velocity/obs_velocity_scale;"                              \
     "offset/obs_neighbor_scale,relative_velocity/obs_velocity_scale,mask"
+#define KERNEL_OBS_LAYOUTS KERNEL_OBS_LAYOUT "\n" KERNEL_OBS_LAYOUT ",status"
+/* The agents' statuses it applies (swarm_envs.envs.task.agent_status.masks): pairs with
+ * an agent not present, updates of agents that do not move, statistics over the members
+ * (the mobile agents), the observed flag of the active ones. */
+#define KERNEL_STATUSES "present mobile members active"
+
+/* An agent's flags (fused_step_body.h): in the physics, moving (a member), active. */
+#define AG_PRESENT 1
+#define AG_MOBILE 2
+#define AG_ACTIVE 4
 
 /* e^x in float32, inlined so that the pair loop vectorises without calls (a call to
  * libmvec's vector expf spills every live register, which made the loop 1.6x slower).
@@ -105,7 +116,8 @@ long long fused_step_layout(void) { return STEP_LAYOUT_HASH; }
 int fused_step_kmax(void) { return KMAX_SORT; }
 const char *fused_step_physics(void) { return KERNEL_PHYSICS; }
 const char *fused_step_stats(void) { return KERNEL_STATS; }
-const char *fused_step_obs_layout(void) { return KERNEL_OBS_LAYOUT; }
+const char *fused_step_obs_layouts(void) { return KERNEL_OBS_LAYOUTS; }
+const char *fused_step_statuses(void) { return KERNEL_STATUSES; }
 
 #define REAL float
 #define ABITS uint32_t /* a REAL's bits, and its exponent's */
@@ -122,6 +134,7 @@ typedef int32_t vindex_f32 __attribute__((vector_size(64)));
 #define FABS fabsf
 #define FUSED_SWARM fused_swarm_f32
 #define STABLE_SUBSTEP stable_substep_f32
+#define MEMBER_STATS member_stats_f32
 typedef uint64_t vkey __attribute__((vector_size(64)));
 /* Lanes [8h, 8h + 8) of a 16-lane int32 vector, zero-extended to 64 bits. */
 #define KEY_HALF(v, h)                                                                 \
@@ -156,6 +169,7 @@ static inline vkey key_max(vkey a, vkey b) { vkey lt = (vkey)(a < b); return (b 
 #undef FABS
 #undef FUSED_SWARM
 #undef STABLE_SUBSTEP
+#undef MEMBER_STATS
 #undef KNN_BLOCK
 #undef KNN_KEYS
 #undef OBS_PAIRS_AVX512
@@ -180,6 +194,7 @@ typedef int64_t vindex_f64 __attribute__((vector_size(64)));
 #define FABS fabs
 #define FUSED_SWARM fused_swarm_f64
 #define STABLE_SUBSTEP stable_substep_f64
+#define MEMBER_STATS member_stats_f64
 #define KNN_BLOCK knn_block_f64
 #define FUSED_STEP fused_step_f64
 #include "fused_step_body.h"

@@ -27,11 +27,14 @@ static inline __attribute__((always_inline)) void KNN_BLOCK(
     vkey lo[KMAX_SORT], hi[KMAX_SORT];
     for (int64_t q = 0; q < K; q++) lo[q] = hi[q] = (vkey){0} + UINT64_MAX;
 #else
+    /* The empty slots hold (inf, the last lane): a candidate at inf with a lower index
+     * (an agent not present) still goes before them, in (ρ, j) order, and a slot left
+     * empty (only by NaN distances) names a lane inside the tables. */
     VREAL bd[KMAX_SORT];
     VINDEX bi[KMAX_SORT];
     for (int64_t q = 0; q < K; q++) {
         bd[q] = (VREAL){0} + (REAL)INFINITY;
-        bi[q] = (VINDEX){0};
+        bi[q] = (VINDEX){0} + (INDEX)(nb * LANES - 1);
     }
 #endif
     for (int64_t J = 0; J < nb; J++) {
@@ -105,14 +108,17 @@ static inline double STABLE_SUBSTEP(REAL omega2, REAL gamma) {
     return den > 0 ? (double)((REAL)STEP_EDGE_NUMERATOR / den) : INFINITY;
 }
 
+#include "fused_step_members.h" /* MEMBER_STATS */
+
 static inline __attribute__((always_inline)) int FUSED_SWARM(
     const StepParams *P, const int64_t d, int64_t b, REAL *scratch, const REAL *x,
     const REAL *v, const REAL *f, const double *h_in, const REAL *goal, const REAL *a,
-    const uint8_t *move, REAL *x_out, REAL *v_out, REAL *f_out, double *h_out, float *obs,
-    REAL *packed) {
+    const uint8_t *move, const int8_t *status, REAL *x_out, REAL *v_out, REAL *f_out,
+    double *h_out, float *obs, REAL *packed) {
     const int64_t B = P->batch, N = P->n_agents, k = P->n_neighbors;
     const int64_t k_real = P->k_real, k_sort = P->k_rank, need = P->need;
     const int64_t obs_dim = P->obs_dim, physics_goal = P->physics_goal;
+    const int64_t observe_status = P->observe_status;
     const int64_t NP = (N + LANES - 1) / LANES * LANES;
     const REAL m = (REAL)P->physics_m, u_max = (REAL)P->u_max;
     const REAL C_a = (REAL)P->physics_C_a, C_r = (REAL)P->physics_C_r;
@@ -147,11 +153,27 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
 
     /* Scratch: xs, vs, fs, offset (d × NP each), the agents' rate sums ks, ws (NP each),
      * gd (N), rho (NP × NP, per tile and offset), near (k_sort × N each, distances and
-     * int32 indices), tab (8 × N) and own (2d × NP float32) for the observations. */
+     * int32 indices), tab (8 × NP) and own (2d × NP float32) for the observations, and
+     * the agents' flags (NP, INDEX). */
     REAL *xs = scratch, *vs = xs + d * S, *fs = vs + d * S, *off = fs + d * S;
     REAL *ks = off + d * S, *ws = ks + S;
     REAL *gd = ws + S, *rho = gd + N, *near_d = rho + NP * NP;
     int32_t *near_i = (int32_t *)(near_d + k_sort * N);
+    INDEX *alive = (INDEX *)(near_d + 2 * k_sort * N + 8 * NP + 2 * d * NP);
+
+    /* The agents' statuses (swarm_envs.envs.task.agent_status; status NULL: every agent
+     * active) as flags: AG_PRESENT (in the physics: its pairs interact, it can be a
+     * neighbour), AG_MOBILE (its update is integrated, it is a member of the swarm for
+     * the statistics), AG_ACTIVE (the observed status); padding lanes have none. With
+     * statuses (masked), every tile takes the masked path: a pair interacts where both
+     * agents are present. */
+    const int8_t *st = status ? status + b * N : NULL;
+    const int masked = st != NULL;
+    for (int64_t i = 0; i < NP; i++) {
+        const int s_i = i < N ? (st ? st[i] : 0) : 4;
+        alive[i] = (INDEX)((s_i <= 2 ? AG_PRESENT : 0) | (s_i <= 1 ? AG_MOBILE : 0) |
+                           (s_i == 0 ? AG_ACTIVE : 0));
+    }
 
     /* 1. The step in substeps (swarm_envs.envs.dynamics.SocialPotentialDynamics.step).
      * Each plans the time tau left of the step with the stable substep hs of the current
@@ -194,6 +216,7 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
 #pragma omp simd
                 for (int64_t i = 0; i < N; i++) {
                     REAL accel = fc[i] + u_max * UNIT_CLIP(ab[i * d + c]);
+                    if (masked) accel = alive[i] & AG_MOBILE ? accel : 0; /* held at rest */
                     if (m != (REAL)1) accel = accel / m;
                     vn[i] = vc[i] + hr * accel;
                     xn[i] = xc[i] + hr * vn[i];
@@ -219,10 +242,13 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
          * added to i in its lane and, rotated back by s, to j (the force negated). The
          * diagonal tile (I, I) needs offsets 1 .. LANES/2 only (offset LANES/2 holds
          * every pair twice, so it adds to i only). Lanes past N are padding: masked
-         * out, their distances inf. ρ is stored per tile and offset, the layout the
-         * k-NN below reads. The lane loop (PAIR_BODY) writes each pair's terms; the
-         * offset loop (S_LOOP) adds them to the sums of i (FI, KI, ...: vectors, so
-         * that they stay in registers) and of j (FJ, KJ, ...). */
+         * out, their distances inf; with statuses, so is every pair with an agent not
+         * present (no force, rate or energy, not a neighbour), and a close pair is a
+         * collision only where one of the two moves (the masks pv, mv per offset, from
+         * the agents' flags). ρ is stored per tile and offset, the layout the k-NN
+         * below reads. The lane loop (PAIR_BODY) writes each pair's terms; the offset
+         * loop (S_LOOP) adds them to the sums of i (FI, KI, ...: vectors, so that they
+         * stay in registers) and of j (FJ, KJ, ...). */
         for (int64_t c = 0; c < d; c++)
             for (int64_t i = 0; i < NP; i++) fs[c * S + i] = 0;
         for (int64_t i = 0; i < NP; i++) ks[i] = ws[i] = 0;
@@ -234,19 +260,24 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
             VINDEX close_lane = {0};
             const REAL *xi0 = xs + I0, *xi1 = xs + S + I0, *xi2 = xs + 2 * S + I0;
             const REAL *vi0 = vs + I0, *vi1 = vs + S + I0, *vi2 = vs + 2 * S + I0;
+            VINDEX aI;
+            memcpy(&aI, alive + I0, sizeof aI);
             for (int64_t J = I; J < nb; J++) {
                 const int64_t J0 = J * LANES;
                 VREAL xJ[3], vJ[3], FJ[3], KJ = {0}, WJ = {0};
+                VINDEX aJ;
+                memcpy(&aJ, alive + J0, sizeof aJ);
                 for (int64_t c = 0; c < d; c++) {
                     memcpy(&xJ[c], xs + c * S + J0, sizeof(VREAL));
                     memcpy(&vJ[c], vs + c * S + J0, sizeof(VREAL));
                     FJ[c] = (VREAL){0};
                 }
                 const int s_first = J == I ? 1 : 0, s_last = J == I ? LANES / 2 : LANES - 1;
-                const int full = I0 + LANES <= N && J0 + LANES <= N; /* no padding lanes */
+                /* no padding lanes, no statuses */
+                const int full = !masked && I0 + LANES <= N && J0 + LANES <= N;
 #define PAIR_BODY(ALIGN, SAME, FULL, LAST)                                                 \
     _Pragma("omp simd") for (int l = 0; l < LANES; l++) {                                  \
-        const int valid = FULL || ((I0 + l < N) & (J0 + ((l + s) & (LANES - 1)) < N));     \
+        const int valid = FULL || pv[l];                                                    \
         REAL dx0 = xj[0][l] - xi0[l], dx1 = xj[1][l] - xi1[l];                             \
         REAL dx2 = d == 3 ? xj[2][l] - xi2[l] : 0;                                         \
         REAL r2 = dx0 * dx0 + dx1 * dx1;                                                   \
@@ -276,7 +307,7 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
         if (d == 3) cx[2][l] = sp * dx2;                                                   \
         if (LAST) {                                                                        \
             ex[l] = valid ? w * (C_r * er - C_a * ea) : 0;                                 \
-            cl[l] = valid & (r < collision_radius) ? wc : 0;                               \
+            cl[l] = (FULL || mv[l]) & (r < collision_radius) ? wc : 0;                     \
             drow[l] = valid ? r : inf;                                                     \
         }                                                                                  \
     }
@@ -286,7 +317,14 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
         const REAL w = both ? 2 : 1;                                                       \
         const INDEX wc = both ? 2 : 1;                                                     \
         REAL xj[3][LANES], vj[3][LANES], cx[3][LANES], kx[LANES], wx[LANES], ex[LANES];    \
-        INDEX cl[LANES];                                                                   \
+        INDEX cl[LANES], pv[LANES], mv[LANES];                                             \
+        if (!FULL) { /* pairs of present agents; and one of them moves */                 \
+            const VINDEX aj = __builtin_shuffle(aJ, rot[s]);                               \
+            const VINDEX p = (aI & aj & AG_PRESENT) != 0;                                  \
+            const VINDEX mo = p & (((aI | aj) & AG_MOBILE) != 0);                          \
+            memcpy(pv, &p, sizeof p);                                                      \
+            memcpy(mv, &mo, sizeof mo);                                                    \
+        }                                                                                  \
         for (int64_t c = 0; c < d; c++) {                                                  \
             VREAL t = __builtin_shuffle(xJ[c], rot[s]);                                    \
             memcpy(xj[c], &t, sizeof t);                                                   \
@@ -419,8 +457,14 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
      * not by the thread count. */
     REAL sink = 0, kinetic = 0;
     if (C_g > 0) {
+        if (masked) {
 #pragma omp simd reduction(+ : sink)
-        for (int64_t i = 0; i < N; i++) sink += -C_g * EXP(-gd[i] / l_g);
+            for (int64_t i = 0; i < N; i++)
+                sink += alive[i] & AG_PRESENT ? -C_g * EXP(-gd[i] / l_g) : 0;
+        } else {
+#pragma omp simd reduction(+ : sink)
+            for (int64_t i = 0; i < N; i++) sink += -C_g * EXP(-gd[i] / l_g);
+        }
     }
     for (int64_t c = 0; c < d; c++) {
         const REAL *vc = vs + c * S;
@@ -449,35 +493,42 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
             default: KNN_BLOCK(k_sort, I, nb, N, rho, rot, near_d, near_i); break;
             }
         }
+        if (!masked) { /* with statuses: over the members (MEMBER_STATS) */
 #pragma omp simd reduction(+ : nnd)
-        for (int64_t i = 0; i < N; i++) nnd += near_d[i];
-        nnd = nnd / Nr;
+            for (int64_t i = 0; i < N; i++) nnd += near_d[i];
+            nnd = nnd / Nr;
+        }
     }
 
     /* 4. Observations (B, N, obs_dim), float32, clipped to ±obs_bound. Every agent j's
-     * position, velocity and a 1 sit in 8 lanes (tab, one neighbour block of the row:
-     * 2d + 1 ≤ 7 values); a neighbour's block is (tab_j − tab_i with its 1 kept) × scale.
+     * position, velocity, a 1 (the slot mask) and, with observe_status, its status flag
+     * (1 where active) sit in 8 lanes (tab, one neighbour block of the row: 2d + 1 (+ 1)
+     * ≤ 8 values); a neighbour's block is (tab_j − tab_i with its flags kept) × scale.
+     * With statuses a slot holds a neighbour only where both agents are present (else
+     * padding, zeros: fewer present others than slots, or an observer not present).
      * float32 with AVX-512 handles two blocks per 16-lane vector and compresses their
      * values together (OBS_PAIRS_AVX512); otherwise each block is stored 8 wide in order
      * so that the next block overwrites the spare lanes (the last one at its own
      * width). */
     REAL *tab = near_d + k_sort * N + k_sort * N; /* after near_i (k_sort × N int32) */
-    const int64_t blk = 2 * d + 1;
+    const int64_t blk = 2 * d + 1 + observe_status;
     REAL keep[8], scl[8];
     for (int c = 0; c < 8; c++) {
-        keep[c] = c == blk - 1 ? 0 : 1;
+        keep[c] = c < 2 * d ? 1 : 0;
         scl[c] = c < d ? inv_nbr_scale : (c < 2 * d ? inv_vel_scale : 1);
     }
-    for (int64_t j = 0; j < N; j++) {
+    for (int64_t j = 0; j < NP; j++) { /* padding rows: zeros */
         REAL *t = tab + j * 8;
         for (int c = 0; c < 8; c++) t[c] = 0;
+        if (j >= N) continue;
         for (int64_t c = 0; c < d; c++) {
             t[c] = xs[c * S + j];
             t[d + c] = vs[c * S + j];
         }
-        t[blk - 1] = 1;
+        t[2 * d] = 1;
+        if (observe_status) t[2 * d + 1] = alive[j] & AG_ACTIVE ? 1 : 0;
     }
-    float *own = (float *)(tab + 8 * N); /* the row's first 2d values, (2d, NP) */
+    float *own = (float *)(tab + 8 * NP); /* the row's first 2d values, (2d, NP) */
 #define CLIP_OBS(val) ((float)((val) < -obs_bound ? -obs_bound : ((val) > obs_bound ? obs_bound : (val))))
     for (int64_t c = 0; c < d; c++) {
 #pragma omp simd
@@ -501,19 +552,27 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
         for (int64_t c = 0; c < 2 * d; c++) o[c] = own[c * NP + i];
         const __m256 selfk = _mm256_mul_ps(_mm256_loadu_ps(tab + i * 8), _mm256_loadu_ps(keep));
         const __m512 self16 = PAIR8(selfk, selfk);
+        const INDEX here = alive[i] & AG_PRESENT;
         float *on = o + 2 * d;
         int64_t q = 0;
         for (; q + 1 < k_real; q += 2) {
-            const __m256 g0 = _mm256_loadu_ps(tab + near_i[q * N + i] * 8);
-            const __m256 g1 = _mm256_loadu_ps(tab + near_i[(q + 1) * N + i] * 8);
+            const int32_t j0 = near_i[q * N + i], j1 = near_i[(q + 1) * N + i];
+            const __m256 g0 = _mm256_loadu_ps(tab + j0 * 8);
+            const __m256 g1 = _mm256_loadu_ps(tab + j1 * 8);
             __m512 val = _mm512_mul_ps(_mm512_sub_ps(PAIR8(g0, g1), self16), scl16);
             val = _mm512_min_ps(hi16, _mm512_max_ps(lo16, val)); /* NaN stays NaN */
+            if (masked) /* slots without a present neighbour: padding */
+                val = _mm512_maskz_mov_ps(
+                    (__mmask16)((here & alive[j0] ? 0x00ffu : 0u) | (here & alive[j1] ? 0xff00u : 0u)),
+                    val);
             _mm512_mask_storeu_ps(on + q * blk, pair_out, _mm512_maskz_compress_ps(pair_lanes, val));
         }
         if (q < k_real) { /* an odd last real block */
-            const __m256 g0 = _mm256_loadu_ps(tab + near_i[q * N + i] * 8);
+            const int32_t j0 = near_i[q * N + i];
+            const __m256 g0 = _mm256_loadu_ps(tab + j0 * 8);
             __m512 val = _mm512_mul_ps(_mm512_sub_ps(PAIR8(g0, g0), self16), scl16);
             val = _mm512_min_ps(hi16, _mm512_max_ps(lo16, val));
+            if (masked && !(here & alive[j0])) val = _mm512_setzero_ps();
             _mm512_mask_storeu_ps(on + q * blk, blk_lanes, val);
             q++;
         }
@@ -524,11 +583,13 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
         float *o = obs + (b * N + i) * obs_dim;
         for (int64_t c = 0; c < 2 * d; c++) o[c] = own[c * NP + i];
         const REAL *self = tab + i * 8;
+        const INDEX here = alive[i] & AG_PRESENT;
         float *on = o + 2 * d;
         for (int64_t q = 0; q < k; q++) {
             float out[8];
-            if (q < k_real) {
-                const REAL *g = tab + near_i[q * N + i] * 8;
+            const int32_t j = q < k_real ? near_i[q * N + i] : 0;
+            if (q < k_real && (!masked || (here & alive[j]))) {
+                const REAL *g = tab + j * 8;
 #pragma omp simd
                 for (int c = 0; c < 8; c++) {
                     REAL val = (g[c] - self[c] * keep[c]) * scl[c];
@@ -537,12 +598,12 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
             } else {
                 for (int c = 0; c < 8; c++) out[c] = 0.0f;
             }
-            if (q + 1 < k)
-                memcpy(on + q * blk, out, 8 * sizeof(float));
-            else if (d == 2)
-                memcpy(on + q * blk, out, 5 * sizeof(float));
-            else
-                memcpy(on + q * blk, out, 7 * sizeof(float));
+            switch (q + 1 < k ? 8 : blk) { /* constant sizes: the copies are inlined */
+            case 5: memcpy(on + q * blk, out, 5 * sizeof(float)); break;
+            case 6: memcpy(on + q * blk, out, 6 * sizeof(float)); break;
+            case 7: memcpy(on + q * blk, out, 7 * sizeof(float)); break;
+            default: memcpy(on + q * blk, out, 8 * sizeof(float)); break;
+            }
         }
     }
 #endif
@@ -551,82 +612,84 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
     /* 5. Statistics (swarm_envs.metrics, docs/models.md §2). Headings v/|v| (0 at rest) and
      * unit offsets from the centroid (0 within the centring tolerance) as quotients
      * whose divisor is replaced by 1 where they are 0: the loops vectorise. */
-    const REAL *x0 = xs, *x1 = xs + S, *x2 = xs + 2 * S;
-    const REAL *v0 = vs, *v1 = vs + S, *v2 = vs + 2 * S;
-    REAL hs0 = 0, hs1 = 0, hs2 = 0, cs0 = 0, cs1 = 0, cs2 = 0, scale = 0;
+    REAL *pk = packed + b * PK_SIZE;
+    if (masked) {
+        MEMBER_STATS(N, d, S, xs, vs, gd, near_d, alive, g, centre_tol, goal_radius,
+                     (REAL)P->success_threshold, pk);
+    } else {
+        const REAL *x0 = xs, *x1 = xs + S, *x2 = xs + 2 * S;
+        const REAL *v0 = vs, *v1 = vs + S, *v2 = vs + 2 * S;
+        REAL hs0 = 0, hs1 = 0, hs2 = 0, cs0 = 0, cs1 = 0, cs2 = 0, scale = 0;
 #pragma omp simd reduction(+ : hs0, hs1, hs2, cs0, cs1, cs2) reduction(max : scale)
-    for (int64_t i = 0; i < N; i++) {
-        const REAL vz = d == 3 ? v2[i] : 0, xz = d == 3 ? x2[i] : 0;
-        const REAL speed = SQRT(v0[i] * v0[i] + v1[i] * v1[i] + vz * vz);
-        const int moves = speed > 0;
-        const REAL den = moves ? speed : 1;
-        hs0 += (moves ? v0[i] : 0) / den;
-        hs1 += (moves ? v1[i] : 0) / den;
-        hs2 += (moves ? vz : 0) / den;
-        cs0 += x0[i];
-        cs1 += x1[i];
-        cs2 += xz;
-        REAL ax = FABS(x0[i]) > FABS(x1[i]) ? FABS(x0[i]) : FABS(x1[i]);
-        ax = FABS(xz) > ax ? FABS(xz) : ax;
-        scale = ax > scale ? ax : scale;
-    }
-    const REAL centre[3] = {cs0 / Nr, cs1 / Nr, cs2 / Nr};
-    REAL polarization = SQRT(hs0 * hs0 + hs1 * hs1 + hs2 * hs2) / Nr;
-    polarization = polarization > 1 ? 1 : polarization;
-    const REAL tol = centre_tol * scale;
-    REAL cross0 = 0, cross1 = 0, cross2 = 0, radius_sum = 0;
-#pragma omp simd reduction(+ : cross0, cross1, cross2, radius_sum)
-    for (int64_t i = 0; i < N; i++) {
-        const REAL vz = d == 3 ? v2[i] : 0;
-        const REAL r0 = x0[i] - centre[0], r1 = x1[i] - centre[1];
-        const REAL r2 = d == 3 ? x2[i] - centre[2] : 0;
-        const REAL radius = SQRT(r0 * r0 + r1 * r1 + r2 * r2);
-        const REAL speed = SQRT(v0[i] * v0[i] + v1[i] * v1[i] + vz * vz);
-        radius_sum += radius;
-        const int moves = speed > 0, off_centre = radius > tol;
-        const REAL sden = moves ? speed : 1, rden = off_centre ? radius : 1;
-        const REAL h0 = (moves ? v0[i] : 0) / sden, h1 = (moves ? v1[i] : 0) / sden;
-        const REAL h2 = (moves ? vz : 0) / sden;
-        const REAL e0 = (off_centre ? r0 : 0) / rden, e1 = (off_centre ? r1 : 0) / rden;
-        const REAL e2 = (off_centre ? r2 : 0) / rden;
-        cross2 += e0 * h1 - e1 * h0;
-        if (d == 3) {
-            cross0 += e1 * h2 - e2 * h1;
-            cross1 += e2 * h0 - e0 * h2;
+        for (int64_t i = 0; i < N; i++) {
+            const REAL vz = d == 3 ? v2[i] : 0, xz = d == 3 ? x2[i] : 0;
+            const REAL speed = SQRT(v0[i] * v0[i] + v1[i] * v1[i] + vz * vz);
+            const int moves = speed > 0;
+            const REAL den = moves ? speed : 1;
+            hs0 += (moves ? v0[i] : 0) / den;
+            hs1 += (moves ? v1[i] : 0) / den;
+            hs2 += (moves ? vz : 0) / den;
+            cs0 += x0[i];
+            cs1 += x1[i];
+            cs2 += xz;
+            REAL ax = FABS(x0[i]) > FABS(x1[i]) ? FABS(x0[i]) : FABS(x1[i]);
+            ax = FABS(xz) > ax ? FABS(xz) : ax;
+            scale = ax > scale ? ax : scale;
         }
-    }
-    REAL turn = d == 2 ? FABS(cross2) : SQRT(cross0 * cross0 + cross1 * cross1 + cross2 * cross2);
-    REAL angular = turn / Nr;
-    angular = angular > 1 ? 1 : angular;
-    REAL cd2 = 0;
-    for (int64_t c = 0; c < d; c++) cd2 += (centre[c] - g[c]) * (centre[c] - g[c]);
-    int64_t arrived_count = 0;
-    REAL gd_sum = 0;
+        const REAL centre[3] = {cs0 / Nr, cs1 / Nr, cs2 / Nr};
+        REAL polarization = SQRT(hs0 * hs0 + hs1 * hs1 + hs2 * hs2) / Nr;
+        polarization = polarization > 1 ? 1 : polarization;
+        const REAL tol = centre_tol * scale;
+        REAL cross0 = 0, cross1 = 0, cross2 = 0, radius_sum = 0;
+#pragma omp simd reduction(+ : cross0, cross1, cross2, radius_sum)
+        for (int64_t i = 0; i < N; i++) {
+            const REAL vz = d == 3 ? v2[i] : 0;
+            const REAL r0 = x0[i] - centre[0], r1 = x1[i] - centre[1];
+            const REAL r2 = d == 3 ? x2[i] - centre[2] : 0;
+            const REAL radius = SQRT(r0 * r0 + r1 * r1 + r2 * r2);
+            const REAL speed = SQRT(v0[i] * v0[i] + v1[i] * v1[i] + vz * vz);
+            radius_sum += radius;
+            const int moves = speed > 0, off_centre = radius > tol;
+            const REAL sden = moves ? speed : 1, rden = off_centre ? radius : 1;
+            const REAL h0 = (moves ? v0[i] : 0) / sden, h1 = (moves ? v1[i] : 0) / sden;
+            const REAL h2 = (moves ? vz : 0) / sden;
+            const REAL e0 = (off_centre ? r0 : 0) / rden, e1 = (off_centre ? r1 : 0) / rden;
+            const REAL e2 = (off_centre ? r2 : 0) / rden;
+            cross2 += e0 * h1 - e1 * h0;
+            if (d == 3) {
+                cross0 += e1 * h2 - e2 * h1;
+                cross1 += e2 * h0 - e0 * h2;
+            }
+        }
+        REAL turn = d == 2 ? FABS(cross2) : SQRT(cross0 * cross0 + cross1 * cross1 + cross2 * cross2);
+        REAL angular = turn / Nr;
+        angular = angular > 1 ? 1 : angular;
+        REAL cd2 = 0;
+        for (int64_t c = 0; c < d; c++) cd2 += (centre[c] - g[c]) * (centre[c] - g[c]);
+        int64_t arrived_count = 0;
+        REAL gd_sum = 0;
 #pragma omp simd reduction(+ : arrived_count, gd_sum)
-    for (int64_t i = 0; i < N; i++) {
-        arrived_count += gd[i] <= goal_radius;
-        gd_sum += gd[i];
+        for (int64_t i = 0; i < N; i++) {
+            arrived_count += gd[i] <= goal_radius;
+            gd_sum += gd[i];
+        }
+        pk[PK_polarization] = polarization;
+        pk[PK_angular_momentum] = angular;
+        pk[PK_expanse] = radius_sum / Nr;
+        pk[PK_nearest_neighbor_distance] = nnd;
+        pk[PK_fraction_arrived] = (REAL)arrived_count / Nr;
+        pk[PK_centroid_distance] = SQRT(cd2);
+        pk[PK_mean_goal_distance] = gd_sum / Nr;
+        pk[PK_success] = arrived_count >= need ? 1 : 0;
     }
-    const REAL arrived = (REAL)arrived_count / Nr;
-    const REAL success = arrived_count >= need ? 1 : 0;
-    const REAL mean_goal_distance = gd_sum / Nr;
     REAL effort = 0;
 #pragma omp simd reduction(+ : effort)
     for (int64_t t = 0; t < N * d; t++) {
         const REAL at = UNIT_CLIP(ab[t]);
         effort += at * at;
     }
-    REAL *pk = packed + b * PK_SIZE;
-    pk[PK_polarization] = polarization;
-    pk[PK_angular_momentum] = angular;
-    pk[PK_expanse] = radius_sum / Nr;
-    pk[PK_nearest_neighbor_distance] = nnd;
     pk[PK_energy] = phi;
-    pk[PK_fraction_arrived] = arrived;
     pk[PK_collisions] = collisions;
-    pk[PK_centroid_distance] = SQRT(cd2);
-    pk[PK_mean_goal_distance] = mean_goal_distance;
-    pk[PK_success] = success;
     pk[PK_substeps] = (REAL)used;
     pk[PK_unstable] = 0; /* set by the caller's guard, which undoes an unstable step */
     pk[PK_effort] = effort;
@@ -659,7 +722,8 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
  * library links to). Every swarm is stepped by one thread in the same way, so the
  * results do not depend on the thread count.
  * State per swarm: x, v and the carried passive force f (component first, d × B × N),
- * and the carried stable substep h (B, double); the step writes the new ones to the
+ * and the carried stable substep h (B, double); the agents' statuses (B × N int8,
+ * swarm_envs.envs.task.agent_status), or NULL where every agent is active; the step writes the new ones to the
  * *_out arrays, the observations to obs and the columns PK_* to packed (B × PK_SIZE):
  * the statistics, the actions' effort, over_cap (1 where the step needed more than
  * max_substeps) and needed (the substeps it would have taken).
@@ -669,8 +733,8 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
  * Finite actions outside [-1, 1] are clipped, as numpy's clip would. */
 int FUSED_STEP(const StepParams *P, int64_t b0, int64_t b1, const int64_t *rows,
                const REAL *x, const REAL *v, const REAL *f, const double *h, const REAL *goal,
-               const REAL *a, const uint8_t *move, REAL *x_out, REAL *v_out, REAL *f_out,
-               double *h_out, float *obs, REAL *packed) {
+               const REAL *a, const uint8_t *move, const int8_t *status, REAL *x_out,
+               REAL *v_out, REAL *f_out, double *h_out, float *obs, REAL *packed) {
     const int64_t N = P->n_agents, d = P->dim, k_sort = P->k_rank;
     const int64_t NP = (N + LANES - 1) / LANES * LANES;
     if (k_sort > KMAX_SORT) return 2;
@@ -683,9 +747,9 @@ int FUSED_STEP(const StepParams *P, int64_t b0, int64_t b1, const int64_t *rows,
     }
     if (nonfinite) return 3;
     const size_t n_real =
-        (size_t)(4 * d * NP + 2 * NP + N + NP * NP + 2 * k_sort * N + 8 * N + 2 * d * NP);
-    int status = 0;
-#pragma omp parallel if (b1 - b0 > 1) reduction(| : status)
+        (size_t)(4 * d * NP + 2 * NP + N + NP * NP + 2 * k_sort * N + 8 * NP + 2 * d * NP + NP);
+    int code = 0;
+#pragma omp parallel if (b1 - b0 > 1) reduction(| : code)
     {
         REAL *scratch = (REAL *)malloc(n_real * sizeof(REAL) + 64);
         /* d as a constant in each copy: the loops over components unroll. Every thread
@@ -693,21 +757,21 @@ int FUSED_STEP(const StepParams *P, int64_t b0, int64_t b1, const int64_t *rows,
         if (d == 2) {
 #pragma omp for schedule(static)
             for (int64_t t = b0; t < b1; t++) {
-                if (!scratch) { status |= 1; continue; }
+                if (!scratch) { code |= 1; continue; }
                 if (FUSED_SWARM(P, 2, rows ? rows[t] : t, scratch, x, v, f, h, goal, a, move,
-                                x_out, v_out, f_out, h_out, obs, packed))
-                    status |= STEP_UNSOUND;
+                                status, x_out, v_out, f_out, h_out, obs, packed))
+                    code |= STEP_UNSOUND;
             }
         } else {
 #pragma omp for schedule(static)
             for (int64_t t = b0; t < b1; t++) {
-                if (!scratch) { status |= 1; continue; }
+                if (!scratch) { code |= 1; continue; }
                 if (FUSED_SWARM(P, 3, rows ? rows[t] : t, scratch, x, v, f, h, goal, a, move,
-                                x_out, v_out, f_out, h_out, obs, packed))
-                    status |= STEP_UNSOUND;
+                                status, x_out, v_out, f_out, h_out, obs, packed))
+                    code |= STEP_UNSOUND;
             }
         }
         free(scratch);
     }
-    return status;
+    return code;
 }

@@ -19,9 +19,9 @@ for each of the k nearest neighbours j, nearest first:
 ``N − 1 < k`` the last ``k − (N − 1)`` slots are padding (all zeros). Every entry is
 clipped to ``[−OBS_BOUND, OBS_BOUND]``; observations are float32 whatever the state's
 dtype. Only agents present in the physics are neighbours: a slot whose ranked agent is
-absent, or the agent itself (fewer present others than ``k``), is padding. An agent's own
-features do not say whether it has failed: a failed agent no longer acts, and the
-adapters stop asking it.
+absent (fewer present others than ``k``) is padding, and an agent not present has no
+neighbours (every slot padding). An agent's own features do not say
+whether it has failed: a failed agent no longer acts, and the adapters stop asking it.
 :func:`observation` computes this from the state and each agent's neighbour indices, on
 numpy arrays or torch tensors; the C step writes the same layout.
 """
@@ -105,8 +105,10 @@ def observation(
         columns = [x[..., c] for c in range(d)] + [v[..., c] for c in range(d)]
         scales = [1.0 / task.obs_neighbor_scale] * d + [1.0 / task.obs_velocity_scale] * d
         flag_columns = []
-        if status is not None:
-            flag_columns = [xp.astype(status <= FROZEN, x), xp.astype(status == ACTIVE, x)]
+        if status is not None:  # present, active, and each agent's own index
+            present = xp.astype(status <= FROZEN, x)
+            ids = xp.zeros((B, N), like=x) + xp.array(list(range(N)), like=x)
+            flag_columns = [present, xp.astype(status == ACTIVE, x), ids]
         gathered = xp.gather_agents(columns + flag_columns, index)
         flags = gathered[2 * d :]
         gathered = gathered[: 2 * d]
@@ -117,12 +119,10 @@ def observation(
         if status is None:
             features.append(xp.ones((B, N, k_real), like=x))
         else:
-            # A slot holds a neighbour where that agent is present and not the observer
-            # itself (with fewer present others than k, the ranking runs on into the
-            # agents at infinite distance, the observer among them).
-            present, active = flags
-            own = xp.arange(N, like=x)[None, :, None]
-            real = present * xp.astype(index != own, x)
+            # A slot holds a neighbour where both are present and it is another agent
+            # (the ranking puts the others not present, and the agent itself, last).
+            real, active, slot_ids = flags
+            real = real * present[..., None] * xp.astype(slot_ids != ids[..., None], x)
             features = [f * real for f in features] + [real]
         if getattr(task, "observe_status", False):
             features.append(xp.ones((B, N, k_real), like=x) if status is None else active * real)
