@@ -11,7 +11,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["Core", "StepResult"]
+__all__ = ["Core", "StatusCore", "StepResult"]
 
 #: ``(reward (B,) float64, terminated (B,) bool, truncated (B,) bool, stats)``, with
 #: ``stats`` mapping each of ``STAT_KEYS`` to a ``(B,)`` array.
@@ -64,4 +64,37 @@ class Core(Protocol):
 
     def stats(self) -> dict[str, np.ndarray]:
         """The statistics of the current state, ``{name: (B,)}`` (fresh arrays)."""
+        ...
+
+
+@runtime_checkable
+class StatusCore(Core, Protocol):
+    """A core that takes agent statuses (``backends.STATUS_BACKENDS``): removed, frozen,
+    absent and joining agents, and observations with status flags.
+
+    Attributes:
+        status: each agent's status ``(B, N)`` int8 (``None`` until first given;
+            :mod:`swarm_envs.envs.task.agent_status`).
+    """
+
+    status: np.ndarray | None
+
+    def set_status(
+        self,
+        status: np.ndarray,
+        place: np.ndarray | None = None,
+        at: np.ndarray | None = None,
+        *,
+        rows: np.ndarray | None = None,
+        start: bool = False,
+    ) -> None:
+        """Give the agents new statuses ``(B, N)`` between steps.
+
+        ``place`` ``(B, N)`` bool: agents put at ``at`` ``(B, N, d)`` (joining agents).
+        Agents that no longer move and placed agents are at rest. The swarms whose
+        statuses or places changed, and those in ``rows`` ``(B,)``, are measured again
+        with the masks of their new statuses, and their previous statistics become these
+        (``start=True``: their episode's start too), so that the next reward compares
+        like with like; the other swarms keep theirs.
+        """
         ...
