@@ -5,6 +5,7 @@ Usage::
     python benchmarks/ab.py --base HEAD~1 [--sizes 32x1,32x1024,64x128]
                             [--rows vec_env,torch_vec_env,parallel_env,physics]
                             [--seconds 0.5] [--repeats 7] [--tune-allocator] [--json out.json]
+                            [--large-swarm]
 
 ``--base`` is a git revision (checked out into a temporary worktree) or a folder holding
 another checkout. Each version runs in its own worker process (``PYTHONPATH`` pointing
@@ -12,6 +13,11 @@ at its tree); the parent asks them in turn to time one window of each row, so th
 busy machine slows both alike, and prints the medians, their ratio (this tree over the
 base: above 1 is faster) and the physical state of the swarms at the end of the timing
 (mean speed, expanse, nearest-neighbour distance), so that both timed the same physics.
+
+``--large-swarm`` runs the VecEnv rows on the large-swarm parameter set
+(``SocialPotentialParams.large_swarm()``, given as plain values so that older versions
+take it too) at its start density 0.3, where a step takes one substep at every N: rows
+that time the same work in versions with and without step-size control.
 
 Rows (the same API calls in both versions):
 
@@ -39,7 +45,7 @@ WORKER = r"""
 import json, os, sys, time
 import numpy as np
 
-def make(row, n, b, tune):
+def make(row, n, b, tune, env):
     import swarm_envs
     from swarm_envs import config, swarm_nav_v0
     if tune:
@@ -66,11 +72,11 @@ def make(row, n, b, tune):
         return step, (lambda: state_of(env.core.x, env.core.v))
     if row == "vec_env":
         backend = "native" if "native" in config.BACKENDS else "torch"
-        venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, backend=backend)
+        venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, backend=backend, **env)
     else:  # the compiled torch core (earlier versions ran the C step inside it)
         os.environ["SWARM_ENVS_NATIVE"] = "0"
         try:
-            venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, backend="torch")
+            venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, backend="torch", **env)
         finally:
             del os.environ["SWARM_ENVS_NATIVE"]
     venv.seed(0)
@@ -94,7 +100,7 @@ for line in sys.stdin:
     cmd = json.loads(line)
     if cmd["op"] == "make":
         key = (cmd["row"], cmd["n"], cmd["b"])
-        fn, state = make(cmd["row"], cmd["n"], cmd["b"], cmd["tune"])
+        fn, state = make(cmd["row"], cmd["n"], cmd["b"], cmd["tune"], cmd.get("env", {}))
         fn()
         rows[key] = (fn, state)
         print(json.dumps({"ok": True}), flush=True)
@@ -112,6 +118,20 @@ for line in sys.stdin:
         _, state = rows[(cmd["row"], cmd["n"], cmd["b"])]
         print(json.dumps(state()), flush=True)
 """
+
+
+#: ``SocialPotentialParams.large_swarm()`` as plain values, and its start density.
+LARGE_SWARM = dict(
+    C_a=4.0, C_r=64.0, l_a=0.5, l_r=0.25, C_o=0.5, l_o=1.0, beta=1.0, C_g=30.0, l_g=10.0
+)
+LARGE_SWARM_DENSITY = 0.3
+
+
+def large_swarm_env(n: int) -> dict:
+    """VecEnv keywords of the large-swarm set for ``n`` agents (2-D start disc)."""
+    import math
+
+    return {"physics": LARGE_SWARM, "init_radius": math.sqrt(n / (math.pi * LARGE_SWARM_DENSITY))}
 
 
 class Worker:
@@ -166,6 +186,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--tune-allocator", action="store_true", help="tune glibc in both")
     parser.add_argument("--json", default=None)
+    parser.add_argument("--large-swarm", action="store_true", help="the large-swarm set")
     args = parser.parse_args()
     root = Path(__file__).resolve().parent.parent
     sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
@@ -180,8 +201,9 @@ def main() -> None:
                     if row == "parallel_env" and b != 1:
                         continue
                     spec = dict(row=row, n=n, b=b)
+                    env = large_swarm_env(n) if args.large_swarm and "vec_env" in row else {}
                     for w in workers.values():
-                        w.ask(op="make", tune=args.tune_allocator, **spec)
+                        w.ask(op="make", tune=args.tune_allocator, env=env, **spec)
                     rates: dict[str, list[float]] = {name: [] for name in workers}
                     for _ in range(args.repeats):
                         for name, w in workers.items():
