@@ -27,6 +27,8 @@ from swarm_envs.envs.task import STAT_KEYS
 from swarm_envs.envs.task.agent_status import ABSENT, ACTIVE, FAILED, FROZEN
 from swarm_envs.perturbations import Perturbations
 from swarm_envs.physics import SocialPotentialParams
+from swarm_envs.physics.neighbors import CellList, knn
+from swarm_envs.physics.present_neighbors import close_pairs_among, knn_among
 
 TINY = 1e-12  # cut-off tolerance at which no pair of a small swarm is dropped
 TOLERANCE = dict(rtol=1e-9, atol=1e-9)  # as tests/test_sparse_core.py's run_both
@@ -104,9 +106,15 @@ def _reference(kind: str, shape: str, observe_status: bool) -> tuple[list, set[i
     return _rollout(_config(kind, shape, observe_status), "numpy")
 
 
-@pytest.mark.parametrize("observe_status", [False, True], ids=["", "observe_status"])
-@pytest.mark.parametrize("shape", list(SHAPES))
-@pytest.mark.parametrize("kind", list(PERTURBATIONS))
+#: Each kind in both shapes, once with status flags in the observation and once without.
+ROLLOUTS = [
+    (kind, shape, (shape == "2d") == (kind in ("removed", "joining")))
+    for kind in PERTURBATIONS
+    for shape in SHAPES
+]
+
+
+@pytest.mark.parametrize(("kind", "shape", "observe_status"), ROLLOUTS)
 def test_rollouts_with_statuses_match_the_numpy_core(kind, shape, observe_status):
     got, seen = _rollout(_config(kind, shape, observe_status), "sparse")
     want, ref_seen = _reference(kind, shape, observe_status)
@@ -261,6 +269,23 @@ def test_only_present_others_are_neighbours(n, k, observe_status):
         assert nearest[b] == pytest.approx(np.mean(gaps), rel=1e-12)
 
 
+def test_an_agent_alone_in_the_physics_has_nearest_distance_zero():
+    # Swarm 0: one present agent among absent ones (no present other: 0, not inf);
+    # swarm 1: two present agents, their distance.
+    cfg = SwarmConfig(n_agents=5, perturbations=Perturbations(absent_fraction=0.5))
+    core = _core(cfg)
+    status = np.full((2, 5), ABSENT, np.int8)
+    status[0, 2] = ACTIVE
+    status[1, :2] = ACTIVE
+    core.set_status(status, start=True)
+    nearest = core.stats()["nearest_neighbor_distance"]
+    assert nearest[0] == 0.0
+    assert nearest[1] == pytest.approx(np.linalg.norm(core.x[1, 0] - core.x[1, 1]), rel=1e-12)
+    assert all(np.isfinite(value).all() for value in core.stats().values())
+    core.step(np.random.default_rng(0).uniform(-1, 1, (2, 5, 2)))
+    assert core.stats()["nearest_neighbor_distance"][0] == 0.0
+
+
 def test_joining_agents_are_placed_at_rest_and_the_swarm_measured_again():
     cfg = SwarmConfig(n_agents=6, perturbations=Perturbations(join_fraction=0.5))
     status = np.full((2, 6), ACTIVE, np.int8)
@@ -274,12 +299,12 @@ def test_joining_agents_are_placed_at_rest_and_the_swarm_measured_again():
     place = joined != status
     at = np.full((2, 6, 2), 0.25)
     before = core.stats()
+    place[1, 4] = True  # an active agent put elsewhere comes to rest too
+    assert (np.linalg.norm(core.v[1, 4]) > 0).all()
     core.set_status(joined, place, at)
     assert (core.x[place] == 0.25).all() and (core.v[place] == 0).all()
     stats = core.stats()
     assert stats["energy"][0] != before["energy"][0]  # swarm 0 measured again
-    for key in STAT_KEYS:  # swarm 1 kept its statistics
-        assert stats[key][1] == before[key][1], key
     np.testing.assert_array_equal(stats["substeps"], substeps)  # a measure is no step
     for key in STAT_KEYS:  # the next reward compares with the new statistics
         np.testing.assert_array_equal(core._prev[key], stats[key], err_msg=key)
@@ -293,6 +318,53 @@ def test_bad_statuses_are_refused():
         core.set_status(np.full((2, 5), 4, np.int8))
     with pytest.raises(ValueError, match="place must be"):
         core.set_status(np.zeros((2, 5), np.int8), np.ones((2, 5), bool), None)
+
+
+# --------------------------------------------------------------------------- searches
+
+
+def _brute_rank(x: np.ndarray, among: np.ndarray, i: int) -> list[tuple[float, int]]:
+    others = [j for j in np.flatnonzero(among) if j != i]
+    return sorted((float(np.sqrt(((x[j] - x[i]) ** 2).sum())), int(j)) for j in others)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_knn_among_ranks_the_nearest_marked_others(seed):
+    rng = np.random.default_rng(seed)
+    B, n, d, k = 5, int(rng.integers(2, 50)), int(rng.choice([2, 3])), int(rng.integers(1, 9))
+    x = rng.normal(size=(B, n, d)) * 3
+    among = rng.uniform(size=(B, n)) < rng.uniform(0, 1, (B, 1))  # from none to all
+    idx, dist = knn_among(x, k, among)
+    kk = min(k, n - 1)
+    assert idx.shape == dist.shape == (B, n, kk)
+    for b in range(B):
+        for i in range(n):
+            ranked = _brute_rank(x[b], among[b], i)[:kk] if among[b, i] else []
+            m = len(ranked)
+            assert idx[b, i, :m].tolist() == [j for _, j in ranked]
+            np.testing.assert_allclose(dist[b, i, :m], [r for r, _ in ranked], rtol=1e-12)
+            assert (idx[b, i, m:] == i).all() and np.isinf(dist[b, i, m:]).all()
+    every = np.ones((B, n), bool)
+    for got, want in zip(knn_among(x, k, every), knn(x, k), strict=True):
+        np.testing.assert_array_equal(got, want)
+
+
+def test_close_pairs_among_and_grouped_cell_lists_match_brute_force():
+    rng = np.random.default_rng(5)
+    x = rng.normal(size=(4, 60, 2)) * 2
+    among = rng.uniform(size=(4, 60)) < 0.5
+    got = close_pairs_among(x, among, 0.8, 2.0)
+    for b in range(4):
+        p = x[b][among[b]]
+        rho = np.linalg.norm(p[:, None] - p[None], axis=-1)
+        assert got[b] == np.triu(rho < 0.8, 1).sum()
+    pts, groups = x.reshape(-1, 2), rng.integers(0, 3, 240)  # swarms in no order
+    i, j = CellList.build(pts, 0.5, 2, groups=groups).pairs(0.9)
+    rho = np.linalg.norm(pts[:, None] - pts[None], axis=-1)
+    want = np.triu((rho <= 0.9) & (groups[:, None] == groups[None]), 1)
+    assert want.any()
+    pairs = np.stack([i, j], axis=-1).tolist()
+    assert sorted(pairs) == np.argwhere(want).tolist()
 
 
 # --------------------------------------------------------------------------- backends

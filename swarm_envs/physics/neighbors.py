@@ -230,7 +230,11 @@ class CellList:
             n, d = 0, flat.shape[1]
             B = int(swarm.max()) + 1
             lo = np.full((B, d), np.inf)
-            np.minimum.at(lo, swarm, flat)
+            first = np.flatnonzero(np.diff(swarm, prepend=-1))  # each run of one swarm
+            if (swarm[first[1:]] > swarm[first[:-1]]).all():  # by swarm: one pass
+                lo[swarm[first]] = np.minimum.reduceat(flat, first, axis=0)
+            else:
+                np.minimum.at(lo, swarm, flat)
             t = (flat.astype(np.float64) - lo[swarm]) / h
         top = float(t.max())
         if top >= MAX_CELLS:
