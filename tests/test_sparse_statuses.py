@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs import backends
+from swarm_envs.envs import backends, sparse_core
 from swarm_envs.envs.sparse_core import SPARSE_MIN_AGENTS, SparseSwarmNavCore
 from swarm_envs.envs.task import STAT_KEYS
 from swarm_envs.envs.task.agent_status import ABSENT, ACTIVE, FAILED, FROZEN
@@ -114,12 +114,7 @@ ROLLOUTS = [
 ]
 
 
-@pytest.mark.parametrize(("kind", "shape", "observe_status"), ROLLOUTS)
-def test_rollouts_with_statuses_match_the_numpy_core(kind, shape, observe_status):
-    got, seen = _rollout(_config(kind, shape, observe_status), "sparse")
-    want, ref_seen = _reference(kind, shape, observe_status)
-    assert seen == ref_seen
-    assert PERTURBATIONS[kind][1] <= seen and ACTIVE in seen  # the statuses did occur
+def _assert_same_rollout(got: list, want: list) -> None:
     assert len(got) == len(want)
     for t, ((obs, step, stats), (ref_obs, ref_step, ref_stats)) in enumerate(
         zip(got, want, strict=True)
@@ -133,6 +128,23 @@ def test_rollouts_with_statuses_match_the_numpy_core(kind, shape, observe_status
             np.testing.assert_allclose(
                 stats[key], ref_stats[key], **TOLERANCE, err_msg=f"{key} at {t}"
             )
+
+
+@pytest.mark.parametrize(("kind", "shape", "observe_status"), ROLLOUTS)
+def test_rollouts_with_statuses_match_the_numpy_core(kind, shape, observe_status):
+    got, seen = _rollout(_config(kind, shape, observe_status), "sparse")
+    want, ref_seen = _reference(kind, shape, observe_status)
+    assert seen == ref_seen
+    assert PERTURBATIONS[kind][1] <= seen and ACTIVE in seen  # the statuses did occur
+    _assert_same_rollout(got, want)
+
+
+def test_the_look_ahead_search_takes_the_statuses(monkeypatch):
+    # The neighbour search that runs in a worker thread during the last pair pass
+    # (from KNN_AHEAD_MIN_AGENTS agents on) searches among the present agents too.
+    monkeypatch.setattr(sparse_core, "KNN_AHEAD_MIN_AGENTS", 1)
+    got, _ = _rollout(_config("joining", "2d", True), "sparse")
+    _assert_same_rollout(got, _reference("joining", "2d", True)[0])
 
 
 def test_the_rollouts_see_collisions_between_agents_at_rest():
