@@ -72,9 +72,10 @@ def _core_class(backend: str) -> Any:
 
 
 #: The backends whose cores take agent statuses (``set_status``): removed, frozen,
-#: absent and joining agents, and ``observe_status``. The others run the perturbations
-#: that leave every agent in the physics (passive failures, noise, dropout).
-STATUS_BACKENDS = ("native", "numpy", "torch")
+#: absent and joining agents, and ``observe_status``; every backend does. A backend not
+#: listed would run only the perturbations that leave every agent in the physics
+#: (passive failures, noise, dropout).
+STATUS_BACKENDS = ("native", "numpy", "torch", "sparse")
 
 
 def _needs_statuses(cfg: SwarmConfig) -> bool:

@@ -40,6 +40,11 @@ array. One step:
    diverges (non-finite, or beyond :data:`MAX_SPAN` search radii) takes no further
    substeps, is never handed to the neighbour search, and its energy is NaN.
 
+Agent statuses (removed, frozen, absent and joining agents, ``observe_status``) come
+through ``set_status`` (:mod:`swarm_envs.envs.sparse_statuses`), with the dense core's
+rules: the agents not present are left out of the pair passes and the neighbour search,
+the agents that do not move have zero total force and stay put at rest.
+
 What differs from the dense core is the cut-off only: the pair terms (and their rates)
 of agents farther apart than ``r_c = cutoff_radius(cfg.physics, cutoff_tol,
 speed=cutoff_speed)`` are dropped, each below ``cutoff_tol`` (force units) for relative
@@ -72,12 +77,14 @@ import numpy as np
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.common import SwarmUnstableError, unstable_message
 from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.sparse_statuses import SparseStatuses
 from swarm_envs.physics import compiled_pairs, goal_force, goal_potential, kinetic_energy
 from swarm_envs.physics._validation import check_real
 from swarm_envs.physics.cutoff import cutoff_radius
 from swarm_envs.physics.integrators import SubstepBudget, euler_update, stable_substep
 from swarm_envs.physics.neighbors import knn
 from swarm_envs.physics.pair_sums import swarm_rates
+from swarm_envs.physics.present_neighbors import close_pairs_among, knn_among
 
 #: Agents per swarm from which to use :class:`SparseSwarmNavCore`: above the crossover
 #: with the dense cores that ``benchmarks/large_swarms.py`` measures (default config at
@@ -205,14 +212,24 @@ def _sound_swarms(x: np.ndarray, v: np.ndarray | None, span: float) -> np.ndarra
     return ok
 
 
-class SparseSwarmNavCore(SwarmNavCore):
+def _neighbors(
+    x: np.ndarray, k: int, present: np.ndarray | None, radius: float | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The k-nearest search of the core: among every agent, or the ``present`` ones."""
+    if present is None:
+        return knn(x, k, radius=radius)
+    return knn_among(x, k, present, radius=radius)
+
+
+class SparseSwarmNavCore(SparseStatuses, SwarmNavCore):
     """State and dynamics of ``batch`` independent SwarmNav swarms, for large ``N``.
 
     A drop-in for :class:`~swarm_envs.envs.core.SwarmNavCore` (same methods, same
     random draws, same step-size control and guard, same results up to the cut-off; see
     the module docstring). It overrides only the physics hooks (``_after_reset``,
-    ``_advance``, ``_pair_measures`` and ``_unstable``); the reset draws, the reward,
-    the statistics and the observations are the dense core's.
+    ``_advance``, ``_pair_measures`` and ``_unstable``) and ``set_status``
+    (:class:`~swarm_envs.envs.sparse_statuses.SparseStatuses`); the reset draws, the
+    reward, the statistics and the observations are the dense core's.
 
     Args:
         cfg: the scenario; ``cfg.dynamics`` must be ``"social_potential"``.
@@ -268,6 +285,7 @@ class SparseSwarmNavCore(SwarmNavCore):
         self._knn_cache: tuple[int, np.ndarray, np.ndarray] | None = None
         self._knn_radius: float | None = None
         self._knn_pending: tuple[int, Future] | None = None
+        self._init_statuses()
 
     @staticmethod
     def unsupported(cfg: SwarmConfig) -> str | None:
@@ -303,7 +321,7 @@ class SparseSwarmNavCore(SwarmNavCore):
         """Search the k nearest neighbours of ``self.x`` in a worker thread, meanwhile."""
         k = max(self.cfg.n_neighbors, 1)
         x, _ = self._searchable(self.x)
-        future = _knn_workers().submit(knn, x, k, radius=self._knn_radius)
+        future = _knn_workers().submit(_neighbors, x, k, self._present, self._knn_radius)
         self._knn_pending = (self._state, future)
 
     def _knn(self) -> tuple[np.ndarray, np.ndarray]:
@@ -312,7 +330,10 @@ class SparseSwarmNavCore(SwarmNavCore):
         ``k = min(max(n_neighbors, 1), N − 1)``: the observation's neighbours and, in
         column 0, the nearest neighbour for the NND statistic. Cached per state; the
         search starts from the previous state's 90th percentile of the k-th distance.
-        A diverged swarm (:meth:`_searchable`) gets NaN distances.
+        A diverged swarm (:meth:`_searchable`) gets NaN distances. With the statuses'
+        masks, the nearest present others of each present agent
+        (:func:`~swarm_envs.physics.present_neighbors.knn_among`: the slots beyond
+        them, and those of an agent not present, hold the agent itself at ``inf``).
         """
         if self._knn_cache is not None and self._knn_cache[0] == self._state:
             return self._knn_cache[1], self._knn_cache[2]
@@ -322,9 +343,12 @@ class SparseSwarmNavCore(SwarmNavCore):
         if pending is not None and pending[0] == self._state:
             idx, dist = pending[1].result()
         else:
-            idx, dist = knn(x, k, radius=self._knn_radius)
+            idx, dist = _neighbors(x, k, self._present, self._knn_radius)
         if dist.size:
-            hint = float(np.quantile(dist[~bad][..., -1], 0.9)) if (~bad).any() else 0.0
+            last = dist[~bad][..., -1]
+            if self._present is not None:
+                last = last[np.isfinite(last)]
+            hint = float(np.quantile(last, 0.9)) if last.size else 0.0
             self._knn_radius = hint if hint > 0 else None
             if bad.any():
                 dist = dist.copy()
@@ -346,9 +370,16 @@ class SparseSwarmNavCore(SwarmNavCore):
         cfg = self.cfg
         return self.goal if cfg.goal_in_physics and cfg.physics.C_g > 0 else None
 
-    def _pair_pass(self, x: np.ndarray, velocity: np.ndarray, goal: np.ndarray | None) -> _Pass:
+    def _pair_pass(
+        self,
+        x: np.ndarray,
+        velocity: np.ndarray,
+        goal: np.ndarray | None,
+        rows: np.ndarray | None = None,
+    ) -> _Pass:
         """The passive force at ``x`` ``(b, N, d)`` with ``velocity``, and what the same
         pass over the pairs gives: the stable substep, the pair potential, the collisions.
+        ``rows``: the swarms ``x`` holds (``None``: all), for the statuses' masks.
 
         One cell-list search within ``max(r_c, collision_radius)`` and one pass over
         its pairs (:func:`~swarm_envs.physics.compiled_pairs.swarm_pair_sums`): the pair
@@ -357,7 +388,9 @@ class SparseSwarmNavCore(SwarmNavCore):
         ``−β v`` (eq. 12) and the goal sink (eqs. 19–21) when it acts passively
         (``goal`` ``(b, d)``, else ``None``). Diverged swarms (a non-finite position or
         velocity, or beyond :data:`MAX_SPAN`) are left out: NaN force and potential,
-        ``h* = inf``.
+        ``h* = inf``. With the statuses' masks, the agents not present are left out of
+        the pass (no force, rate, potential or collision), and the close pairs of two
+        present agents that do not move are no collision.
         """
         ok = _sound_swarms(x, velocity, self._span)
         if not ok.all():
@@ -370,7 +403,10 @@ class SparseSwarmNavCore(SwarmNavCore):
                 ok,
             )
             if ok.any():
-                part = self._pair_pass(x[ok], velocity[ok], None if goal is None else goal[ok])
+                sound = (np.arange(b) if rows is None else rows)[ok]
+                part = self._pair_pass(
+                    x[ok], velocity[ok], None if goal is None else goal[ok], sound
+                )
                 out.force[ok], out.h_stable[ok] = part.force, part.h_stable
                 out.potential[ok], out.collisions[ok] = part.potential, part.collisions
             return out
@@ -380,11 +416,16 @@ class SparseSwarmNavCore(SwarmNavCore):
         # no interaction, no collision radius) would ask for more cells than a grid holds;
         # the pairs it adds beyond r_c only make the sums more exact.
         radius = max(self.cutoff, cfg.collision_radius, MIN_SEARCH_RADIUS)
-        sums = compiled_pairs.swarm_pair_sums(x, velocity, p, radius, cfg.collision_radius)
+        where = slice(None) if rows is None else rows
+        present = None if self._present is None else self._present[where]
+        sums = compiled_pairs.swarm_pair_sums(x, velocity, p, radius, cfg.collision_radius, present)
         assert sums.kappa is not None and sums.damping is not None
         force = sums.force.astype(self.dtype, copy=False)
         kappa, damping = sums.kappa, sums.damping
         potential, collisions = sums.potential, sums.close.astype(np.float64)
+        if self._still is not None:  # a pair at rest does not collide
+            still = self._still[where]
+            collisions -= close_pairs_among(x, still, cfg.collision_radius, radius)
         force = force.reshape(b, N, d)
         if p.beta > 0:
             force -= p.beta * velocity
@@ -435,6 +476,7 @@ class SparseSwarmNavCore(SwarmNavCore):
             ur = control if control is None or every else control[rows]
             gr = goal if goal is None or every else goal[rows]
             accel = fr if ur is None else fr + ur
+            accel = self._hold(accel, None if every else rows)
             if verlet:
                 # Kick–drift–kick with the force at the extrapolated velocity
                 # 2v_{n+½} − v_n (swarm_envs.physics.integrators.verlet_step).
@@ -453,7 +495,7 @@ class SparseSwarmNavCore(SwarmNavCore):
                 self._state += 1
                 if ahead:
                     self._start_knn()
-            res = self._pair_pass(xr, probe, gr)
+            res = self._pair_pass(xr, probe, gr, None if every else rows)
             if verlet:
                 accel = res.force if ur is None else res.force + ur
                 vr = v_half + (0.5 / m) * hb * accel
@@ -485,7 +527,7 @@ class SparseSwarmNavCore(SwarmNavCore):
         self.x[idx], self.v[idx] = before[0][idx], before[1][idx]
         self._state += 1
         goal = self._physics_goal()
-        res = self._pair_pass(self.x[idx], self.v[idx], None if goal is None else goal[idx])
+        res = self._pair_pass(self.x[idx], self.v[idx], None if goal is None else goal[idx], idx)
         self._f_passive[idx] = res.force
         self._keep(idx, res)
         substeps = self.dynamics.substeps.copy()
@@ -504,5 +546,10 @@ class SparseSwarmNavCore(SwarmNavCore):
             near, nearest = None, np.zeros((self.batch, 1), self.dtype)
         energy = kinetic_energy(self.v, p) + self._potential
         if p.C_g > 0:
-            energy = energy + goal_potential(self.x, p, self.goal).sum(axis=-1)
+            sink = goal_potential(self.x, p, self.goal)
+            if self._present is not None:  # over the agents present
+                sink = np.where(self._present, sink, 0.0)
+            energy = energy + sink.sum(axis=-1)
+        if self._present is not None:  # an agent alone in the physics: 0
+            nearest = np.where(np.isfinite(nearest), nearest, 0.0).astype(self.dtype)
         return near, nearest, self._collisions.copy(), energy.astype(self.dtype, copy=False)

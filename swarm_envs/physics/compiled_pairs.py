@@ -459,6 +459,7 @@ def swarm_pair_sums(
     params: SocialPotentialParams,
     radius: float,
     close_radius: float = 0.0,
+    present: np.ndarray | None = None,
 ) -> PairSums:
     """:class:`PairSums` of every pair within ``radius`` in each swarm of ``x`` ``(B, N, d)``
     (velocities ``v`` for the alignment), rates included, in the agents' own order.
@@ -470,16 +471,25 @@ def swarm_pair_sums(
     cell order. The force, ``kappa`` and ``damping`` come back flat, ``(B·N, d)`` and
     ``(B·N,)`` in ``x.reshape(-1, d)``'s order (float64), the potential and the close
     pairs per swarm ``(B,)``. ``radius = 0`` or ``N = 1``: no pairs, zeros.
+    ``present`` ``(B, N)`` bool: only the pairs of present agents (the others are left
+    out of the cell list: zero force and rates).
     """
     B, N, d = x.shape
     m = B * N
-    if not (radius > 0 and N > 1):
-        zero = np.zeros(m)
+    rows = None if present is None else np.flatnonzero(present.reshape(m))
+    zero = np.zeros(m)
+    if not (radius > 0 and N > 1) or (rows is not None and rows.size == 0):
         return PairSums(np.zeros((m, d)), np.zeros(B), np.zeros(B, np.int64), zero, zero.copy())
-    cells = CellList.build(x, radius * (1.0 + CELL_MARGIN) / REACH, REACH)
-    order = cells.order
+    h = radius * (1.0 + CELL_MARGIN) / REACH
+    if rows is None:
+        cells = CellList.build(x, h, REACH)
+        order = cells.order  # flat index of each sorted point
+        groups = order // N if B > 1 else None
+    else:
+        cells = CellList.build(x.reshape(m, d)[rows], h, REACH, groups=rows // N)
+        order = rows[cells.order]
+        groups = order // N
     vel = v.reshape(m, d)[order]
-    groups = order // N if B > 1 else None
     if numba_enabled():
         sums = cell_pair_sums(
             cells,
@@ -494,7 +504,7 @@ def swarm_pair_sums(
     else:
         acc = PairAccumulator(
             params,
-            m,
+            order.size,
             vel,
             groups=groups,
             n_groups=B,
@@ -505,11 +515,10 @@ def swarm_pair_sums(
         for chunk in cells.iter_pairs(radius):
             acc.add(*chunk)
         sums = acc.result(d)
-    force = np.empty((m, d))
-    force[order] = sums.force
-    kappa = np.empty(m)
-    damping = np.empty(m)
     assert sums.kappa is not None and sums.damping is not None
+    force = np.zeros((m, d))
+    force[order] = sums.force
+    kappa, damping = zero, zero.copy()
     kappa[order] = sums.kappa
     damping[order] = sums.damping
     return PairSums(force, sums.potential, sums.close, kappa, damping)

@@ -61,7 +61,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from functools import cache
 from typing import NamedTuple
@@ -106,6 +106,22 @@ def _flat_state(x: np.ndarray) -> tuple[np.ndarray, tuple[int, ...], int, int]:
         raise ValueError("positions must be finite for the neighbour search (got NaN or inf)")
     n, d = x.shape[-2:]
     return x.reshape(-1, n, d), x.shape[:-2], n, d
+
+
+def _grouped_state(x: np.ndarray, groups: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points ``(M, d)`` (finite, ``M ≥ 1``) and their swarms ``(M,)`` int64 ``≥ 0``."""
+    flat = as_state(x, "positions", min_agents=1)
+    swarm = np.asarray(groups)
+    integer = np.issubdtype(swarm.dtype, np.integer)
+    if flat.ndim != 2 or swarm.shape != flat.shape[:1] or not integer:
+        raise ValueError(
+            f"groups must be integers (M,) for points (M, d), got {swarm.shape} for {flat.shape}"
+        )
+    if swarm.min() < 0:
+        raise ValueError("groups must be >= 0")
+    if not np.isfinite(flat).all():
+        raise ValueError("positions must be finite for the neighbour search (got NaN or inf)")
+    return flat, swarm.astype(np.int64, copy=False)
 
 
 def _check_reach(owner: str, reach: object) -> int:
@@ -160,7 +176,7 @@ class CellList:
     coords: tuple[np.ndarray, ...]
     """Coordinates in sorted order, one contiguous ``(M,)`` array per dimension."""
     n_agents: int
-    """Agents per swarm, ``N``."""
+    """Agents per swarm, ``N`` (0 for swarms of different sizes, ``groups``)."""
     cell_size: float
     """Side ``h`` of the cubic cells."""
     reach: int
@@ -181,7 +197,9 @@ class CellList:
     keys per point; :attr:`keys` are then searched)."""
 
     @classmethod
-    def build(cls, x: np.ndarray, cell_size: float, reach: int = 1) -> CellList:
+    def build(
+        cls, x: np.ndarray, cell_size: float, reach: int = 1, *, groups: np.ndarray | None = None
+    ) -> CellList:
         """Bin positions ``x`` ``(..., N, d)`` into cells of side ``cell_size``.
 
         Cell coordinates are ``⌊(x − min_swarm x) / h⌋`` per swarm, in float64. The key
@@ -192,20 +210,39 @@ class CellList:
         consecutively, which keeps neighbours neighbours. Raises :class:`ValueError`
         for a non-positive or non-finite ``cell_size``, a non-finite position or a grid
         wider than :data:`MAX_CELLS`.
+
+        ``groups``: swarms of different sizes (the agents of each swarm that are
+        present, say). ``x`` is then ``(M, d)``, at least one point, and ``groups``
+        ``(M,)`` the swarm ``b ≥ 0`` of each point; flat indices are rows of ``x``
+        and :attr:`n_agents` is 0.
         """
         h = check_real("CellList", "cell_size", cell_size, low=0.0, low_inclusive=False)
         m = _check_reach("CellList", reach)
-        x3, _, n, d = _flat_state(x)
-        B = x3.shape[0]
-        lo = x3.min(axis=1, keepdims=True).astype(np.float64)
-        t = (x3.astype(np.float64) - lo) / h
+        if groups is None:
+            x3, _, n, d = _flat_state(x)
+            B = x3.shape[0]
+            lo = x3.min(axis=1, keepdims=True).astype(np.float64)
+            t = (x3.astype(np.float64) - lo) / h
+            flat = x3.reshape(B * n, d)
+            swarm = np.repeat(np.arange(B, dtype=np.int64), n) if B > 1 else None
+        else:
+            flat, swarm = _grouped_state(x, groups)
+            n, d = 0, flat.shape[1]
+            B = int(swarm.max()) + 1
+            lo = np.full((B, d), np.inf)
+            first = np.flatnonzero(np.diff(swarm, prepend=-1))  # each run of one swarm
+            if (swarm[first[1:]] > swarm[first[:-1]]).all():  # by swarm: one pass
+                lo[swarm[first]] = np.minimum.reduceat(flat, first, axis=0)
+            else:
+                np.minimum.at(lo, swarm, flat)
+            t = (flat.astype(np.float64) - lo[swarm]) / h
         top = float(t.max())
         if top >= MAX_CELLS:
             raise ValueError(
                 f"positions span {top:.3g} cells of side {h:g} per dimension; the neighbour "
                 f"search supports at most {MAX_CELLS} (is the swarm diverging?)"
             )
-        c = np.floor(t).astype(np.int64).reshape(B * n, d)
+        c = np.floor(t).astype(np.int64).reshape(flat.shape[0], d)
         c += m
         size = [int(c[:, k].max()) + m + 1 for k in range(d)]
         if B * math.prod(size) > _KEY_LIMIT:
@@ -220,8 +257,8 @@ class CellList:
             strides[k] = strides[k + 1] * size[k + 1]
         span = strides[0] * size[0]  # keys per swarm
         key = c @ np.array(strides, dtype=np.int64)
-        if B > 1:
-            key += np.repeat(np.arange(B, dtype=np.int64) * span, n)
+        if swarm is not None:
+            key += swarm * span
         order = np.argsort(key, kind="stable")
         point_key = key[order]
         new = np.empty(point_key.size, dtype=bool)
@@ -230,11 +267,10 @@ class CellList:
         start = np.append(np.flatnonzero(new), point_key.size)
         keys = point_key[start[:-1]]
         cumulative = None
-        if B * span <= LOOKUP_FACTOR * max(B * n, 1024):
+        if B * span <= LOOKUP_FACTOR * max(flat.shape[0], 1024):
             cumulative = np.zeros(B * span + 1, dtype=np.int64)
             cumulative[keys + 1] = np.diff(start)
             np.cumsum(cumulative, out=cumulative)
-        flat = x3.reshape(B * n, d)
         coords = tuple(np.ascontiguousarray(flat[order, k]) for k in range(d))
         return cls(coords, n, h, m, order, point_key, tuple(strides), keys, start, cumulative)
 
@@ -524,6 +560,40 @@ def density_radius(x: np.ndarray, k: int) -> float:
     return radius
 
 
+def knn_rounds(
+    build: Callable[[float], CellList],
+    todo: np.ndarray,
+    k: int,
+    radius: float,
+    idx: np.ndarray,
+    d2: np.ndarray,
+) -> None:
+    """The rounds of :func:`knn` for the points with flat indices ``todo``, in place.
+
+    ``build(h)``: the cell list of every point (flat indices ``[0, M)``) with cells of
+    side ``h`` and padding ``2 KNN_REACH``. Row ``i`` of ``idx`` ``(M, k)`` gets the flat
+    indices of point ``i``'s ``k`` nearest others (``k ≥ 1``), nearest first, and ``d2``
+    their squared distances; each point of ``todo`` must have ``k`` others in its
+    swarm. The first round searches ``radius``.
+    """
+    r, m = radius, idx.shape[0]
+    while todo.size:
+        # One grid serves two rounds: radius r (reach KNN_REACH), then 2r.
+        cells = build(r * (1.0 + CELL_MARGIN) / KNN_REACH)
+        inverse = np.empty(m, dtype=np.int64)
+        inverse[cells.order] = np.arange(m)
+        for reach in (KNN_REACH, 2 * KNN_REACH):
+            queries = np.sort(inverse[todo])
+            ok, nb, nd2 = cells.knearest_round(queries, k, r, reach)
+            done = cells.order[queries[ok]]
+            idx[done] = nb
+            d2[done] = nd2
+            todo = cells.order[queries[~ok]]
+            r *= 2.0
+            if not todo.size:
+                break
+
+
 def knn(x: np.ndarray, k: int, *, radius: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` nearest other agents of every agent, nearest first, and their distances.
 
@@ -550,23 +620,7 @@ def knn(x: np.ndarray, k: int, *, radius: float | None = None) -> tuple[np.ndarr
         r = check_real("knn", "radius", r, low=0.0, low_inclusive=False)
         span = float((x3.max(axis=1) - x3.min(axis=1)).max())
         r = max(r, 4.0 * KNN_REACH * span / MAX_CELLS)  # keep the grid within MAX_CELLS
-        todo = np.arange(M)
-        while todo.size:
-            # One grid serves two rounds: radius r (reach KNN_REACH), then 2r.
-            h = r * (1.0 + CELL_MARGIN) / KNN_REACH
-            cells = CellList.build(x3, h, 2 * KNN_REACH)
-            inverse = np.empty(M, dtype=np.int64)
-            inverse[cells.order] = np.arange(M)
-            for reach in (KNN_REACH, 2 * KNN_REACH):
-                queries = np.sort(inverse[todo])
-                ok, nb, nd2 = cells.knearest_round(queries, kk, r, reach)
-                done = cells.order[queries[ok]]
-                idx[done] = nb
-                d2[done] = nd2
-                todo = cells.order[queries[~ok]]
-                r *= 2.0
-                if not todo.size:
-                    break
+        knn_rounds(lambda h: CellList.build(x3, h, 2 * KNN_REACH), np.arange(M), kk, r, idx, d2)
         idx -= (np.arange(M) // n * n)[:, None]
     return idx.reshape(*batch, n, kk), np.sqrt(d2).reshape(*batch, n, kk)
 
@@ -582,5 +636,6 @@ __all__ = [
     "HalfStencil",
     "density_radius",
     "knn",
+    "knn_rounds",
     "radius_pairs",
 ]
