@@ -16,8 +16,9 @@ base: above 1 is faster) and the physical state of the swarms at the end of the 
 
 ``--large-swarm`` runs the VecEnv rows on the large-swarm parameter set
 (``SocialPotentialParams.large_swarm()``, given as plain values so that older versions
-take it too) at its start density 0.3, where a step takes one substep at every N: rows
-that time the same work in versions with and without step-size control.
+take it too) at its start density 0.3; with ``--zero-actions`` the swarms stay at that
+density and a step takes one substep at every N: rows that time the same work in versions
+with and without step-size control (compare the printed states).
 
 Rows (the same API calls in both versions):
 
@@ -46,6 +47,8 @@ import json, os, sys, time
 import numpy as np
 
 def make(row, n, b, tune, env):
+    env = dict(env)
+    zero = env.get("_zero_actions", False)
     import swarm_envs
     from swarm_envs import config, swarm_nav_v0
     if tune:
@@ -72,16 +75,21 @@ def make(row, n, b, tune, env):
         return step, (lambda: state_of(env.core.x, env.core.v))
     if row == "vec_env":
         backend = "native" if "native" in config.BACKENDS else "torch"
+        env.pop("_zero_actions", None)
         venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, backend=backend, **env)
+        env["_zero_actions"] = zero
     else:  # the compiled torch core (earlier versions ran the C step inside it)
         os.environ["SWARM_ENVS_NATIVE"] = "0"
         try:
-            venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, backend="torch", **env)
+            kw = {k: v for k, v in env.items() if k != "_zero_actions"}
+            venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, backend="torch", **kw)
         finally:
             del os.environ["SWARM_ENVS_NATIVE"]
     venv.seed(0)
     venv.reset()
     a = rng.uniform(-1, 1, (venv.num_envs, 2)).astype(np.float32)
+    if env.pop("_zero_actions", False):
+        a[:] = 0.0
     core = venv.cores[0]
     return (lambda: venv.step(a)), (lambda: state_of(core.x, core.v))
 
@@ -187,6 +195,9 @@ def main() -> None:
     parser.add_argument("--tune-allocator", action="store_true", help="tune glibc in both")
     parser.add_argument("--json", default=None)
     parser.add_argument("--large-swarm", action="store_true", help="the large-swarm set")
+    parser.add_argument(
+        "--zero-actions", action="store_true", help="VecEnv rows with zero actions (passive)"
+    )
     args = parser.parse_args()
     root = Path(__file__).resolve().parent.parent
     sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
@@ -202,6 +213,8 @@ def main() -> None:
                         continue
                     spec = dict(row=row, n=n, b=b)
                     env = large_swarm_env(n) if args.large_swarm and "vec_env" in row else {}
+                    if args.zero_actions and "vec_env" in row:
+                        env["_zero_actions"] = True
                     for w in workers.values():
                         w.ask(op="make", tune=args.tune_allocator, env=env, **spec)
                     rates: dict[str, list[float]] = {name: [] for name in workers}
