@@ -728,3 +728,39 @@ def test_actions_of_agents_that_do_not_act_are_zero_and_noise_is_clipped(dtype):
     inside = np.abs(a[1][~idle[1]]) < 0.6  # far from the clip: the noise itself
     assert abs(quiet[inside].std() / 0.1 - 1) < 0.15
     assert (np.abs(out[2][~idle[2]]) == 1.0).mean() > 0.5  # loud noise: mostly clipped
+
+
+@pytest.mark.parametrize("backend", ["native", "torch", "sparse"])
+def test_every_status_backend_keeps_an_undone_steps_flag_as_numpy_does(monkeypatch, backend):
+    # The numpy test above, on each other core that takes statuses: swarm 0's undone,
+    # truncated step stays reported while swarm 1 is measured again for its frozen agent.
+    from swarm_envs.envs import backends
+    from swarm_envs.envs.native import core as native_module
+
+    if backends.unsupported(SwarmConfig(backend=backend), backend) is not None:
+        pytest.skip(f"{backend} cannot run here")
+    if backend == "torch":
+        monkeypatch.setenv("SWARM_ENVS_TORCH_COMPILE", "0")
+    rng = np.random.default_rng(5)
+    x = rng.uniform(-1.5, 1.5, (2, 5, 2))
+    x[0, 1] = x[0, 0] + 1e-3
+    goal = np.array([[4.0, 1.0], [4.0, 1.0]])
+    starts = lambda cfg, rng, n: (x.copy(), np.zeros_like(x), goal)  # noqa: E731
+    monkeypatch.setattr(core_module, "draw_starts", starts)
+    monkeypatch.setattr(native_module, "draw_starts", starts)
+    import swarm_envs.envs.torch_core as torch_module
+
+    monkeypatch.setattr(torch_module, "draw_starts", starts)
+    stiff = dataclasses.replace(SwarmConfig().physics, C_r=4.0, l_r=0.05)
+    fields = dict(n_agents=5, dt=0.1, max_substeps=2, on_unstable="truncate", physics=stiff)
+    p = Perturbations(failed_fraction=0.2, failure_mode="frozen", failure_time=1)
+    results = {}
+    for name in ("numpy", backend):
+        core = make_core(SwarmConfig(backend=name, perturbations=p, **fields), batch=2)
+        assert core.backend == name
+        core.reset(np.random.default_rng(0))
+        _, _, truncated, stats = core.step(np.zeros((2, 5, 2)))
+        results[name] = (truncated.tolist(), stats["unstable"].tolist(), core.status.copy())
+    assert results[backend][0] == results["numpy"][0] == [True, False]
+    assert results[backend][1] == results["numpy"][1] == [1.0, 0.0]
+    np.testing.assert_array_equal(results[backend][2], results["numpy"][2])

@@ -342,10 +342,12 @@ class NativeSwarmNavCore:
             return
         idx = np.flatnonzero(rows)
         substeps = self._packed[:, _SUBSTEPS].copy()  # a measure takes none
+        before = self._stats
         self._measure(None if idx.size == B else idx.astype(np.int64))
         self._packed[idx, _SUBSTEPS] = substeps[idx]
         self._stats["substeps"][idx] = substeps[idx]
         for key, value in self._stats.items():
+            value[~rows] = before[key][~rows]  # the others keep theirs (an `unstable` flag)
             self._prev[key][idx] = value[idx]
             if start:
                 self._start[key][idx] = value[idx]
