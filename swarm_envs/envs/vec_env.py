@@ -301,13 +301,20 @@ class SwarmNavVecEnv(VecEnv):
         going = ~done[:, None]
         stopped = going & was_active & ~active  # its last step as an acting agent
         idle = ~was_active  # it did not act in this step
-        for b, i in zip(*np.nonzero(stopped | (going & idle)), strict=True):
+        # The idle slots of swarms that go on share one info: the same absorbing
+        # transition, whose zero observation is read-only (SB3's wrappers replace it).
+        zeros = np.zeros(obs.shape[-1], obs.dtype)
+        zeros.flags.writeable = False
+        shared = {"terminal_observation": zeros, "TimeLimit.truncated": False}
+        for slot in np.flatnonzero((going & idle & ~stopped).reshape(-1)).tolist():
+            infos[slot] = shared if slot % N else {**infos[slot], **shared}
+        for b, i in zip(*np.nonzero(stopped), strict=True):
             slot = int(b) * N + int(i)
-            last = obs[b, i].copy() if stopped[b, i] else np.zeros_like(obs[b, i])
-            info = dict(infos[slot])
-            info["terminal_observation"] = last
-            info["TimeLimit.truncated"] = False
-            infos[slot] = info
+            infos[slot] = {
+                **infos[slot],
+                "terminal_observation": obs[b, i].copy(),
+                "TimeLimit.truncated": False,
+            }
         rewards[idle.reshape(-1)] = 0.0
         dones[(stopped | (going & idle)).reshape(-1)] = True
         obs[~active] = 0.0
