@@ -301,13 +301,14 @@ class SwarmNavVecEnv(VecEnv):
         going = ~done[:, None]
         stopped = going & was_active & ~active  # its last step as an acting agent
         idle = ~was_active  # it did not act in this step
-        # The idle slots of swarms that go on share one info: the same absorbing
-        # transition, whose zero observation is read-only (SB3's wrappers replace it).
+        # The idle slots of swarms that go on: the same absorbing transition, each in a
+        # dict of its own (a C-level copy), sharing one read-only zero observation
+        # (SB3's wrappers replace it rather than write into it).
         zeros = np.zeros(obs.shape[-1], obs.dtype)
         zeros.flags.writeable = False
-        shared = {"terminal_observation": zeros, "TimeLimit.truncated": False}
+        absorbing = {"terminal_observation": zeros, "TimeLimit.truncated": False}
         for slot in np.flatnonzero((going & idle & ~stopped).reshape(-1)).tolist():
-            infos[slot] = shared if slot % N else {**infos[slot], **shared}
+            infos[slot] = absorbing.copy() if slot % N else {**infos[slot], **absorbing}
         for b, i in zip(*np.nonzero(stopped), strict=True):
             slot = int(b) * N + int(i)
             infos[slot] = {
