@@ -152,6 +152,26 @@ def test_energy_balance_with_self_propulsion(goal):
     assert change == pytest.approx(integral, rel=2e-3, abs=2e-3)
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_angular_momentum_about_the_goal_follows_the_discrete_friction_law(dim):
+    """Without self-propulsion, semi-implicit Euler with the sink on: the angular
+    momentum about the goal is ``L_n = L_0 (1 − β dt/m)^n`` to round-off (the pair and
+    sink torques cancel, ``r_{n+1} × v_{n+1} = r_n × v_{n+1}``)."""
+    rng = np.random.default_rng(8)
+    p = dataclasses.replace(SocialPotentialParams.navigation(), m=1.5)
+    goal = rng.normal(size=dim)
+    x0, v0 = rng.normal(size=(9, dim)), rng.normal(size=(9, dim))
+    dt, steps = 0.01, 300
+    xs, vs = simulate(p, x0, v0, dt=dt, steps=steps, goal=goal)
+    r = xs - goal
+    if dim == 2:
+        L = (r[..., 0] * vs[..., 1] - r[..., 1] * vs[..., 0]).sum(-1)[:, None]
+    else:
+        L = np.cross(r, vs).sum(-2)
+    law = L[0] * (1.0 - p.beta * dt / p.m) ** np.arange(steps + 1)[:, None]
+    np.testing.assert_allclose(L, law, rtol=1e-9, atol=1e-12 * np.abs(L[0]).max())
+
+
 # --------------------------------------------------------------------------- step size
 
 
