@@ -625,7 +625,9 @@ def energy(
 
     With no control, ``dφ/dt = −β Σ|v_i|² − ½ Σ_{i≠j} C_o ((v_ij·u_ij))² e^{−ρ_ij/l_o} ≤ 0``
     (eq. 18, with the projected relative velocity that the printed eq. writes as
-    ``v_ij²``): φ is the Lyapunov function of the paper's section 3.
+    ``v_ij²``): φ is the Lyapunov function of the paper's section 3. With
+    self-propulsion (``alpha > 0``) the first term is ``Σ (α − β|v_i|²)|v_i|²``
+    (:func:`dissipation`), of either sign; φ keeps its definition.
 
     >>> x = np.array([[0.0, 0.0], [1.0, 0.0]]); v = np.zeros_like(x)
     >>> p = SocialPotentialParams()
