@@ -308,3 +308,21 @@ def test_the_sparse_core_matches_the_numpy_core(integrator):
         ours = _rollout(SparseSwarmNavCore(cfg, batch=2, cutoff_tol=1e-12))
     for a, b in zip(ours, ref, strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-7, atol=1e-7)
+
+
+def test_the_env_takes_physics_alpha_and_falls_back_from_the_c_step(monkeypatch):
+    from swarm_envs import swarm_nav_v0
+    from swarm_envs.envs import backends
+
+    if backends.unsupported(SwarmConfig(), "native"):
+        pytest.skip(f"C step unavailable: {backends.unsupported(SwarmConfig(), 'native')}")
+    monkeypatch.setattr(backends, "_WARNED", set())
+    with pytest.warns(UserWarning, match=r"backend 'native' cannot run .*physics\.alpha"):
+        env = swarm_nav_v0.parallel_env(
+            n_agents=5, backend="native", physics={"alpha": 1.0, "beta": 0.25}
+        )
+    assert env.core.backend == "numpy" and env.core.cfg.physics.cruise_speed == 2.0
+    obs, _ = env.reset(seed=0)
+    actions = {agent: np.zeros(2, np.float32) for agent in env.agents}
+    obs, *_ = env.step(actions)
+    assert all(np.isfinite(o).all() for o in obs.values())
