@@ -203,6 +203,7 @@ def field_strategies(dynamics: tuple[str, ...] = ("social_potential",)) -> dict[
             "C_g": st.one_of(st.just(0.0), _real(0.0, 15.0)),
             "l_g": _real(1.0, 10.0),
             "m": _real(0.5, 2.0),
+            "alpha": st.one_of(st.just(0.0), _real(0.0, 1.0)),
         },
     }
 
@@ -235,6 +236,8 @@ def configs(draw: Any, dynamics: tuple[str, ...] = ("social_potential",)) -> Swa
         else:
             fields[name] = draw(strategy)
     fields["goal_distance_max"] += fields["goal_distance_min"]
+    if fields["physics"]["alpha"] > 0:  # self-propulsion needs a Rayleigh coefficient
+        fields["physics"]["beta"] = max(fields["physics"]["beta"], 0.25)
     if fields["dynamics"] == "lagrangian":
         fields["init_density"] = None  # its start checks read init_radius
         fields["lagrangian"] = {"r": 0.01}  # bins small enough for any start radius

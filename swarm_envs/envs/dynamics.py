@@ -62,6 +62,8 @@ from swarm_envs.physics.lagrangian import (
 )
 from swarm_envs.physics.piecewise import interaction_forces, piecewise_rates, random_force
 from swarm_envs.physics.social_potential import (
+    components,
+    dissipation,
     goal_terms,
     pair_rates,
     pair_terms,
@@ -190,16 +192,15 @@ class SocialPotentialDynamics(Dynamics):
         mobile = self.mobile if rows is None else self.mobile[rows]
         return np.where(mobile[..., None], f, 0.0).astype(f.dtype, copy=False)
 
-    def _rates(self, geometry: PairGeometry) -> np.ndarray:
-        omega2, gamma = pair_rates(geometry, self.cfg.physics, sink=self._sink)
+    def _rates(self, geometry: PairGeometry, v: np.ndarray) -> np.ndarray:
+        omega2, gamma = pair_rates(geometry, self.cfg.physics, sink=self._sink, v=v)
         return stable_substep(omega2, gamma)
 
     def _passive(self, x, v, goal, geometry) -> np.ndarray:
         """The passive force at ``(x, v)`` (semi-implicit Euler's carried force)."""
         p = self.cfg.physics
         fs, _ = pair_terms(geometry, v, p, energy=False)
-        if p.beta > 0:
-            fs = [fc - p.beta * v[..., k] for k, fc in enumerate(fs)]
+        fs = dissipation(fs, components(v), p)
         if goal is not None:
             sink, _, _ = goal_terms(x, p, goal)
             fs = [fc + gc for fc, gc in zip(fs, sink, strict=True)]
@@ -247,16 +248,15 @@ class SocialPotentialDynamics(Dynamics):
             )
             if not self._verlet:
                 self._force[rows] = self._passive(xr, vr, None if goal is None else goal[rows], geo)
-            self._h_stable[rows] = self._rates(geo)
+            self._h_stable[rows] = self._rates(geo, vr)
 
     def measure(self, x, v, goal, geometry):
         p = self.cfg.physics
-        self._h_stable = self._rates(geometry)
+        self._h_stable = self._rates(geometry, v)
         if self._verlet:
             return energy(x, v, p, goal if p.C_g > 0 else None, geometry=geometry)
         fs, pairs = pair_terms(geometry, v, p)
-        if p.beta > 0:
-            fs = [fc - p.beta * v[..., k] for k, fc in enumerate(fs)]
+        fs = dissipation(fs, components(v), p)
         phi = kinetic_energy(v, p) + pairs
         if p.C_g > 0:
             sink, potential, _ = goal_terms(x, p, goal)

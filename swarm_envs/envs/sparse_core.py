@@ -85,6 +85,7 @@ from swarm_envs.physics.integrators import SubstepBudget, euler_update, stable_s
 from swarm_envs.physics.neighbors import knn
 from swarm_envs.physics.pair_sums import swarm_rates
 from swarm_envs.physics.present_neighbors import close_pairs_among, knn_among
+from swarm_envs.physics.social_potential import components, dissipation
 
 #: Agents per swarm from which to use :class:`SparseSwarmNavCore`: above the crossover
 #: with the dense cores that ``benchmarks/large_swarms.py`` measures (default config at
@@ -427,12 +428,11 @@ class SparseSwarmNavCore(SparseStatuses, SwarmNavCore):
             still = self._still[where]
             collisions -= close_pairs_among(x, still, cfg.collision_radius, radius)
         force = force.reshape(b, N, d)
-        if p.beta > 0:
-            force -= p.beta * velocity
+        force[...] = np.stack(dissipation(components(force), components(velocity), p), axis=-1)
         if goal is not None:
             force += goal_force(x, p, goal)
         omega2, gamma = swarm_rates(
-            kappa.reshape(b, N), damping.reshape(b, N), p, sink=goal is not None
+            kappa.reshape(b, N), damping.reshape(b, N), p, sink=goal is not None, v=velocity
         )
         return _Pass(force, stable_substep(omega2, gamma), potential, collisions, ok)
 

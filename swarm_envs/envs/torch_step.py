@@ -52,6 +52,7 @@ from swarm_envs.physics import kinetic_energy
 from swarm_envs.physics.integrators import euler_update, stable_substep, substep_plan
 from swarm_envs.physics.social_potential import (
     PairGeometry,
+    dissipation,
     goal_terms,
     pair_geometry,
     pair_rates,
@@ -142,18 +143,18 @@ def _passive(
     semi-implicit Euler force."""
     p = cfg.physics
     fs, pairs = pair_terms(geo, vs, p, energy=energy)
-    if p.beta > 0:
-        fs = [fc - p.beta * vc for fc, vc in zip(fs, vs, strict=True)]
+    fs = dissipation(fs, vs, p)
     sink, potential, goal_distance = goal_terms(xs, p, goal)
     if cfg.goal_in_physics and p.C_g > 0:
         fs = [fc + gc for fc, gc in zip(fs, sink, strict=True)]
     return fs, pairs, potential, goal_distance
 
 
-def _stable(geo: PairGeometry, cfg: Any) -> torch.Tensor:
-    """The stable substep ``h*`` ``(B,)`` of the state of ``geo`` (the shared rule)."""
+def _stable(geo: PairGeometry, vs: list[torch.Tensor], cfg: Any) -> torch.Tensor:
+    """The stable substep ``h*`` ``(B,)`` of the state of ``geo`` with the velocities
+    ``vs`` (the shared rule)."""
     p = cfg.physics
-    omega2, gamma = pair_rates(geo, p, sink=cfg.goal_in_physics and p.C_g > 0)
+    omega2, gamma = pair_rates(geo, p, sink=cfg.goal_in_physics and p.C_g > 0, v=vs)
     return stable_substep(omega2, gamma, torch)
 
 
@@ -239,7 +240,7 @@ def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
         xs, vs = list(x_new.unbind(0)), list(v_new.unbind(0))
         geo = present_geometry(pair_geometry(xs), present)
         fs, pairs, potential, goal_distance = _passive(geo, xs, vs, goal, cfg, energy=True)
-        h_stable = _stable(geo, cfg)
+        h_stable = _stable(geo, vs, cfg)
         xn, vn = x_new.permute(1, 2, 0), v_new.permute(1, 2, 0)
         energy = kinetic_energy(vn, p) + pairs
         if p.C_g > 0:  # the energy statistic includes the sink whenever it exists
@@ -367,7 +368,7 @@ def build_substep(cfg: Any) -> Callable[..., tuple[Any, ...]]:
         xs, vs = list(x_new.unbind(0)), list(v_new.unbind(0))
         geo = present_geometry(pair_geometry(xs), present)
         fs, _, _, _ = _passive(geo, xs, vs, goal, cfg, energy=False)
-        h_new = _stable(geo, cfg)
+        h_new = _stable(geo, vs, cfg)
         # The next substep, planned as the next call would plan it: for the fused step
         # when it is every swarm's last.
         h, last, late, wanted = plan_substep(remaining, h_new.to(wide), used, cap, torch)

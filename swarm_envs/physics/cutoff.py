@@ -96,6 +96,8 @@ from swarm_envs.physics.pair_sums import (
 )
 from swarm_envs.physics.social_potential import (
     SocialPotentialParams,
+    components,
+    dissipation,
     goal_force,
     goal_potential,
     kinetic_energy,
@@ -306,8 +308,7 @@ def sparse_forces(
     x, v, xf, i, j = _flat_pairs(x, v, i, j)
     assert v is not None
     out = pair_sums(xf, v.reshape(xf.shape), params, i, j).force.reshape(x.shape)
-    if params.beta > 0:
-        out -= params.beta * v
+    out[...] = np.stack(dissipation(components(out), components(v), params), axis=-1)
     if goal is not None:
         goal = check_goal(goal, x)
         if params.C_g > 0:

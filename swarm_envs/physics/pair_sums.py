@@ -21,6 +21,8 @@ import numpy as np
 from swarm_envs.physics.social_potential import (
     RHO_FLOOR,
     SocialPotentialParams,
+    components,
+    dissipation_rate,
     pair_law,
     rate_law,
 )
@@ -54,7 +56,12 @@ class PairSums(NamedTuple):
 
 
 def swarm_rates(
-    kappa: np.ndarray, damping: np.ndarray, params: SocialPotentialParams, *, sink: bool = False
+    kappa: np.ndarray,
+    damping: np.ndarray,
+    params: SocialPotentialParams,
+    *,
+    sink: bool = False,
+    v: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(ω², γ)`` per swarm ``(...)`` from the per-agent rate sums ``(..., N)``.
 
@@ -63,7 +70,9 @@ def swarm_rates(
     ``ω² = (2/m) max_i Σ_j κ_ij`` (``+ C_g/(l_g² m)`` with ``sink``, the goal sink acting
     passively) and ``γ = (β + 2 max_i Σ_j w_ij)/m``. With every pair listed it equals
     ``pair_rates``; with the pairs within ``r_c`` it drops the rates of the pairs beyond,
-    as the force drops their terms.
+    as the force drops their terms. With self-propulsion (``alpha > 0``) ``β`` is
+    replaced by :func:`~swarm_envs.physics.social_potential.dissipation_rate` of the
+    velocities ``v`` ``(..., N, d)`` (required then).
 
     >>> p = SocialPotentialParams.navigation()
     >>> omega2, gamma = swarm_rates(np.array([[3.0, 5.0]]), np.array([[0.5, 0.2]]), p)
@@ -75,7 +84,8 @@ def swarm_rates(
     if sink:
         omega2 = omega2 + p.C_g / (p.l_g * p.l_g * p.m)
     top = damping.max(axis=-1) if damping.shape[-1] else np.zeros(damping.shape[:-1])
-    return omega2, (p.beta + 2.0 * top) / p.m
+    rate = dissipation_rate(None if v is None else components(v), p)
+    return omega2, (rate + 2.0 * top) / p.m
 
 
 def _check_pairs(i: Any, j: Any, m: int) -> tuple[np.ndarray, np.ndarray]:

@@ -69,13 +69,18 @@ class SocialPotentialParams:
     l_o: float = 1.5
     """Alignment range (eq. 11), ``> 0``."""
     beta: float = 0.1
-    """Linear dissipation (friction) coefficient β (eq. 12), ``≥ 0``."""
+    """Linear dissipation (friction) coefficient β (eq. 12), ``≥ 0``; with
+    ``alpha > 0`` the Rayleigh coefficient of :func:`dissipation`, ``> 0``."""
     C_g: float = 0.0
     """Goal-sink amplitude (eq. 19); 0 switches the sink off, ``≥ 0``."""
     l_g: float = 5.0
     """Goal-sink range (eq. 19; printed as ``l_a`` in eqs. 21/23), ``> 0``."""
     m: float = 1.0
     """Mass of every agent (the paper takes unit mass), ``> 0``."""
+    alpha: float = 0.0
+    """Self-propulsion α, ``≥ 0``: with ``alpha > 0`` the dissipation is the Rayleigh
+    term ``(α − β|v_i|²) v_i`` (D'Orsogna et al. 2006), whose fixed speed is
+    ``v₀ = √(α/β)`` (:func:`dissipation`); 0 keeps the linear friction ``−β v_i``."""
 
     def __post_init__(self) -> None:
         positive = {"l_a", "l_r", "l_o", "l_g", "m"}
@@ -88,6 +93,17 @@ class SocialPotentialParams:
                 low_inclusive=f.name not in positive,
             )
             object.__setattr__(self, f.name, value)
+        if self.alpha > 0 and self.beta <= 0:
+            raise ValueError(
+                f"{type(self).__name__}.beta must be in (0, inf) when alpha > 0 "
+                f"(the Rayleigh coefficient), got {self.beta!r}"
+            )
+
+    @property
+    def cruise_speed(self) -> float:
+        """``v₀ = √(α/β)``, the speed a free self-propelled agent tends to (0 without
+        self-propulsion)."""
+        return math.sqrt(self.alpha / self.beta) if self.alpha > 0 else 0.0
 
     @classmethod
     def navigation(cls) -> SocialPotentialParams:
@@ -378,8 +394,58 @@ def pair_terms(
     return [xp.sum_product(s, c) for c in dx], total
 
 
+def dissipation(fs: list[Array], vs: list[Array], params: SocialPotentialParams) -> list[Array]:
+    """The forces ``fs`` per component with the dissipation of every agent added.
+
+    ``−β v_i`` (eq. 12, linear friction) when ``alpha = 0``; the Rayleigh term
+    ``(α − β|v_i|²) v_i`` (D'Orsogna et al., PRL 96, 104302 (2006)) when
+    ``alpha > 0``: it drives a free agent's speed to ``v₀ = √(α/β)``. ``vs`` are the
+    velocity components ``(..., N)`` (numpy arrays or torch tensors).
+
+    >>> p = SocialPotentialParams(alpha=1.0, beta=0.25)  # v₀ = 2
+    >>> [float(f) for f in dissipation([0.0, 0.0], [2.0, 0.0], p)]
+    [0.0, 0.0]
+    """
+    p = params
+    if p.alpha > 0:
+        speed2 = vs[0] * vs[0]
+        for vc in vs[1:]:
+            speed2 = speed2 + vc * vc
+        gain = p.alpha - p.beta * speed2
+        return [fc + gain * vc for fc, vc in zip(fs, vs, strict=True)]
+    if p.beta > 0:
+        return [fc - p.beta * vc for fc, vc in zip(fs, vs, strict=True)]
+    return fs
+
+
+def dissipation_rate(vs: list[Array] | None, params: SocialPotentialParams) -> Any:
+    """The largest damping rate (times the mass) of :func:`dissipation`, per swarm.
+
+    ``β`` for linear friction (a float). With self-propulsion the Jacobian
+    ``−∂/∂v_i [(α − β|v_i|²) v_i]`` has the eigenvalues ``β|v_i|² − α`` (across
+    ``v_i``) and ``3β|v_i|² − α`` (along it), so the rate is
+    ``max_i 3β|v_i|² − α``, shaped ``(...)``; negative where every agent is slower
+    than ``v₀/√3`` (the term then injects energy). ``vs``: the velocity components
+    ``(..., N)``, required when ``alpha > 0``.
+    """
+    p = params
+    if p.alpha <= 0:
+        return p.beta
+    if vs is None:
+        raise ValueError("the self-propelled dissipation rate needs the velocities")
+    xp = namespace(vs[0])
+    speed2 = vs[0] * vs[0]
+    for vc in vs[1:]:
+        speed2 = speed2 + vc * vc
+    return 3.0 * p.beta * xp.amax(speed2, axis=-1) - p.alpha
+
+
 def pair_rates(
-    geometry: PairGeometry, params: SocialPotentialParams, *, sink: bool = False
+    geometry: PairGeometry,
+    params: SocialPotentialParams,
+    *,
+    sink: bool = False,
+    v: Array | None = None,
 ) -> tuple[Array, Array]:
     """``(ω², γ)`` per swarm ``(...)``: the Gershgorin bounds of the step-size rule.
 
@@ -387,7 +453,10 @@ def pair_rates(
     the potential divided by the mass (each pair's block enters its two agents' rows),
     and ``γ = (β + 2 max_i Σ_{j≠i} w(ρ_ij))/m`` the largest damping rate of dissipation
     and alignment (:func:`rate_law`). ``sink=True`` adds the goal sink's curvature
-    ``C_g/l_g²`` (its largest, at the goal) to ``ω²``: the sink acts passively.
+    ``C_g/l_g²`` (its largest, at the goal) to ``ω²``: the sink acts passively. With
+    self-propulsion (``alpha > 0``) ``β`` is replaced by :func:`dissipation_rate` of
+    the velocities ``v`` (``(..., N, d)`` or components, required then), and ``γ`` may
+    be negative.
     """
     p = params
     rho = geometry.rho
@@ -398,11 +467,12 @@ def pair_rates(
     omega2 = (2.0 / p.m) * xp.clip(xp.amax(xp.sum(kappa, axis=-1), axis=-1) - k0, 0.0, None)
     if sink:
         omega2 = omega2 + p.C_g / (p.l_g * p.l_g * p.m)
+    rate = dissipation_rate(None if v is None else components(v), p)
     if w is None:
-        gamma = p.beta / p.m + 0.0 * omega2
+        gamma = rate / p.m + 0.0 * omega2
     else:
         rows = xp.clip(xp.amax(xp.sum(w, axis=-1), axis=-1) - p.C_o, 0.0, None)
-        gamma = (p.beta + 2.0 * rows) / p.m
+        gamma = (rate + 2.0 * rows) / p.m
     return omega2, gamma
 
 
@@ -481,8 +551,9 @@ def forces(
     − C_o ((v_i − v_j)·u_ij) e^{−ρ_ij/l_o} ] u_ij − β v_i + F_goal_i``
 
     cohesion (eq. 10, the negative gradient of eq. 9), alignment (eq. 11), dissipation
-    (eq. 12) and, when ``goal`` is given and ``C_g > 0``, the goal sink (gradient of
-    eq. 19). Positive cohesion pulls i toward j. The cohesion part equals
+    (eq. 12; with ``alpha > 0`` the Rayleigh term ``(α − β|v_i|²) v_i`` in place of
+    ``−β v_i``, :func:`dissipation`) and, when ``goal`` is given and ``C_g > 0``, the
+    goal sink (gradient of eq. 19). Positive cohesion pulls i toward j. The cohesion part equals
     ``−∇_i V`` with ``V = Σ_{i<j} U(ρ_ij)`` (tested by finite differences).
 
     Args:
@@ -506,8 +577,7 @@ def forces(
     p = params
     geo = pair_geometry(x) if geometry is None else geometry
     fs, _ = pair_terms(geo, v, p, energy=False)
-    if p.beta > 0:
-        fs = [fc - p.beta * v[..., k] for k, fc in enumerate(fs)]
+    fs = dissipation(fs, components(v), p)
     if goal is not None:
         goal = check_goal(goal, x)
         if p.C_g > 0:
@@ -555,7 +625,9 @@ def energy(
 
     With no control, ``dφ/dt = −β Σ|v_i|² − ½ Σ_{i≠j} C_o ((v_ij·u_ij))² e^{−ρ_ij/l_o} ≤ 0``
     (eq. 18, with the projected relative velocity that the printed eq. writes as
-    ``v_ij²``): φ is the Lyapunov function of the paper's section 3.
+    ``v_ij²``): φ is the Lyapunov function of the paper's section 3. With
+    self-propulsion (``alpha > 0``) the first term is ``Σ (α − β|v_i|²)|v_i|²``
+    (:func:`dissipation`), of either sign; φ keeps its definition.
 
     >>> x = np.array([[0.0, 0.0], [1.0, 0.0]]); v = np.zeros_like(x)
     >>> p = SocialPotentialParams()
