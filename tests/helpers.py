@@ -123,3 +123,67 @@ def make_config(overrides: dict) -> SwarmConfig:
     if physics:
         cfg = dataclasses.replace(cfg, physics=dataclasses.replace(cfg.physics, **physics))
     return cfg
+
+
+# ---------------------------------------------------------------- agent statuses
+def status_perturbations() -> dict:
+    """Each kind of perturbation that needs statuses in the cores, with the statuses its
+    rollouts must go through (``{kind: (Perturbations, {status, ...})}``)."""
+    from swarm_envs.envs.task.agent_status import ABSENT, FAILED, FROZEN
+    from swarm_envs.perturbations import Perturbations
+
+    return {
+        "removed": (
+            Perturbations(failed_fraction=0.4, failure_mode="removed", failure_time=[0, 4]),
+            {ABSENT},
+        ),
+        "frozen": (
+            Perturbations(failed_fraction=0.4, failure_mode="frozen", failure_time=[0, 4]),
+            {FROZEN},
+        ),
+        "passive": (
+            Perturbations(failed_fraction=0.4, failure_mode="passive", failure_time=[0, 4]),
+            {FAILED},
+        ),
+        "joining": (
+            Perturbations(absent_fraction=0.2, join_fraction=0.3, join_time=[1, 5]),
+            {ABSENT},
+        ),
+    }
+
+
+def status_rollout(core, n_agents: int, dim: int, steps: int, dtype=np.float64):
+    """Observations, step results and statistics of a seeded rollout of ``core`` (ended
+    swarms reset as the VecEnv resets them), and the statuses its agents went through."""
+    batch = core.batch
+    rng = np.random.default_rng(0)
+    core.reset(rng)
+    seen = set(np.unique(core.status).tolist())
+    out = [(core.observe(), None, core.stats())]
+    actions = np.random.default_rng(1).uniform(-1, 1, (steps, batch, n_agents, dim))
+    for a in actions.astype(dtype):
+        reward, terminated, truncated, stats = core.step(a)
+        out.append((core.observe(), (reward, terminated, truncated), stats))
+        seen |= set(np.unique(core.status).tolist())
+        core.reset(rng, which=terminated | truncated)
+        out.append((core.observe(), None, core.stats()))
+    return out, seen
+
+
+def assert_same_status_rollout(got: list, want: list, tol: dict) -> None:
+    """Two :func:`status_rollout` records agree: observations, rewards and statistics to
+    ``tol``, the episode ends exactly, every statistic of ``STAT_KEYS`` in order."""
+    from swarm_envs.envs.task import STAT_KEYS
+
+    assert len(got) == len(want)
+    for t, ((obs, step, stats), (ref_obs, ref_step, ref_stats)) in enumerate(
+        zip(got, want, strict=True)
+    ):
+        np.testing.assert_allclose(obs, ref_obs, **tol, err_msg=f"observations at {t}")
+        if step is not None:
+            np.testing.assert_allclose(step[0], ref_step[0], **tol, err_msg=f"reward at {t}")
+            np.testing.assert_array_equal(step[1], ref_step[1], err_msg=f"terminated at {t}")
+            np.testing.assert_array_equal(step[2], ref_step[2], err_msg=f"truncated at {t}")
+        assert list(stats) == list(STAT_KEYS)
+        for key in STAT_KEYS:
+            np.testing.assert_allclose(stats[key], ref_stats[key], **tol, err_msg=f"{key} at {t}")

@@ -18,6 +18,7 @@ import pickle
 
 import numpy as np
 import pytest
+from helpers import assert_same_status_rollout, status_perturbations, status_rollout
 
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs import backends
@@ -34,25 +35,7 @@ needs_native = pytest.mark.skipif(not SUPPORTED, reason=f"C step unavailable: {W
 TOLERANCE = {np.float64: dict(rtol=1e-9, atol=1e-9), np.float32: dict(rtol=2e-3, atol=2e-3)}
 BATCH, STEPS = 4, 16
 
-#: Each kind of perturbation, with the statuses its rollouts must go through.
-PERTURBATIONS = {
-    "removed": (
-        Perturbations(failed_fraction=0.4, failure_mode="removed", failure_time=[0, 4]),
-        {ABSENT},
-    ),
-    "frozen": (
-        Perturbations(failed_fraction=0.4, failure_mode="frozen", failure_time=[0, 4]),
-        {FROZEN},
-    ),
-    "passive": (
-        Perturbations(failed_fraction=0.4, failure_mode="passive", failure_time=[0, 4]),
-        {FAILED},
-    ),
-    "joining": (
-        Perturbations(absent_fraction=0.2, join_fraction=0.3, join_time=[1, 5]),
-        {ABSENT},
-    ),
-}
+PERTURBATIONS = status_perturbations()
 
 #: Swarm shapes: 2-D with more slots than some agents have present others, and 3-D with
 #: the goal sink in the physics and alignment (the sink energy over present agents).
@@ -80,22 +63,9 @@ def _config(kind: str, shape: str, observe_status: bool) -> SwarmConfig:
 
 
 def _rollout(cfg: SwarmConfig, backend: str, dtype) -> tuple[list, set[int]]:
-    """Observations, step results and statistics of a seeded rollout (ended swarms reset
-    as the VecEnv resets them), and the statuses the agents went through."""
     core = backends.make_core(dataclasses.replace(cfg, backend=backend), BATCH, dtype)
     assert core.backend == backend
-    rng = np.random.default_rng(0)
-    core.reset(rng)
-    seen = set(np.unique(core.status).tolist())
-    out = [(core.observe(), None, core.stats())]
-    actions = np.random.default_rng(1).uniform(-1, 1, (STEPS, BATCH, cfg.n_agents, cfg.dim))
-    for a in actions.astype(dtype):
-        reward, terminated, truncated, stats = core.step(a)
-        out.append((core.observe(), (reward, terminated, truncated), stats))
-        seen |= set(np.unique(core.status).tolist())
-        core.reset(rng, which=terminated | truncated)
-        out.append((core.observe(), None, core.stats()))
-    return out, seen
+    return status_rollout(core, cfg.n_agents, cfg.dim, STEPS, dtype)
 
 
 @functools.cache
@@ -104,19 +74,7 @@ def _reference(kind: str, shape: str, observe_status: bool) -> tuple[list, set[i
 
 
 def _assert_same_rollout(got: list, want: list, dtype) -> None:
-    tol = TOLERANCE[dtype]
-    assert len(got) == len(want)
-    for t, ((obs, step, stats), (ref_obs, ref_step, ref_stats)) in enumerate(
-        zip(got, want, strict=True)
-    ):
-        np.testing.assert_allclose(obs, ref_obs, **tol, err_msg=f"observations at {t}")
-        if step is not None:
-            np.testing.assert_allclose(step[0], ref_step[0], **tol, err_msg=f"reward at {t}")
-            np.testing.assert_array_equal(step[1], ref_step[1], err_msg=f"terminated at {t}")
-            np.testing.assert_array_equal(step[2], ref_step[2], err_msg=f"truncated at {t}")
-        assert list(stats) == list(STAT_KEYS)
-        for key in STAT_KEYS:
-            np.testing.assert_allclose(stats[key], ref_stats[key], **tol, err_msg=f"{key} at {t}")
+    assert_same_status_rollout(got, want, TOLERANCE[dtype])
 
 
 @needs_native

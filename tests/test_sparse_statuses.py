@@ -19,6 +19,7 @@ import functools
 
 import numpy as np
 import pytest
+from helpers import assert_same_status_rollout, status_perturbations, status_rollout
 
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs import backends, sparse_core
@@ -34,25 +35,7 @@ TINY = 1e-12  # cut-off tolerance at which no pair of a small swarm is dropped
 TOLERANCE = dict(rtol=1e-9, atol=1e-9)  # as tests/test_sparse_core.py's run_both
 BATCH, STEPS = 4, 16
 
-#: Each kind of perturbation, with the statuses its rollouts must go through.
-PERTURBATIONS = {
-    "removed": (
-        Perturbations(failed_fraction=0.4, failure_mode="removed", failure_time=[0, 4]),
-        {ABSENT},
-    ),
-    "frozen": (
-        Perturbations(failed_fraction=0.4, failure_mode="frozen", failure_time=[0, 4]),
-        {FROZEN},
-    ),
-    "passive": (
-        Perturbations(failed_fraction=0.4, failure_mode="passive", failure_time=[0, 4]),
-        {FAILED},
-    ),
-    "joining": (
-        Perturbations(absent_fraction=0.2, join_fraction=0.3, join_time=[1, 5]),
-        {ABSENT},
-    ),
-}
+PERTURBATIONS = status_perturbations()
 
 #: Swarm shapes: 2-D with more present agents than neighbour slots (the cell-list
 #: search), and 3-D with fewer (the search by brute force), the goal sink in the
@@ -81,24 +64,11 @@ def _config(kind: str, shape: str, observe_status: bool) -> SwarmConfig:
 
 
 def _rollout(cfg: SwarmConfig, backend: str) -> tuple[list, set[int]]:
-    """Observations, step results and statistics of a seeded rollout (ended swarms reset
-    as the VecEnv resets them), and the statuses the agents went through."""
     core = backends.make_core(dataclasses.replace(cfg, backend=backend), BATCH)
     assert core.backend == backend
     if backend == "sparse":
         core.inner.cutoff_tol = TINY
-    rng = np.random.default_rng(0)
-    core.reset(rng)
-    seen = set(np.unique(core.status).tolist())
-    out = [(core.observe(), None, core.stats())]
-    actions = np.random.default_rng(1).uniform(-1, 1, (STEPS, BATCH, cfg.n_agents, cfg.dim))
-    for a in actions:
-        reward, terminated, truncated, stats = core.step(a)
-        out.append((core.observe(), (reward, terminated, truncated), stats))
-        seen |= set(np.unique(core.status).tolist())
-        core.reset(rng, which=terminated | truncated)
-        out.append((core.observe(), None, core.stats()))
-    return out, seen
+    return status_rollout(core, cfg.n_agents, cfg.dim, STEPS)
 
 
 @functools.cache
@@ -115,19 +85,7 @@ ROLLOUTS = [
 
 
 def _assert_same_rollout(got: list, want: list) -> None:
-    assert len(got) == len(want)
-    for t, ((obs, step, stats), (ref_obs, ref_step, ref_stats)) in enumerate(
-        zip(got, want, strict=True)
-    ):
-        np.testing.assert_allclose(obs, ref_obs, **TOLERANCE, err_msg=f"observations at {t}")
-        if step is not None:
-            np.testing.assert_allclose(step[0], ref_step[0], **TOLERANCE, err_msg=f"reward {t}")
-            np.testing.assert_array_equal(step[1], ref_step[1], err_msg=f"terminated at {t}")
-            np.testing.assert_array_equal(step[2], ref_step[2], err_msg=f"truncated at {t}")
-        for key in STAT_KEYS:
-            np.testing.assert_allclose(
-                stats[key], ref_stats[key], **TOLERANCE, err_msg=f"{key} at {t}"
-            )
+    assert_same_status_rollout(got, want, TOLERANCE)
 
 
 @pytest.mark.parametrize(("kind", "shape", "observe_status"), ROLLOUTS)
