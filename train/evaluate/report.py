@@ -100,6 +100,37 @@ def write_json(results: Mapping[str, Any], path: Path) -> Path:
     return path
 
 
+def measure_legend(columns: Any) -> list[str]:
+    """Markdown lines naming each measure of the table ``columns`` (``(key, header,
+    spec)`` triples) and of its spreads, with its documentation."""
+    shown = {k for k, _, _ in columns} | set(STD_OF.values())
+    return [f"- `{k}`: {doc}" for k, doc in METRIC_DOCS.items() if k in shown]
+
+
+def write_sweep_outputs(
+    results: Mapping[str, Any],
+    out_dir: str | Path,
+    *,
+    stem: str,
+    write_csv: Any,
+    summary: str,
+    plot: Any | None,
+) -> dict[str, Path]:
+    """Write a sweep's ``results.json``, ``summary.md``, ``<stem>.csv`` (``write_csv``)
+    and, unless ``plot`` is None, ``<stem>.png`` into ``out_dir``; return their paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {
+        "results": write_json(results, out / "results.json"),
+        "csv": write_csv(results, out / f"{stem}.csv"),
+    }
+    paths["summary"] = out / "summary.md"
+    paths["summary"].write_text(summary, encoding="utf-8")
+    if plot is not None:
+        paths["plot"] = plot(results, out / f"{stem}.png")
+    return paths
+
+
 def _summary_markdown(results: Mapping[str, Any]) -> str:
     cfg = results["config"]
     lines = [
@@ -114,9 +145,8 @@ def _summary_markdown(results: Mapping[str, Any]) -> str:
         "",
         "Measures (means over episodes):",
         "",
+        *measure_legend(TABLE_COLUMNS),
     ]
-    shown = {k for k, _, _ in TABLE_COLUMNS} | set(STD_OF.values())
-    lines += [f"- `{k}`: {doc}" for k, doc in METRIC_DOCS.items() if k in shown]
     return "\n".join(lines) + "\n"
 
 

@@ -52,7 +52,7 @@ from swarm_envs.perturbations import Perturbations
 from train.evaluate.episodes import run_episodes
 from train.evaluate.harness import check_policies
 from train.evaluate.measures import METRIC_DOCS, summarize
-from train.evaluate.report import STD_OF, csv_cell, format_cell, write_json
+from train.evaluate.report import csv_cell, format_cell, measure_legend, write_sweep_outputs
 
 __all__ = [
     "ROBUSTNESS_COLUMNS",
@@ -386,9 +386,8 @@ def _summary_markdown(results: Mapping[str, Any]) -> str:
         "",
         "Measures (means over episodes; — where undefined):",
         "",
+        *measure_legend(ROBUSTNESS_COLUMNS),
     ]
-    shown = {k for k, _, _ in ROBUSTNESS_COLUMNS} | set(STD_OF.values())
-    lines += [f"- `{k}`: {doc}" for k, doc in METRIC_DOCS.items() if k in shown]
     return "\n".join(lines) + "\n"
 
 
@@ -397,16 +396,13 @@ def write_robustness_outputs(
 ) -> dict[str, Path]:
     """Write ``results.json``, ``summary.md``, ``robustness.csv`` and (``plots``)
     ``robustness.png`` into ``out_dir``; return their paths."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = {
-        "results": write_json(results, out / "results.json"),
-        "csv": write_robustness_csv(results, out / "robustness.csv"),
-    }
-    paths["summary"] = out / "summary.md"
-    paths["summary"].write_text(_summary_markdown(results), encoding="utf-8")
-    if plots:
-        from train.evaluate.figures import plot_robustness
+    from train.evaluate.figures import plot_robustness
 
-        paths["plot"] = plot_robustness(results, out / "robustness.png")
-    return paths
+    return write_sweep_outputs(
+        results,
+        out_dir,
+        stem="robustness",
+        write_csv=write_robustness_csv,
+        summary=_summary_markdown(results),
+        plot=plot_robustness if plots else None,
+    )

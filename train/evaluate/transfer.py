@@ -37,7 +37,7 @@ from train.evaluate.episodes import run_episodes
 from train.evaluate.harness import check_policies
 from train.evaluate.measures import METRIC_DOCS, summarize
 from train.evaluate.policies import SpaceMismatchError, describe_trained_env, policy_mode
-from train.evaluate.report import STD_OF, csv_cell, format_cell, write_json
+from train.evaluate.report import csv_cell, format_cell, measure_legend, write_sweep_outputs
 
 __all__ = [
     "TRANSFER_COLUMNS",
@@ -304,9 +304,8 @@ def _summary_markdown(results: Mapping[str, Any]) -> str:
         "",
         "Measures (means over episodes; — where undefined):",
         "",
+        *measure_legend(TRANSFER_COLUMNS),
     ]
-    shown = {k for k, _, _ in TRANSFER_COLUMNS} | set(STD_OF.values())
-    lines += [f"- `{k}`: {doc}" for k, doc in METRIC_DOCS.items() if k in shown]
     return "\n".join(lines) + "\n"
 
 
@@ -315,16 +314,13 @@ def write_transfer_outputs(
 ) -> dict[str, Path]:
     """Write ``results.json``, ``summary.md``, ``transfer.csv`` and (``plots``)
     ``transfer.png`` into ``out_dir``; return their paths."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = {
-        "results": write_json(results, out / "results.json"),
-        "csv": write_transfer_csv(results, out / "transfer.csv"),
-    }
-    paths["summary"] = out / "summary.md"
-    paths["summary"].write_text(_summary_markdown(results), encoding="utf-8")
-    if plots:
-        from train.evaluate.figures import plot_transfer
+    from train.evaluate.figures import plot_transfer
 
-        paths["plot"] = plot_transfer(results, out / "transfer.png")
-    return paths
+    return write_sweep_outputs(
+        results,
+        out_dir,
+        stem="transfer",
+        write_csv=write_transfer_csv,
+        summary=_summary_markdown(results),
+        plot=plot_transfer if plots else None,
+    )
