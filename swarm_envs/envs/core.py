@@ -51,7 +51,7 @@ from swarm_envs.envs.task import (
     statistics,
     success_count,
 )
-from swarm_envs.envs.task.agent_status import masks
+from swarm_envs.envs.task.agent_status import keep_measured, masks, status_update
 from swarm_envs.physics import PairGeometry, pair_geometry
 from swarm_envs.physics.social_potential import present_geometry
 
@@ -221,13 +221,11 @@ class SwarmNavCore:
         again, and their previous statistics become these (``start=True``: their
         episode's start too), so that the next reward compares like with like.
         """
-        old = self.status
-        changed = np.ones(self.batch, dtype=bool) if old is None else (old != status).any(-1)
-        rows = changed if rows is None else changed | rows
+        shape = (self.batch, self.cfg.n_agents, self.cfg.dim)
+        status, place, rows = status_update(self.status, status, place, at, rows, shape)
         if place is not None:
-            rows |= place.any(axis=-1)
             self.x = np.where(place[..., None], at, self.x).astype(self.dtype, copy=False)
-        self.status = np.array(status, dtype=np.int8)
+        self.status = status
         mask = masks(self.status)
         self.v = np.where(mask.mobile[..., None], self.v, 0.0).astype(self.dtype, copy=False)
         if place is not None:
@@ -243,11 +241,7 @@ class SwarmNavCore:
         before = self._stats
         with np.errstate(over="ignore", invalid="ignore"):
             self._measure(substeps=before["substeps"])
-        for key, value in self._stats.items():
-            value[~rows] = before[key][~rows]  # the others keep theirs (an `unstable` flag)
-            self._prev[key][idx] = value[idx]
-            if start:
-                self._start[key][idx] = value[idx]
+        keep_measured(self._stats, before, self._prev, self._start, rows, start)
 
     def _pair_measures(self) -> tuple[np.ndarray | None, np.ndarray, np.ndarray, np.ndarray]:
         """``(ranked neighbours (B, N, k') or None, nearest distance (B, N), close

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from swarm_envs.envs.task.agent_status import ABSENT, masks
+from swarm_envs.envs.task.agent_status import keep_measured, masks, status_update
 
 __all__ = ["SparseStatuses"]
 
@@ -97,23 +97,9 @@ class SparseStatuses:
                 ``place``/``at`` of the wrong shape.
         """
         cfg = self.cfg
-        B, N, d = self.batch, cfg.n_agents, cfg.dim
-        status = np.array(status, dtype=np.int8)
-        if status.shape != (B, N) or status.min() < 0 or status.max() > ABSENT:
-            raise ValueError(
-                f"status must be ({B}, {N}) with values 0 to {ABSENT}, got shape {status.shape}"
-            )
-        old = self.status
-        changed = np.ones(B, dtype=bool) if old is None else (old != status).any(-1)
-        rows = changed if rows is None else changed | np.asarray(rows, dtype=bool)
+        shape = (self.batch, cfg.n_agents, cfg.dim)
+        status, place, rows = status_update(self.status, status, place, at, rows, shape)
         if place is not None:
-            place = np.asarray(place, dtype=bool)
-            if place.shape != (B, N) or at is None or np.shape(at) != (B, N, d):
-                raise ValueError(
-                    f"place must be ({B}, {N}) bool with at ({B}, {N}, {d}), got "
-                    f"{place.shape} and {None if at is None else np.shape(at)}"
-                )
-            rows = rows | place.any(axis=-1)
             self.x = np.where(place[..., None], at, self.x).astype(self.dtype, copy=False)
         self.status = status
         mask = masks(status)
@@ -137,8 +123,4 @@ class SparseStatuses:
         before = self._stats
         with np.errstate(over="ignore", invalid="ignore"):
             self._measure(substeps=before["substeps"])
-        for key, value in self._stats.items():
-            value[~rows] = before[key][~rows]  # the others keep theirs (an `unstable` flag)
-            self._prev[key][idx] = value[idx]
-            if start:
-                self._start[key][idx] = value[idx]
+        keep_measured(self._stats, before, self._prev, self._start, rows, start)

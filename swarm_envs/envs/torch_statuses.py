@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from swarm_envs.envs.task.agent_status import ABSENT, masks
+from swarm_envs.envs.task.agent_status import masks, status_update
 
 __all__ = ["StatusControl", "needs_statuses"]
 
@@ -91,24 +91,10 @@ class StatusControl:
                 "set_status needs a config with agent statuses (perturbations that remove, "
                 "freeze or add agents, or observe_status); this core's config has none"
             )
-        B, N, d = self.batch, self.cfg.n_agents, self.cfg.dim
-        status = np.array(status, dtype=np.int8)
-        if status.shape != (B, N) or status.min() < 0 or status.max() > ABSENT:
-            raise ValueError(
-                f"status must be ({B}, {N}) with values 0 to {ABSENT}, got shape {status.shape}"
-            )
-        old = self.status
-        changed = np.ones(B, dtype=bool) if old is None else (old != status).any(-1)
-        rows = changed if rows is None else changed | np.asarray(rows, dtype=bool)
+        shape = (self.batch, self.cfg.n_agents, self.cfg.dim)
+        status, place, rows = status_update(self.status, status, place, at, rows, shape)
         still = ~masks(status).mobile  # at rest: those that no longer move, and placed ones
         if place is not None:
-            place = np.asarray(place, dtype=bool)
-            if place.shape != (B, N) or at is None or np.shape(at) != (B, N, d):
-                raise ValueError(
-                    f"place must be ({B}, {N}) bool with at ({B}, {N}, {d}), got "
-                    f"{place.shape} and {None if at is None else np.shape(at)}"
-                )
-            rows = rows | place.any(axis=-1)
             still = still | place
             where = torch.as_tensor(place, device=self.device)
             at_t = torch.from_numpy(np.ascontiguousarray(at, dtype=self.dtype)).to(self.device)

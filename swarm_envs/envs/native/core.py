@@ -57,7 +57,7 @@ from swarm_envs.envs.task import (
     observation_size,
     reward,
 )
-from swarm_envs.envs.task.agent_status import masks
+from swarm_envs.envs.task.agent_status import keep_measured, masks, status_update
 
 __all__ = ["UNAVAILABLE", "NativeSwarmNavCore"]
 
@@ -321,16 +321,11 @@ class NativeSwarmNavCore:
         applies the statuses' masks: pairs with an agent not present, updates of agents
         that do not move, statistics over the members, the observed status flags.
         """
-        B, N = self.batch, self.cfg.n_agents
-        status = np.ascontiguousarray(status, dtype=np.int8)
-        if status.shape != (B, N):
-            raise ValueError(f"status must have shape {(B, N)}, got {status.shape}")
+        B = self.batch
         old = self._status
-        changed = np.ones(B, dtype=bool) if old is None else (old != status).any(-1)
-        rows = changed if rows is None else changed | np.asarray(rows, dtype=bool)
+        shape = (B, self.cfg.n_agents, self.cfg.dim)
+        status, place, rows = status_update(old, status, place, at, rows, shape)
         if place is not None:
-            place = np.asarray(place, dtype=bool)
-            rows = rows | place.any(axis=-1)
             self._x[:, place] = np.asarray(at, dtype=self.dtype)[place].T
             self._v[:, place] = 0.0
         if old is None:
@@ -346,11 +341,7 @@ class NativeSwarmNavCore:
         self._measure(None if idx.size == B else idx.astype(np.int64))
         self._packed[idx, _SUBSTEPS] = substeps[idx]
         self._stats["substeps"][idx] = substeps[idx]
-        for key, value in self._stats.items():
-            value[~rows] = before[key][~rows]  # the others keep theirs (an `unstable` flag)
-            self._prev[key][idx] = value[idx]
-            if start:
-                self._start[key][idx] = value[idx]
+        keep_measured(self._stats, before, self._prev, self._start, rows, start)
 
     # ------------------------------------------------------------------ step
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:

@@ -175,3 +175,67 @@ def perturb_observations(
             slots[..., : 2 * dim] += np.where(real, slot_noise[..., : 2 * dim], 0.0)
         np.clip(out, -bound, bound, out=out)
     return out
+
+
+class StatusUpdate(NamedTuple):
+    """A checked ``set_status`` call: the statuses ``(B, N)`` int8, the agents to place
+    ``(B, N)`` bool (or ``None``) and the swarms to measure again ``(B,)`` bool."""
+
+    status: np.ndarray
+    place: np.ndarray | None
+    rows: np.ndarray
+
+
+def status_update(
+    old: np.ndarray | None,
+    status: Any,
+    place: Any,
+    at: Any,
+    rows: Any,
+    shape: tuple[int, int, int],
+) -> StatusUpdate:
+    """The part of ``set_status`` every core shares (``protocol.StatusCore``): check the
+    arguments against ``shape`` ``(B, N, d)`` and find the swarms whose statuses or places
+    change, or that ``rows`` names (all of them when there were no statuses before).
+
+    Raises:
+        ValueError: ``status`` not ``(B, N)`` with values 0 to ``ABSENT``, or
+            ``place``/``at`` not ``(B, N)`` bool and ``(B, N, d)``.
+    """
+    B, N, d = shape
+    status = np.array(status, dtype=np.int8)
+    if status.shape != (B, N) or status.min() < 0 or status.max() > ABSENT:
+        raise ValueError(
+            f"status must be ({B}, {N}) with values 0 to {ABSENT}, got shape {status.shape}"
+        )
+    changed = np.ones(B, dtype=bool) if old is None else (old != status).any(-1)
+    remeasure = changed if rows is None else changed | np.asarray(rows, dtype=bool)
+    if place is not None:
+        place = np.asarray(place, dtype=bool)
+        if place.shape != (B, N) or at is None or np.shape(at) != (B, N, d):
+            raise ValueError(
+                f"place must be ({B}, {N}) bool with at ({B}, {N}, {d}), got "
+                f"{place.shape} and {None if at is None else np.shape(at)}"
+            )
+        remeasure = remeasure | place.any(axis=-1)
+    return StatusUpdate(status, place, remeasure)
+
+
+def keep_measured(
+    stats: dict[str, np.ndarray],
+    before: dict[str, np.ndarray],
+    prev: dict[str, np.ndarray],
+    start_stats: dict[str, np.ndarray],
+    rows: np.ndarray,
+    start: bool,
+) -> None:
+    """After a core measured its swarms again for new statuses: the swarms not in
+    ``rows`` keep their statistics of ``before`` (an undone step's ``unstable`` flag
+    included), and those in ``rows`` take the new ones as their previous statistics
+    (``start=True``: as their episode's start too), in place."""
+    idx = np.flatnonzero(rows)
+    for key, value in stats.items():
+        value[~rows] = before[key][~rows]
+        prev[key][idx] = value[idx]
+        if start:
+            start_stats[key][idx] = value[idx]
