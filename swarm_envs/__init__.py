@@ -1,8 +1,11 @@
 """swarm_envs: Gymnasium and PettingZoo environments for learned swarm control.
 
-``import swarm_envs`` registers ``swarm_envs/SwarmNav-v0`` with Gymnasium: ``gym.make``
-builds :class:`~swarm_envs.envs.swarm_nav.SwarmNavEnv`, ``gym.make_vec`` the batched
-:class:`~swarm_envs.envs.gym_vector.SwarmNavVectorEnv` (its ``vector_entry_point``). The
+``import swarm_envs`` registers ``swarm_envs/SwarmNav-v0``, ``swarm_envs/SwarmInformed-v0``
+and ``swarm_envs/SwarmMill-v0`` (one per task, :data:`TASK_IDS`) with Gymnasium:
+``gym.make`` builds :class:`~swarm_envs.envs.swarm_nav.SwarmNavEnv` with that ``task``,
+``gym.make_vec`` the batched :class:`~swarm_envs.envs.gym_vector.SwarmNavVectorEnv`
+(its ``vector_entry_point``); the PettingZoo modules are ``swarm_nav_v0``,
+``swarm_informed_v0`` and ``swarm_mill_v0``. The
 episode length is the config's ``max_steps`` alone: the env truncates itself there, and
 no ``max_episode_steps`` (``TimeLimit``) is registered. The import also makes the envs'
 OpenMP users safe in processes forked afterwards (:mod:`swarm_envs._runtime.fork`).
@@ -18,24 +21,36 @@ from gymnasium.envs.registration import register, registry
 
 from swarm_envs._runtime.allocator import tune_allocator
 from swarm_envs._runtime.fork import install_fork_handlers
+from swarm_envs.tasks import TASK_IDS
 
 __version__ = "0.1.0"
 
-ENV_ID = "swarm_envs/SwarmNav-v0"
+ENV_ID = TASK_IDS["navigation"]
 
-if ENV_ID not in registry:
-    register(
-        id=ENV_ID,
-        entry_point="swarm_envs.envs.swarm_nav:SwarmNavEnv",
-        vector_entry_point="swarm_envs.envs.gym_vector:SwarmNavVectorEnv",
-    )
+for _task, _env_id in TASK_IDS.items():
+    if _env_id not in registry:
+        register(
+            id=_env_id,
+            entry_point="swarm_envs.envs.swarm_nav:SwarmNavEnv",
+            vector_entry_point="swarm_envs.envs.gym_vector:SwarmNavVectorEnv",
+            kwargs={} if _task == "navigation" else {"task": _task},
+        )
 
 install_fork_handlers()
 
 if os.environ.get("SWARM_ENVS_TUNE_ALLOCATOR", "").strip() == "1":
     tune_allocator()
 
-from swarm_envs import swarm_nav_v0  # noqa: E402
+from swarm_envs import swarm_informed_v0, swarm_mill_v0, swarm_nav_v0  # noqa: E402
 from swarm_envs.envs.common import SwarmUnstableError  # noqa: E402
 
-__all__ = ["ENV_ID", "SwarmUnstableError", "__version__", "swarm_nav_v0", "tune_allocator"]
+__all__ = [
+    "ENV_ID",
+    "TASK_IDS",
+    "SwarmUnstableError",
+    "__version__",
+    "swarm_informed_v0",
+    "swarm_mill_v0",
+    "swarm_nav_v0",
+    "tune_allocator",
+]

@@ -29,7 +29,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from swarm_envs.perturbations import Perturbations
+from swarm_envs.perturbations import Perturbations, check_ranged
 from swarm_envs.physics import (
     INTEGRATORS,
     LagrangianParams,
@@ -38,6 +38,7 @@ from swarm_envs.physics import (
     ZoneParams,
 )
 from swarm_envs.physics._validation import SUPPORTED_DIMS, check_real
+from swarm_envs.tasks import TASKS, with_task_defaults
 
 T = TypeVar("T")
 
@@ -108,6 +109,10 @@ class RewardWeights:
     """Penalty on the mean squared action (action units, in [0, d])."""
     time: float = 0.05
     """Penalty per step, so that arriving earlier pays."""
+    mill: float = 0.0
+    """Scale of the mill's order, paid every step: the members' tangential speed about
+    the goal (those within the arrival radius counted) over the cruise speed ``v₀``, at
+    most 1 (``info["mill_order"]``; needs self-propulsion, ``physics.alpha > 0``)."""
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -209,6 +214,19 @@ class SwarmConfig:
     """If true each neighbour slot of an observation ends with a flag: 1 when that
     neighbour is active, 0 when it has failed (and the central Gymnasium env appends
     every agent's flag); see ``perturbations``."""
+    task: str = "navigation"
+    """What the swarm must do, one of :data:`~swarm_envs.tasks.TASKS`: ``"navigation"``
+    (gather at the goal), ``"informed"`` (the same, with only ``informed_fraction`` of
+    the agents observing the goal) or ``"mill"`` (reach the goal and circle it, on the
+    self-propelled social potential). Each has its registered id, and defaults that the
+    envs and :func:`load_swarm_config` apply beneath the given values
+    (:mod:`swarm_envs.tasks`)."""
+    informed_fraction: float | tuple[float, float] = 1.0
+    """Fraction of each swarm's agents that observe the goal (``task="informed"``), in
+    ``(0, 1]``, or a ``[low, high]`` range drawn per episode; ``⌊f·N⌋`` agents, at least
+    one, drawn per episode. Must stay 1 for the other tasks. (The zone model's own
+    ``zone.informed_fraction`` is another thing: the agents its passive physics steers
+    to the goal with ``goal_in_physics``.)"""
     reward: RewardWeights = field(default_factory=RewardWeights)
     """Reward weights."""
     perturbations: Perturbations = field(default_factory=Perturbations)
@@ -267,6 +285,7 @@ class SwarmConfig:
             raise ValueError(f"{owner}.observe_status must be true or false")
         if not isinstance(self.perturbations, Perturbations):
             raise ValueError(f"{owner}.perturbations must be Perturbations")
+        self._check_task(owner)
         if self.perturbations.needs_masks and self.dynamics != "social_potential":
             raise ValueError(
                 f"{owner}.perturbations: removed, frozen, absent and joining agents need "
@@ -332,6 +351,44 @@ class SwarmConfig:
                     f"this radius with non-overlapping bins (lagrangian.r), got "
                     f"{self.init_radius!r}"
                 )
+
+    def _check_task(self, owner: str) -> None:
+        """The task and what it needs (:mod:`swarm_envs.tasks`)."""
+        if self.task not in TASKS:
+            raise ValueError(f"{owner}.task must be one of {TASKS}, got {self.task!r}")
+        fraction = check_ranged(
+            owner,
+            "informed_fraction",
+            self.informed_fraction,
+            integer=False,
+            low=0.0,
+            high=1.0,
+            low_inclusive=False,
+        )
+        object.__setattr__(self, "informed_fraction", fraction)
+        if self.task != "informed" and fraction != 1.0:
+            raise ValueError(
+                f"{owner}.informed_fraction applies to task='informed' "
+                f"(swarm_envs/SwarmInformed-v0) and must be 1 for task={self.task!r}, got "
+                f"{fraction!r}"
+            )
+        if self.reward.mill > 0 and self.physics.alpha <= 0:
+            raise ValueError(
+                f"{owner}.reward.mill rewards circling at the cruise speed of "
+                f"self-propulsion: it needs physics.alpha > 0, got {self.physics.alpha!r}"
+            )
+        if self.task == "mill":
+            if self.dynamics != "social_potential" or self.physics.alpha <= 0:
+                raise ValueError(
+                    f"{owner}.task='mill' runs on the self-propelled social potential: it "
+                    f"needs dynamics='social_potential' and physics.alpha > 0, got "
+                    f"dynamics={self.dynamics!r}, physics.alpha={self.physics.alpha!r}"
+                )
+
+    @property
+    def informs_agents(self) -> bool:
+        """Whether the observation says who is informed (``task="informed"``)."""
+        return self.task == "informed"
 
     @property
     def start_radius(self) -> float:
@@ -512,7 +569,8 @@ def load_swarm_config(
     """Load a :class:`SwarmConfig` from YAML, then apply keyword ``overrides`` strictly.
 
     Overrides replace top-level keys; a nested section given as a mapping is merged
-    into the file's section (``physics={"C_o": 0.7}`` changes only ``C_o``).
+    into the file's section (``physics={"C_o": 0.7}`` changes only ``C_o``). Both lie
+    over the defaults of the resulting ``task`` (:mod:`swarm_envs.tasks`).
     """
     data: dict[str, Any] = load_yaml(resolve_config_path(path)) if path is not None else {}
     for key, value in (overrides or {}).items():
@@ -520,7 +578,7 @@ def load_swarm_config(
             data[key] = {**data[key], **value}
         else:
             data[key] = value
-    return config_from_mapping(SwarmConfig, data)
+    return config_from_mapping(SwarmConfig, with_task_defaults(data))
 
 
 def as_dict(obj: Any) -> Any:

@@ -14,6 +14,11 @@ Statistics (``r_ic = r_i − r_c``, ``â = a / |a|``):
 - :func:`angular_momentum` — ``|Σ r̂_ic × v̂_i| / N ∈ [0, 1]``, unit headings (Couzin).
 - :func:`velocity_angular_momentum` — ``|Σ r̂_ic × v_i| / N`` (Mabrouk & McInnes eq. 3).
 - :func:`raw_angular_momentum` — ``|Σ r_ic × v_i| / N`` (Naterop eq. 10 and table 3).
+- :func:`goal_angular_momentum` — ``|Σ_i (r_i − r_g) × v_i| / N``, the true angular
+  momentum per agent (unit masses) about the goal ``r_g`` (a mill at the goal).
+- :func:`tangential_speed` — ``|Σ_i r̂_ig × v_i| / N``, the mean tangential velocity
+  about the goal (``r̂_ig`` the unit vector from the goal), optionally of the agents
+  within a radius of it only.
 - :func:`spherical_variance` — ``1 − polarization``, unit headings (Mabrouk & McInnes eq. 4).
 - :func:`nearest_neighbor_distance` — ``(1/N) Σ_i min_{j≠i} |r_i − r_j|`` (eq. 5).
 - :func:`expanse` — ``(1/N) Σ_i |r_i − r_c|`` (eq. 6 as the text defines it; Naterop eq. 11).
@@ -69,11 +74,13 @@ __all__ = [
     "expanse",
     "first_passage_time",
     "fraction_within",
+    "goal_angular_momentum",
     "nearest_neighbor_distance",
     "packing_density",
     "polarization",
     "raw_angular_momentum",
     "spherical_variance",
+    "tangential_speed",
     "total_energy",
     "velocity_angular_momentum",
     "velocity_polarization",
@@ -366,6 +373,95 @@ def raw_angular_momentum(x: ArrayLike, v: ArrayLike) -> np.ndarray:
     n = x.shape[-2]
     value = _cross_sum_norm(_relative(x, xp), v, xp) / n
     return _result(value, _common(x, v))
+
+
+def _about_goal(x: Any, v: Any, goal: Any) -> tuple[Any, Any, ArrayNamespace]:
+    """``(r_i − r_g (..., N, d), v, xp)`` for a goal broadcastable to ``(..., d)``."""
+    x, v = _as_pair(x, v)
+    xp = namespace(x, v)
+    if not _is_tensor(goal):
+        goal = np.asarray(goal, dtype=_common(x, v).dtype)
+    if goal.shape[-1:] != x.shape[-1:]:
+        raise ValueError(f"goal must have shape (..., {x.shape[-1]}), got {tuple(goal.shape)}")
+    return x - goal[..., None, :], v, xp
+
+
+def goal_angular_momentum(
+    x: ArrayLike, v: ArrayLike, goal: ArrayLike, members: ArrayLike | None = None
+) -> np.ndarray:
+    """True angular momentum per agent about the goal, ``|Σ_i (r_i − r_g) × v_i| / N``.
+
+    Unit masses. Unlike the unit-heading :func:`angular_momentum` it vanishes for a
+    swarm at rest, whatever its residual spin, and grows with the mill's radius and
+    speed: a ring of radius ``R`` about ``r_g`` circling at speed ``s`` gives ``R s``.
+    Cross product as in :func:`angular_momentum` (absolute value in 2-D, norm in 3-D).
+
+    Args:
+        x: positions ``(..., N, d)``.
+        v: velocities, same shape.
+        goal: the goal ``r_g``, broadcastable to ``(..., d)``.
+        members: optional bool ``(..., N)``: these agents only (divided by their count).
+
+    >>> theta = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+    >>> ring = np.stack([np.cos(theta), np.sin(theta)], axis=-1)
+    >>> tangent = np.stack([-np.sin(theta), np.cos(theta)], axis=-1)
+    >>> round(float(goal_angular_momentum(2 * ring + 5.0, 0.3 * tangent, [5.0, 5.0])), 12)
+    0.6
+    """
+    r, v, xp = _about_goal(x, v, goal)
+    if members is None:
+        value = _cross_sum_norm(r, v, xp) / x.shape[-2]
+    else:
+        w, count = _weights(members, r, xp)
+        value = _cross_sum_norm(r * w[..., None], v, xp) / count
+    return _result(value, _common(r, v))
+
+
+def tangential_speed(
+    x: ArrayLike,
+    v: ArrayLike,
+    goal: ArrayLike,
+    radius: float | None = None,
+    members: ArrayLike | None = None,
+) -> np.ndarray:
+    """Mean tangential velocity about the goal, ``|Σ_i r̂_ig × v_i| / N``.
+
+    ``r̂_ig`` is the unit vector from the goal to agent i (an agent on the goal
+    contributes 0). It is the speed at which the swarm circles the goal, in the units
+    of ``v``: ``s`` for a ring circling at speed ``s`` whatever its radius, 0 for a swarm
+    that moves radially or translates past the goal, and it stays 0 for a swarm at rest.
+    With ``radius``, only the agents within that distance of the goal contribute (the
+    others count as 0 in the mean), so that a mill far from the goal does not count.
+
+    Args:
+        x: positions ``(..., N, d)``.
+        v: velocities, same shape.
+        goal: the goal ``r_g``, broadcastable to ``(..., d)``.
+        radius: optional distance ``≥ 0`` from the goal.
+        members: optional bool ``(..., N)``: these agents only (divided by their count).
+
+    >>> theta = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+    >>> ring = np.stack([np.cos(theta), np.sin(theta)], axis=-1)
+    >>> tangent = np.stack([-np.sin(theta), np.cos(theta)], axis=-1)
+    >>> round(float(tangential_speed(2 * ring, 0.3 * tangent, [0.0, 0.0])), 12)
+    0.3
+    >>> float(tangential_speed(2 * ring, 0.3 * tangent, [0.0, 0.0], radius=1.0))
+    0.0
+    """
+    r, v, xp = _about_goal(x, v, goal)
+    dist = _norm(r, xp)
+    keep = dist > 0
+    if radius is not None:
+        if not radius >= 0:
+            raise ValueError(f"tangential_speed: radius must be >= 0, got {radius!r}")
+        keep = keep & (dist <= radius)
+    unit = _unit(r, dist, keep, xp)
+    if members is None:
+        value = _cross_sum_norm(unit, v, xp) / x.shape[-2]
+    else:
+        w, count = _weights(members, unit, xp)
+        value = _cross_sum_norm(unit * w[..., None], v, xp) / count
+    return _result(value, _common(r, v))
 
 
 def nearest_neighbor_distance(x: ArrayLike) -> np.ndarray:

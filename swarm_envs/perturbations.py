@@ -34,14 +34,14 @@ FAILURE_MODES = ("passive", "removed", "frozen")
 Ranged = float | tuple[float, float]
 
 
-def _ranged(owner: str, name: str, value: Any, *, integer: bool, **bounds: Any) -> Any:
+def check_ranged(owner: str, name: str, value: Any, *, integer: bool, **bounds: Any) -> Any:
     """``value`` checked as a number in ``bounds``, or a ``[low, high]`` pair of them."""
     if isinstance(value, Sequence) and not isinstance(value, (str, bytes)):
         if len(value) != 2:
             raise ValueError(
                 f"{owner}.{name} must be a number or a range [low, high], got {list(value)!r}"
             )
-        low, high = (_ranged(owner, name, item, integer=integer, **bounds) for item in value)
+        low, high = (check_ranged(owner, name, item, integer=integer, **bounds) for item in value)
         if high < low:
             raise ValueError(f"{owner}.{name} range [low, high] needs low <= high, got {value!r}")
         return (low, high)
@@ -98,7 +98,7 @@ class Perturbations:
         owner = type(self).__name__
         fractions = ("failed_fraction", "absent_fraction", "join_fraction", "neighbor_dropout")
         for name in fractions:
-            value = _ranged(
+            value = check_ranged(
                 owner,
                 name,
                 getattr(self, name),
@@ -109,10 +109,10 @@ class Perturbations:
             )
             object.__setattr__(self, name, value)
         for name in ("obs_noise", "action_noise"):
-            value = _ranged(owner, name, getattr(self, name), integer=False, low=0.0)
+            value = check_ranged(owner, name, getattr(self, name), integer=False, low=0.0)
             object.__setattr__(self, name, value)
-        failure_time = _ranged(owner, "failure_time", self.failure_time, integer=True, low=0)
-        join_time = _ranged(owner, "join_time", self.join_time, integer=True, low=1)
+        failure_time = check_ranged(owner, "failure_time", self.failure_time, integer=True, low=0)
+        join_time = check_ranged(owner, "join_time", self.join_time, integer=True, low=1)
         object.__setattr__(self, "failure_time", failure_time)
         object.__setattr__(self, "join_time", join_time)
         if self.failure_mode not in FAILURE_MODES:

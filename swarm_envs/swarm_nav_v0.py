@@ -71,4 +71,16 @@ def vec_env(n_swarms: int = 1, **kwargs: Any):
     return SwarmNavVecEnv(n_swarms, **kwargs)
 
 
-__all__ = ["env", "parallel_env", "raw_env", "vec_env"]
+def for_task(task: str, module: str, kwargs: dict[str, Any]) -> dict[str, Any]:
+    """``kwargs`` with ``task`` set, for the module of that task (a PettingZoo module
+    such as ``swarm_informed_v0``); another ``task`` given raises :class:`ValueError`."""
+    given = kwargs.get("task", task)
+    if given != task:
+        raise ValueError(
+            f"{module} runs task={task!r}, got task={given!r}; each task has its module "
+            "(swarm_nav_v0, swarm_informed_v0, swarm_mill_v0)"
+        )
+    return {**kwargs, "task": task}
+
+
+__all__ = ["env", "for_task", "parallel_env", "raw_env", "vec_env"]

@@ -105,7 +105,7 @@ def unsupported(cfg: SwarmConfig, backend: str) -> str | None:
 def _auto(cfg: SwarmConfig, batch: int) -> tuple[str, str | None]:
     """``auto``'s pick and, if the C step would have been picked but cannot run, why."""
     pick, why = _auto_by_speed(cfg, batch)
-    if _needs_statuses(cfg) and unsupported(cfg, pick) is not None:
+    if (_needs_statuses(cfg) or cfg.informs_agents) and unsupported(cfg, pick) is not None:
         for name in ("native", "numpy", "torch"):
             if unsupported(cfg, name) is None:
                 return name, None

@@ -52,6 +52,8 @@ from swarm_envs.envs.task import (
     success_count,
 )
 from swarm_envs.envs.task.agent_status import keep_measured, masks, status_update
+from swarm_envs.envs.task.episode import episode_end
+from swarm_envs.envs.task.informed import draw_informed
 from swarm_envs.physics import PairGeometry, pair_geometry
 from swarm_envs.physics.social_potential import present_geometry
 
@@ -106,6 +108,10 @@ class SwarmNavCore:
         #: ``None`` while every agent is active and always will be.
         self.status: np.ndarray | None = None
         self._members: np.ndarray | None = None
+        #: Which agents observe the goal ``(B, N)`` bool (``task="informed"``), else None.
+        self.informed: np.ndarray | None = (
+            np.ones((B, N), dtype=bool) if cfg.informs_agents else None
+        )
 
     def _empty_stats(self) -> dict[str, np.ndarray]:
         return {key: np.zeros(self.batch, dt) for key, dt in self._wide.items()}
@@ -121,6 +127,8 @@ class SwarmNavCore:
         if idx.size == 0:
             return
         self.x[idx], self.v[idx], self.goal[idx] = draw_starts(self.cfg, rng, idx.size)
+        if self.informed is not None:
+            self.informed[idx] = draw_informed(self.cfg, rng, idx.size)
         self.t[idx] = 0
         substeps = self._stats["substeps"].copy()
         substeps[idx] = 0.0  # no step yet; the other swarms keep their last step's
@@ -161,11 +169,10 @@ class SwarmNavCore:
         inputs = RewardInputs(stats, self._prev, self._start, effort, cfg.n_agents, NUMPY)
         r = np.asarray(reward(cfg.reward, inputs), dtype=np.float64)
         self._prev = {key: value.copy() for key, value in stats.items()}
-        success = stats["success"].astype(bool)
-        truncated = (self.t >= cfg.max_steps) & ~success
+        terminated, truncated = episode_end(self.cfg, stats["success"], self.t)
         if bad.any():
-            r[bad], success[bad], truncated[bad] = 0.0, False, True
-        return r, success, truncated, self.stats()
+            r[bad], terminated[bad], truncated[bad] = 0.0, False, True
+        return r, terminated, truncated, self.stats()
 
     def _unstable(self, bad: np.ndarray, before: tuple[np.ndarray, np.ndarray]) -> None:
         """Put the swarms ``bad`` back to their state before the step; then raise
@@ -298,13 +305,16 @@ class SwarmNavCore:
         ``(B,)``): those swarms' observations only, ``(n, N, obs_dim)``. Every call
         returns a new array.
         """
-        status = self.status
+        status, told = self.status, self.informed
         if which is None:
-            return observation(self.x, self.v, self.goal, self._near, self.cfg, NUMPY, status)
+            return observation(self.x, self.v, self.goal, self._near, self.cfg, NUMPY, status, told)
         idx = np.flatnonzero(which)
         near = None if self._near is None else self._near[idx]
         status = None if status is None else status[idx]
-        return observation(self.x[idx], self.v[idx], self.goal[idx], near, self.cfg, NUMPY, status)
+        told = None if told is None else told[idx]
+        return observation(
+            self.x[idx], self.v[idx], self.goal[idx], near, self.cfg, NUMPY, status, told
+        )
 
 
 def _rank_neighbors(rho: np.ndarray, k: int) -> np.ndarray:

@@ -34,7 +34,7 @@ from swarm_envs.envs.task.agent_status import (
     perturb_actions,
     perturb_observations,
 )
-from swarm_envs.envs.task.observation import OBS_BOUND, block_size
+from swarm_envs.envs.task.observation import OBS_BOUND, block_size, own_size
 
 
 class PerturbedCore:
@@ -140,6 +140,7 @@ class PerturbedCore:
             dropout=s.neighbor_dropout[idx],
             rng=self._rng,
             bound=OBS_BOUND,
+            own=own_size(self.cfg),
         )
 
     def observe(self, which: np.ndarray | None = None) -> np.ndarray:

@@ -68,6 +68,7 @@ from swarm_envs.envs.common import (
     wide_dtypes,
 )
 from swarm_envs.envs.task import STAT_KEYS, observation_size
+from swarm_envs.envs.task.episode import episode_end
 from swarm_envs.envs.torch_statuses import StatusControl
 from swarm_envs.envs.torch_step import PACKED_KEYS, build_advance, build_substep
 from swarm_envs.envs.torch_substeps import UNSTABLE, SubstepControl
@@ -228,6 +229,8 @@ class TorchSwarmNavCore(SubstepControl, StatusControl):
             return f"supports dynamics='social_potential' only, got {cfg.dynamics!r}"
         if cfg.integrator != "semi_implicit_euler":
             return f"supports integrator='semi_implicit_euler' only, got {cfg.integrator!r}"
+        if cfg.informs_agents:
+            return "does not write the informed agents' observation (task='informed')"
         return None
 
     def _build(
@@ -446,11 +449,10 @@ class TorchSwarmNavCore(SubstepControl, StatusControl):
         stats, bad = self._guard(a, self.stats(), before, over, needed)
         self._prev = self._packed
         reward = self._reward.cpu().numpy().astype(np.float64)
-        success = stats["success"].astype(bool)
-        truncated = (self.t >= self.cfg.max_steps) & ~success
+        terminated, truncated = episode_end(self.cfg, stats["success"], self.t)
         if bad is not None:
-            reward[bad], success[bad], truncated[bad] = 0.0, False, True
-        return reward, success, truncated, stats
+            reward[bad], terminated[bad], truncated[bad] = 0.0, False, True
+        return reward, terminated, truncated, stats
 
     # ------------------------------------------------------------------ views
     def stats(self) -> dict[str, np.ndarray]:

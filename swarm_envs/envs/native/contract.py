@@ -108,6 +108,9 @@ HOST_CONFIG_FIELDS = {
     "on_unstable": "the guard after the step runs in Python (it raises, or undoes the step)",
     "perturbations": "drawn and applied in Python (PerturbedCore: the schedule, the noise, "
     "the dropout); the agents' statuses reach the kernel as an array (set_status)",
+    "task": "navigation and mill (termination and the mill's statistics in Python); "
+    "'informed' refused (checked)",
+    "informed_fraction": "task='informed' only, which is refused",
 }
 
 #: Or'ed into the C step's return value where a swarm of the call went over the cap or
@@ -279,6 +282,8 @@ def unsupported(cfg: SwarmConfig, kernel: KernelInfo) -> str | None:
         return f"supports integrator='semi_implicit_euler' only, got {cfg.integrator!r}"
     if cfg.device != "cpu":
         return f"runs on the CPU only, got device={cfg.device!r}"
+    if cfg.informs_agents:
+        return "does not write the informed agents' observation (task='informed')"
     known = set(KERNEL_CONFIG_FIELDS) | set(HOST_CONFIG_FIELDS)
     for f in dataclasses.fields(SwarmConfig):
         if f.name not in known:

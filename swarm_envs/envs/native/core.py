@@ -58,6 +58,7 @@ from swarm_envs.envs.task import (
     reward,
 )
 from swarm_envs.envs.task.agent_status import keep_measured, masks, status_update
+from swarm_envs.envs.task.episode import episode_end
 
 __all__ = ["UNAVAILABLE", "NativeSwarmNavCore"]
 
@@ -149,7 +150,15 @@ class NativeSwarmNavCore:
         #: is active and always will be (then the kernel applies no masks).
         self._status: np.ndarray | None = None
         self._bind()
-        self._extra = tuple(s for s in STATISTICS if s.name not in library.info.statistics)
+        # The statistics the kernel does not write, and the task's success where it is
+        # not the kernel's (arrival alone): evaluated on the state by their definitions.
+        own_success = cfg.task != "mill"
+        self._extra = tuple(
+            s
+            for s in STATISTICS
+            if s.name not in library.info.statistics or (s.name == "success" and not own_success)
+        )
+        self._extra_pairs = any(s.pairwise for s in self._extra)
         self._measure()
         self._prev, self._start = self.stats(), self.stats()
 
@@ -254,18 +263,21 @@ class NativeSwarmNavCore:
 
     def _frame(self, packed: np.ndarray) -> Frame:
         """A numpy :class:`Frame` of the current state, for statistics the kernel does
-        not write (pairwise distances in numpy: slower, and only then)."""
+        not write (pairwise distances in numpy: slower, and only for statistics that may
+        read them; else the nearest distances are left at 0)."""
         x, v = self.x, self.v
-        rho = np.linalg.norm(x[:, :, None, :] - x[:, None, :, :], axis=-1)
         n = self.cfg.n_agents
-        members = None
-        if self._status is not None:  # pairs with an agent not present: none
-            present, members = masks(self._status).present, masks(self._status).mobile
-            rho = np.where(present[:, :, None] & present[:, None, :], rho, np.inf)
-        rho[:, np.arange(n), np.arange(n)] = np.inf
-        nearest = rho.min(axis=-1) if n > 1 else np.zeros((self.batch, 1), self.dtype)
-        if members is not None:  # no present other: 0
-            nearest = np.where(np.isfinite(nearest), nearest, 0.0).astype(self.dtype)
+        members = None if self._status is None else masks(self._status).mobile
+        nearest = np.zeros((self.batch, n), self.dtype)
+        if self._extra_pairs and n > 1:
+            rho = np.linalg.norm(x[:, :, None, :] - x[:, None, :, :], axis=-1)
+            if self._status is not None:  # pairs with an agent not present: none
+                present = masks(self._status).present
+                rho = np.where(present[:, :, None] & present[:, None, :], rho, np.inf)
+            rho[:, np.arange(n), np.arange(n)] = np.inf
+            nearest = rho.min(axis=-1)
+            if members is not None:  # no present other: 0
+                nearest = np.where(np.isfinite(nearest), nearest, 0.0).astype(self.dtype)
         offset = self.goal[:, None, :] - x
         return Frame(
             x,
@@ -393,11 +405,10 @@ class NativeSwarmNavCore:
         # _unpack made fresh arrays: the caller gets them, the next reward a copy (a reset
         # writes into the copy).
         self._prev = {key: value.copy() for key, value in stats.items()}
-        success = stats["success"].astype(bool)
-        truncated = (self.t >= self.cfg.max_steps) & ~success
+        terminated, truncated = episode_end(self.cfg, stats["success"], self.t)
         if bad is not None:
-            r[bad], success[bad], truncated[bad] = 0.0, False, True
-        return r, success, truncated, stats
+            r[bad], terminated[bad], truncated[bad] = 0.0, False, True
+        return r, terminated, truncated, stats
 
     def _unstable(self, bad: np.ndarray) -> None:
         """Raise :class:`~swarm_envs.envs.common.SwarmUnstableError`, or

@@ -148,27 +148,29 @@ def perturb_observations(
     dropout: np.ndarray,
     rng: np.random.Generator,
     bound: float,
+    own: int | None = None,
 ) -> np.ndarray:
     """Observations ``(B, N, D)`` with neighbour slots dropped and noise added.
 
-    Each of the ``n_slots`` neighbour blocks (``block`` entries: offset, relative
-    velocity, slot mask, and the status flag if observed) is dropped with its swarm's
-    probability: all zeros, as padding reads. Gaussian noise of the swarm's ``σ`` is then
-    added to the own features (the first ``2d``) and to the offsets and relative
+    The agent's own features come first (``own`` entries, ``2d`` if not given), then
+    the ``n_slots`` neighbour blocks (``block`` entries: offset, relative velocity, slot
+    mask, then the flags observed). Each block is dropped with its swarm's probability:
+    all zeros, as padding reads. Gaussian noise of the swarm's ``σ`` is then added to the
+    goal offset and velocity (the first ``2d``) and to the offsets and relative
     velocities of the slots that hold a neighbour, never to the flags, and the result
     clipped to ``±bound``. Draws: the dropout's uniforms (if any swarm drops), then the
     noise's normals (if any swarm is noisy).
     """
     out = obs.copy()
     B, N, _ = out.shape
-    own = 2 * dim
+    own = 2 * dim if own is None else own
     slots = out[..., own : own + n_slots * block].reshape(B, N, n_slots, block)
     if n_slots and np.any(dropout > 0):
         drop = rng.random((B, N, n_slots)) < dropout[:, None, None]
         slots[drop] = 0.0
     if np.any(sigma > 0):
         noise = (rng.standard_normal(out.shape) * sigma[:, None, None]).astype(np.float32)
-        out[..., :own] += noise[..., :own]
+        out[..., : 2 * dim] += noise[..., : 2 * dim]
         if n_slots:
             real = slots[..., 2 * dim : 2 * dim + 1] > 0  # the slot mask
             slot_noise = noise[..., own : own + n_slots * block].reshape(B, N, n_slots, block)

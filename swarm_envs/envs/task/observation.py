@@ -6,13 +6,16 @@ Per agent i, in this order (``d`` the dimension, ``k = n_neighbors``):
 features                                  size
 ========================================  ====================================
 goal offset ``(r_g − r_i) / obs_goal_scale``                   ``d``
+  (zeros for an agent not informed, ``task="informed"``)
 own velocity ``v_i / obs_velocity_scale``                      ``d``
+with ``task="informed"``: 1 if the agent is informed, else 0   ``1``
 for each of the k nearest neighbours j, nearest first:
   offset ``(r_j − r_i) / obs_neighbor_scale``                  ``d``
   relative velocity ``(v_j − v_i) / obs_velocity_scale``       ``d``
   mask: 1 for a real neighbour, 0 for a padding slot           ``1``
   with ``observe_status``: 1 if that neighbour is active, 0      ``1``
   if it has failed (:mod:`~swarm_envs.envs.task.agent_status`)
+  with ``task="informed"``: 1 if that neighbour is informed      ``1``
 ========================================  ====================================
 
 "Nearest first" orders by ``(ρ_ij, j)``: equal distances by the lower index. When
@@ -47,20 +50,36 @@ LAYOUT = (
 )
 
 
+def _informs(task: Any) -> bool:
+    return bool(getattr(task, "informs_agents", False))
+
+
+def own_size(task: Any) -> int:
+    """Entries of the agent's own features: ``2d`` (goal offset, velocity), one more
+    (its informed flag) with ``task="informed"``."""
+    return 2 * task.dim + int(_informs(task))
+
+
 def block_size(task: Any) -> int:
     """Entries per neighbour slot: ``2d + 1`` (offset, velocity, mask), one more with
-    ``observe_status``."""
-    return 2 * task.dim + 1 + int(getattr(task, "observe_status", False))
+    ``observe_status``, one more with ``task="informed"``."""
+    return 2 * task.dim + 1 + int(getattr(task, "observe_status", False)) + int(_informs(task))
 
 
 def observation_size(task: Any) -> int:
-    """``2d + k · block``: goal offset, own velocity, k neighbour slots (:func:`block_size`)."""
-    return 2 * task.dim + task.n_neighbors * block_size(task)
+    """``own + k · block``: the agent's own features (:func:`own_size`), then k
+    neighbour slots (:func:`block_size`)."""
+    return own_size(task) + task.n_neighbors * block_size(task)
 
 
 def layout(task: Any) -> str:
-    """:data:`LAYOUT`, with ``,status`` ending each neighbour block under ``observe_status``."""
-    return LAYOUT + (",status" if getattr(task, "observe_status", False) else "")
+    """:data:`LAYOUT`, with ``,status`` ending each neighbour block under
+    ``observe_status`` and the informed flags with ``task="informed"``."""
+    out = LAYOUT + (",status" if getattr(task, "observe_status", False) else "")
+    if _informs(task):
+        own, block = out.split(";")
+        out = f"{own},informed;{block},informed"
+    return out
 
 
 def ranked_neighbors(task: Any) -> int:
@@ -77,6 +96,7 @@ def observation(
     task: Any,
     xp: ArrayNamespace,
     status: Array | None = None,
+    informed: Array | None = None,
 ) -> Array:
     """Observations ``(B, N, obs_dim)`` float32 (the layout of the module docstring).
 
@@ -90,12 +110,23 @@ def observation(
         xp: the array namespace of ``x``.
         status: each agent's status ``(B, N)`` (``None``: every agent active); the
             neighbour ranking must put agents not present last.
+        informed: which agents observe the goal ``(B, N)`` bool, required with
+            ``task="informed"`` (and read only then).
     """
     B, N, d = x.shape
     k = task.n_neighbors
     k_real = min(k, N - 1)
     block = block_size(task)
-    parts = [(goal[:, None, :] - x) / task.obs_goal_scale, v / task.obs_velocity_scale]
+    goal_offset = (goal[:, None, :] - x) / task.obs_goal_scale
+    told = None
+    if _informs(task):
+        if informed is None:
+            raise ValueError("task='informed' needs each agent's informed flag")
+        told = xp.astype(informed, x)
+        goal_offset = goal_offset * told[..., None]
+    parts = [goal_offset, v / task.obs_velocity_scale]
+    if told is not None:
+        parts.append(told[..., None])
     if k_real > 0:
         assert near is not None
         # One neighbour feature at a time: gather the column of every agent's values
@@ -109,9 +140,12 @@ def observation(
             present = xp.astype(status <= FROZEN, x)
             ids = xp.zeros((B, N), like=x) + xp.array(list(range(N)), like=x)
             flag_columns = [present, xp.astype(status == ACTIVE, x), ids]
+        if told is not None:
+            flag_columns.append(told)
         gathered = xp.gather_agents(columns + flag_columns, index)
         flags = gathered[2 * d :]
         gathered = gathered[: 2 * d]
+        told_slots = flags.pop() if told is not None else None
         features = [
             (g - col[..., None]) * scale
             for g, col, scale in zip(gathered, columns, scales, strict=True)
@@ -126,6 +160,8 @@ def observation(
             features = [f * real for f in features] + [real]
         if getattr(task, "observe_status", False):
             features.append(xp.ones((B, N, k_real), like=x) if status is None else active * real)
+        if told_slots is not None:
+            features.append(told_slots if status is None else told_slots * real)
         parts.append(xp.stack(features, axis=-1).reshape(B, N, k_real * block))
     if k > k_real:
         parts.append(xp.zeros((B, N, (k - k_real) * block), like=x))

@@ -14,6 +14,9 @@ term            sign  value
 ``collision``   −     colliding pairs / N
 ``effort``      −     ``Σ_i |a_i|² / N`` (clipped actions, in ``[0, d]``)
 ``time``        −     1 per step, so that arriving earlier pays
+``mill``        \\+    ``mill_order``: the members' tangential speed about the
+                      goal (those within the arrival radius counted) over the
+                      cruise speed ``v₀``, at most 1
 ==============  ====  ======================================================
 
 A term reads :class:`RewardInputs`: this step's statistics, the previous step's, the
@@ -88,6 +91,12 @@ REWARD_TERMS: tuple[RewardTerm, ...] = (
     ),
     RewardTerm("effort", -1.0, "Σ|a_i|² / N", lambda r: r.effort / r.n_agents),
     RewardTerm("time", -1.0, "1 per step", lambda r: 1.0),
+    RewardTerm(
+        "mill",
+        1.0,
+        "mill_order: tangential speed about the goal / v₀, at most 1",
+        lambda r: r.stats["mill_order"],
+    ),
 )
 
 

@@ -20,6 +20,7 @@ from typing import Any, NamedTuple
 
 from swarm_envs import metrics
 from swarm_envs._array import ArrayNamespace
+from swarm_envs.tasks import MILL_SUCCESS_SPEED
 
 Array = Any
 
@@ -67,6 +68,10 @@ class Statistic:
     doc: str
     value: Callable[[Frame, Any, ArrayNamespace], Array]
     wide: bool = False
+    pairwise: bool = True
+    """Whether it may read the frame's pair measures (``nearest_distance``,
+    ``close_pairs``); a core that fills in statistics from its state alone skips
+    computing those for the ones that do not."""
 
 
 def success_count(n_agents: int, success_fraction: float) -> int:
@@ -121,6 +126,27 @@ def _success(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
     return xp.astype(fraction >= task.success_fraction - 1e-9, f.goal_distance)
 
 
+def _mill_speed(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
+    return metrics.tangential_speed(f.x, f.v, f.goal, task.arrival_radius, f.members)
+
+
+def _mill_order(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
+    """``min(mill_speed / v₀, 1)``; 0 without self-propulsion (no ``v₀``)."""
+    v0 = task.physics.cruise_speed
+    if v0 <= 0:
+        return xp.zeros(f.energy.shape, like=f.energy)
+    return xp.clip(_mill_speed(f, task, xp) / v0, None, 1.0)
+
+
+def _task_success(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
+    """:func:`_success`; in the mill task, while the members within the arrival radius
+    also circle the goal at ``mill_order ≥ MILL_SUCCESS_SPEED``."""
+    arrived = _success(f, task, xp)
+    if getattr(task, "task", "navigation") != "mill":
+        return arrived
+    return arrived * xp.astype(_mill_order(f, task, xp) >= MILL_SUCCESS_SPEED, arrived)
+
+
 def _substeps(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
     if f.substeps is None:
         return xp.zeros(f.energy.shape, like=f.energy)
@@ -170,9 +196,31 @@ STATISTICS: tuple[Statistic, ...] = (
         lambda f, task, xp: _mean(f.goal_distance, f, xp),
     ),
     Statistic(
+        "goal_angular_momentum",
+        "true angular momentum per member about the goal |Σ (r_i − r_g) × v_i|/N "
+        "(metrics.goal_angular_momentum)",
+        lambda f, task, xp: metrics.goal_angular_momentum(f.x, f.v, f.goal, f.members),
+        pairwise=False,
+    ),
+    Statistic(
+        "mill_speed",
+        "tangential speed about the goal |Σ r̂_ig × v_i|/N, members within the arrival "
+        "radius (metrics.tangential_speed)",
+        _mill_speed,
+        pairwise=False,
+    ),
+    Statistic(
+        "mill_order",
+        "mill_speed / v₀ (the cruise speed of self-propulsion), at most 1; 0 without "
+        "self-propulsion",
+        _mill_order,
+        pairwise=False,
+    ),
+    Statistic(
         "success",
-        "1 when at least success_fraction of the members have arrived",
-        _success,
+        "1 when at least success_fraction of the members have arrived (the mill task: "
+        f"and mill_order ≥ {MILL_SUCCESS_SPEED:g})",
+        _task_success,
         wide=True,
     ),
     Statistic(
