@@ -13,10 +13,14 @@ One module per source paper:
   Viscido's piecewise force model.
 - :class:`LyapunovTargetController` (:mod:`agents.vanualailai_sharma`): the target
   term of Vanualailai & Sharma's Lyapunov construction, for the Lagrangian model.
+- :class:`MillController` (:mod:`agents.mill`): the mill task's controller, straight to
+  the goal, then a tangential push about it.
 - :class:`ZeroController`, :class:`RandomController` (:mod:`agents.trivial`).
 
 Each model has its analytic baseline (:data:`ANALYTIC`); the name ``"analytic"`` picks
-the one that matches the environment's ``dynamics``.
+the one that matches the environment's ``dynamics`` and task (the mill task has its own,
+:data:`TASK_ANALYTIC`; in the informed task the model's controller acts through the
+informed agents only).
 
 Build one from any environment of the package or from a config::
 
@@ -31,6 +35,7 @@ from typing import Any
 
 from agents.base import Controller, swarm_config_of
 from agents.mabrouk_mcinnes import PotentialFieldController
+from agents.mill import MillController
 from agents.naterop import GoalForceController, InformedIndividualController
 from agents.trivial import RandomController, ZeroController
 from agents.vanualailai_sharma import LyapunovTargetController
@@ -42,6 +47,7 @@ CONTROLLERS: dict[str, type[Controller]] = {
     "informed": InformedIndividualController,
     "goal_force": GoalForceController,
     "lyapunov": LyapunovTargetController,
+    "mill": MillController,
     "zero": ZeroController,
     "random": RandomController,
 }
@@ -55,14 +61,20 @@ ANALYTIC: dict[str, str] = {
 }
 
 
+#: Tasks whose analytic baseline is their own, whatever the dynamics.
+TASK_ANALYTIC: dict[str, str] = {"mill": "mill"}
+
+
 def analytic_name(env: Any) -> str:
-    """The name of the analytic baseline matching ``env``'s dynamics (see :data:`ANALYTIC`).
+    """The name of the analytic baseline matching ``env``'s task and dynamics
+    (:data:`TASK_ANALYTIC`, else :data:`ANALYTIC`).
 
     >>> from swarm_envs.config import SwarmConfig
     >>> analytic_name(SwarmConfig(dynamics="zone"))
     'informed'
     """
-    return ANALYTIC[swarm_config_of(env).dynamics]
+    cfg = swarm_config_of(env)
+    return TASK_ANALYTIC.get(cfg.task, ANALYTIC[cfg.dynamics])
 
 
 def make_controller(name: str, env: Any, *, seed: int | None = None) -> Controller:
@@ -86,10 +98,12 @@ def make_controller(name: str, env: Any, *, seed: int | None = None) -> Controll
 __all__ = [
     "ANALYTIC",
     "CONTROLLERS",
+    "TASK_ANALYTIC",
     "Controller",
     "GoalForceController",
     "InformedIndividualController",
     "LyapunovTargetController",
+    "MillController",
     "PotentialFieldController",
     "RandomController",
     "ZeroController",

@@ -22,7 +22,11 @@ what the analytic controllers need on top of that protocol:
   dict. Any other size raises :class:`ValueError`.
 
 Subclasses implement :meth:`Controller._actions` on a ``(n, obs_dim)`` float64 array
-of per-agent observations, vectorised over agents (no Python loop per agent).
+of per-agent observations, vectorised over agents (no Python loop per agent). In the
+informed task (``task="informed"``) the agents that do not observe the goal get zero
+actions (:attr:`Controller.acts_informed_only`): the analytic controllers then become
+Couzin's informed individuals, and the rest of the swarm follows through the passive
+physics alone.
 """
 
 from __future__ import annotations
@@ -93,6 +97,10 @@ class Controller(ABC):
         n_agents, dim, obs_dim, u_max: read from ``cfg``.
         observation_space, action_space: the per-agent spaces (shared-policy layout).
     """
+
+    #: With ``task="informed"``, only the informed agents act (the others get zero):
+    #: the goal-seeking controllers' informed-individual reading.
+    acts_informed_only: bool = True
 
     def __init__(self, env: Any) -> None:
         self.cfg: SwarmConfig = swarm_config_of(env)
@@ -167,6 +175,10 @@ class Controller(ABC):
         out_dtype = obs.dtype if obs.dtype == np.float32 else np.dtype(np.float64)
         per_agent = obs.reshape(-1, self.obs_dim).astype(np.float64, copy=False)
         actions = self._actions(per_agent, deterministic)
+        if self.cfg.informs_agents and self.acts_informed_only:
+            # Informed individuals: an agent that does not observe the goal leaves the
+            # passive physics alone (its goal offset reads zero anyway).
+            actions = actions * (per_agent[:, 2 * self.dim : 2 * self.dim + 1] > 0.5)
         return actions.reshape((*obs.shape[:-1], out_last)).astype(out_dtype, copy=False), state
 
     @abstractmethod

@@ -48,6 +48,8 @@ class RandomController(Controller):
     ((2,), True)
     """
 
+    acts_informed_only = False  # random for every agent, informed or not
+
     def __init__(self, env: Any, seed: int | np.random.Generator | None = None) -> None:
         super().__init__(env)
         self.seed(seed)
