@@ -74,6 +74,10 @@ class EpisodeBatch:
     substeps: np.ndarray
     integrated: np.ndarray
     trajectory: dict[str, np.ndarray] = field(default_factory=dict)
+    first_success: np.ndarray | None = None
+    """The step at which each episode first succeeded ``(B,)`` (0: never): its end in
+    navigation, the first step of the held mill in the mill task (``None``: the
+    episodes' lengths)."""
 
 
 def run_episodes(
@@ -121,6 +125,7 @@ def run_episodes(
     collisions = np.zeros(B)
     effort = np.zeros(B)
     success = np.zeros(B, bool)
+    first_success = np.zeros(B, np.int64)
     unstable = np.zeros(B, bool)
     substeps = np.zeros(B)
     integrated = np.zeros(B, np.int64)
@@ -181,7 +186,11 @@ def run_episodes(
             for k in CURVE_KEYS:
                 series[k].append(stats[k].astype(np.float64))
             ended = live & (terminated | truncated)
-            success |= ended & terminated
+            # Success ends navigation (terminated); the mill task holds its state to the
+            # end, so there success is the last step's.
+            success |= ended & (terminated | ((stats["success"] > 0) & ~undone))
+            first = live & ~undone & (stats["success"] > 0) & (first_success == 0)
+            first_success[first] = lengths[first]
             unstable |= ended & undone
             for k in FINAL_KEYS:
                 final[k][ended] = stats[k][ended]
@@ -223,4 +232,5 @@ def run_episodes(
         substeps=substeps,
         integrated=integrated,
         trajectory=trajectory,
+        first_success=first_success,
     )

@@ -28,8 +28,8 @@ METRIC_DOCS = {
     "success_ci95": "95 % Wilson score interval of the success rate, [low, high]",
     "mean_return": "mean over episodes of the summed cooperative reward",
     "std_return": "population standard deviation of the episode returns",
-    "mean_time_to_goal": "simulated seconds (steps × dt) to success, over successful "
-    "episodes; null when none succeeded",
+    "mean_time_to_goal": "simulated seconds (steps × dt) to the first step of success (in "
+    "the mill task, of the mill), over successful episodes; null when none succeeded",
     "std_time_to_goal": "population standard deviation of the time to goal over "
     "successful episodes; null when none succeeded",
     "mean_episode_length": "mean episode length in steps",
@@ -82,7 +82,8 @@ def summarize(batch: EpisodeBatch) -> dict[str, Any]:
     undefined ones are ``None``."""
     ok = batch.success
     lengths = batch.lengths.astype(np.float64)
-    times = lengths[ok] * batch.dt
+    reached = lengths if batch.first_success is None else batch.first_success
+    times = reached[ok].astype(np.float64) * batch.dt
     ci = wilson_interval(int(ok.sum()), ok.size)
     integrated = int(batch.integrated.sum())
     out: dict[str, Any] = {
