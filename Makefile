@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= reproductions
 
-.PHONY: help install demo test test-slow lint format reproduce bench clean
+.PHONY: help install demo test test-slow lint format reproduce bench benchmark clean
 
 help:
 	@echo "make demo       the main job: train a shared PPO policy, evaluate it against the"
@@ -14,6 +14,10 @@ help:
 	@echo "make test-slow  the same, plus the slow tests (full training runs)"
 	@echo "make reproduce  regenerate the paper figures (PNG + JSON + GIF) into $(OUT)/"
 	@echo "make bench      print the physics throughput table"
+	@echo "make benchmark  the results table: train every entry of configs/benchmark/results.yaml"
+	@echo "                (3 seeds), evaluate against the analytic baselines, write"
+	@echo "                runs/benchmark/results.{json,md,png} with 95 % bootstrap CIs (slow;"
+	@echo "                rerun to continue after Ctrl-C)"
 	@echo "make format     apply ruff format and autofixes"
 
 $(BIN)/python:
@@ -49,6 +53,9 @@ reproduce: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/physics.py
 	$(BIN)/python benchmarks/envs.py
+
+benchmark: $(STAMP)
+	$(BIN)/swarm-benchmark
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache

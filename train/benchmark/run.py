@@ -1,0 +1,335 @@
+"""Train and evaluate the entries of a benchmark matrix.
+
+For each entry (:class:`~train.benchmark.matrix.Entry`) and training seed ``k`` the
+learned policy is trained into ``OUT/models/<entry>/seed<k>/`` with
+:func:`train.train.train`, one run after another in this process. A folder whose run
+is ``completed`` with the same config is reused; one that was stopped (Ctrl-C, SIGTERM,
+a killed process) is resumed from its latest checkpoint; one whose config differs is
+refused unless ``overwrite`` retrains it. So a benchmark stopped at any point loses no
+finished training, and running it again continues where it stopped.
+
+Every learned model (one per seed) and every baseline is then evaluated with
+:func:`~train.evaluate.episodes.run_episodes` on the same seeded episodes (one
+evaluation seed, apart from the training seeds); the deterministic baselines are
+evaluated once. :func:`~train.benchmark.stats.summarize_runs` turns the episodes into
+the measures and their bootstrap intervals.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from swarm_envs.config import SwarmConfig, as_dict
+from train.benchmark.matrix import Entry
+from train.benchmark.stats import BOOTSTRAP_SEED, CONFIDENCE, N_RESAMPLES, summarize_runs
+from train.config import TrainConfig, load_train_config
+
+__all__ = [
+    "DEFAULT_EVAL_SEED",
+    "ModelRecord",
+    "Settings",
+    "StaleModelError",
+    "evaluate_entry",
+    "existing_run",
+    "model_folder",
+    "quick_overrides",
+    "run_entry",
+    "train_seed",
+]
+
+#: Seed of the evaluation episodes unless ``--eval-seed`` says otherwise.
+DEFAULT_EVAL_SEED = 2026
+
+Log = Callable[[str], None]
+
+
+class StaleModelError(ValueError):
+    """A model folder holds a run of another config than the one asked for."""
+
+
+@dataclass(frozen=True)
+class Settings:
+    """How the entries are run: seeds, episodes, evaluation seed, bootstrap."""
+
+    seeds: tuple[int, ...] = (0, 1, 2)
+    episodes: int = 100
+    eval_seed: int = DEFAULT_EVAL_SEED
+    quick: bool = False
+    overwrite: bool = False
+    progress: bool = True
+    n_resamples: int = N_RESAMPLES
+    bootstrap_seed: int = BOOTSTRAP_SEED
+    confidence: float = CONFIDENCE
+
+    def to_dict(self) -> dict[str, Any]:
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        out["seeds"] = list(self.seeds)
+        return out
+
+
+@dataclass(frozen=True)
+class ModelRecord:
+    """A trained model of one seed: its path and how it came to be."""
+
+    seed: int
+    path: Path
+    action: str  # "trained", "resumed" or "reused"
+    timesteps: int
+    train_seconds: float | None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "seed": self.seed,
+            "path": str(self.path),
+            "action": self.action,
+            "timesteps": self.timesteps,
+            "train_seconds": self.train_seconds,
+        }
+
+
+def quick_overrides(tc: TrainConfig) -> dict[str, Any]:
+    """TrainConfig overrides of a smoke run of ``tc``: two swarms, about one update.
+
+    PPO: one rollout of 32 steps on every slot and one epoch over it; SAC: 16 vector
+    steps, learning from the first, one gradient step each. The networks and the env
+    stay as configured.
+    """
+    slots = 2 * (tc.swarm_config().n_agents if tc.mode == "shared" else 1)
+    base: dict[str, Any] = {"n_swarms": 2, "eval_freq": 0, "checkpoint_freq": 0}
+    if tc.algo == "PPO":
+        hyper = {"n_steps": 32, "batch_size": 64, "n_epochs": 1}
+        return {**base, "total_timesteps": 32 * slots, "hyperparams": hyper}
+    hyper = {"learning_starts": 0, "batch_size": 64, "gradient_steps": 1, "train_freq": 1}
+    hyper["buffer_size"] = 16 * slots
+    return {**base, "total_timesteps": 16 * slots, "hyperparams": hyper}
+
+
+def entry_train_config(entry: Entry, seed: int, quick: bool) -> TrainConfig:
+    """The training config of ``entry`` for ``seed`` (the smoke run's with ``quick``)."""
+    tc = entry.train_config(seed)
+    return entry.train_config(seed, quick_overrides(tc)) if quick else tc
+
+
+def _read_meta(folder: Path) -> dict[str, Any]:
+    try:
+        return json.loads((folder / "meta.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+
+
+def _differences(saved: TrainConfig, wanted: TrainConfig) -> list[str]:
+    return [
+        f"{f.name} ({getattr(saved, f.name)!r} there, {getattr(wanted, f.name)!r} now)"
+        for f in fields(TrainConfig)
+        if getattr(saved, f.name) != getattr(wanted, f.name)
+    ]
+
+
+def existing_run(tc: TrainConfig, folder: Path, *, overwrite: bool = False) -> str:
+    """What to do with ``folder`` for the run ``tc``: ``"reuse"`` (a finished run of
+    ``tc``), ``"resume"`` (a stopped run of ``tc`` with a checkpoint) or ``"train"``
+    (nothing there, an unfinished run without checkpoint, or ``overwrite``).
+
+    Raises:
+        StaleModelError: ``folder`` holds a run of another config (without ``overwrite``).
+    """
+    from train.checkpoints import checkpoint_timesteps, latest_checkpoint
+
+    saved_config = folder / "train_config.yaml"
+    if overwrite or not saved_config.is_file():
+        return "train"
+    try:
+        saved = load_train_config(saved_config)
+    except ValueError as err:
+        raise StaleModelError(
+            f"{folder} holds an unreadable run ({err}); use --overwrite"
+        ) from None
+    diff = _differences(saved, tc)
+    if diff:
+        raise StaleModelError(
+            f"{folder} holds a model trained with another config: {'; '.join(diff)}; "
+            "use --overwrite to retrain it, or another --out"
+        )
+    ckpt = latest_checkpoint(folder)
+    finished = _read_meta(folder).get("status") == "completed" or (
+        ckpt is not None and checkpoint_timesteps(ckpt) >= tc.total_timesteps
+    )
+    if finished and (folder / "model.zip").is_file():
+        return "reuse"
+    return "resume" if ckpt is not None else "train"
+
+
+def train_seed(
+    tc: TrainConfig,
+    folder: Path,
+    *,
+    overwrite: bool = False,
+    progress: bool = True,
+    tensorboard: bool = True,
+    log: Log = print,
+) -> ModelRecord:
+    """Train ``tc`` into ``folder``, or reuse or resume the run already there
+    (:func:`existing_run`).
+
+    Raises:
+        StaleModelError: ``folder`` holds a run of another config (without
+            ``overwrite``).
+        TrainingInterrupted: stopped by SIGINT/SIGTERM (the run is saved; running
+            again resumes it).
+    """
+    from train.train import train
+
+    action = existing_run(tc, folder, overwrite=overwrite)
+    if action == "reuse":
+        log(f"  seed {tc.seed}: reusing {folder / 'model.zip'}")
+    else:
+        verb = "resuming" if action == "resume" else "training"
+        log(f"  seed {tc.seed}: {verb} {tc.algo} for {tc.total_timesteps:,} timesteps")
+        train(
+            tc,
+            folder,
+            progress_bar=progress,
+            tensorboard=tensorboard,
+            verbose=0,
+            overwrite=action == "train",
+            resume=action == "resume",
+            prog="swarm-benchmark",
+        )
+    meta = _read_meta(folder)
+    return ModelRecord(
+        tc.seed,
+        folder / "model.zip",
+        {"reuse": "reused", "resume": "resumed", "train": "trained"}[action],
+        int(meta.get("timesteps", 0)),
+        meta.get("train_seconds"),
+    )
+
+
+def _episodes(policy: Any, cfg: SwarmConfig, s: Settings, name: str) -> dict[str, np.ndarray]:
+    from train.evaluate.episodes import run_episodes
+
+    batch = run_episodes(
+        policy, cfg, s.episodes, s.eval_seed, name=name, progress=False, record_episode=False
+    )
+    return {"return": batch.returns, "success": batch.success, "steps": batch.lengths}
+
+
+def _policy_result(
+    runs: Sequence[Mapping[str, np.ndarray]], cfg: SwarmConfig, s: Settings, **extra: Any
+) -> dict[str, Any]:
+    """The measures, intervals and per-episode values of ``runs`` (one per seed)."""
+    arrays = {k: np.stack([r[k] for r in runs]) for k in ("return", "success", "steps")}
+    summary = summarize_runs(
+        arrays["return"],
+        arrays["success"],
+        arrays["steps"],
+        cfg.dt,
+        n_resamples=s.n_resamples,
+        seed=s.bootstrap_seed,
+        confidence=s.confidence,
+    )
+    per_episode = {
+        "return": arrays["return"].tolist(),
+        "success": arrays["success"].astype(bool).tolist(),
+        "steps": arrays["steps"].astype(int).tolist(),
+    }
+    return {**extra, **summary, "per_episode": per_episode}
+
+
+def evaluate_entry(
+    entry: Entry,
+    tc: TrainConfig,
+    models: Sequence[ModelRecord],
+    s: Settings,
+    log: Log = print,
+) -> list[dict[str, Any]]:
+    """Evaluate every model of ``models`` and every baseline of ``entry`` in each of its
+    evaluations; one result per evaluation, its policies' measures keyed by name
+    (``learned`` and the baselines' names)."""
+    import torch
+
+    from agents import analytic_name, make_controller
+    from train.evaluate.policies import TRAINED_ENV, load_sb3_model, trained_env_differences
+
+    if tc.torch_threads is not None:
+        torch.set_num_threads(tc.torch_threads)
+    loaded = [(m, load_sb3_model(m.path, device=tc.device)) for m in models]
+    results = []
+    for ev in entry.evaluations:
+        cfg = entry.eval_config(ev, tc)
+        log(f"  evaluation {ev.label!r}: {s.episodes} episodes (seed {s.eval_seed})")
+        notes = sorted(
+            {
+                d
+                for _, model in loaded
+                for d in trained_env_differences(getattr(model, TRAINED_ENV, None), cfg)
+            }
+        )
+        started = time.perf_counter()
+        runs = [_episodes(model, cfg, s, f"learned seed {m.seed}") for m, model in loaded]
+        policies = {
+            "learned": _policy_result(
+                runs, cfg, s, kind="learned", seeds=[m.seed for m, _ in loaded], notes=notes
+            )
+        }
+        for name in entry.baselines:
+            controller = name if name != "analytic" else analytic_name(cfg)
+            policy = make_controller(controller, cfg, seed=s.eval_seed)
+            run = _episodes(policy, cfg, s, name)
+            policies[name] = _policy_result([run], cfg, s, kind="baseline", controller=controller)
+        results.append(
+            {
+                "label": ev.label,
+                "env": ev.env,
+                "dt": cfg.dt,
+                "max_steps": cfg.max_steps,
+                "n_agents": cfg.n_agents,
+                "config": as_dict(cfg),
+                "eval_seconds": round(time.perf_counter() - started, 3),
+                "policies": policies,
+            }
+        )
+    return results
+
+
+def model_folder(out: Path, entry: Entry, seed: int) -> Path:
+    """``OUT/models/<entry name>/seed<k>``."""
+    return out / "models" / Path(*entry.name.split("/")) / f"seed{seed}"
+
+
+def run_entry(entry: Entry, out: Path, s: Settings, log: Log = print) -> dict[str, Any]:
+    """Train (or reuse) the models of every seed of ``entry``, evaluate them and its
+    baselines; the entry's results (see :mod:`train.benchmark.report`)."""
+    log(f"{entry.name}: task {entry.task}, dynamics {entry.dynamics}, train {entry.train}")
+    configs = [entry_train_config(entry, seed, s.quick) for seed in s.seeds]
+    models = [
+        train_seed(
+            tc,
+            model_folder(out, entry, tc.seed),
+            overwrite=s.overwrite,
+            progress=s.progress,
+            tensorboard=not s.quick,
+            log=log,
+        )
+        for tc in configs
+    ]
+    train_config = configs[0].to_dict()
+    train_config.pop("seed")
+    return {
+        "name": entry.name,
+        "task": entry.task,
+        "dynamics": entry.dynamics,
+        "train": entry.train,
+        "env": entry.env,
+        "train_overrides": entry.train_overrides,
+        "train_config": train_config,
+        "models": [m.to_dict() for m in models],
+        "evaluations": evaluate_entry(entry, configs[0], models, s, log),
+    }
