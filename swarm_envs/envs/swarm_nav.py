@@ -55,6 +55,27 @@ SWARM_NAV_DOC = """
 
     Details, and what ``goal_in_physics`` means for each, in ``swarm_envs.envs.dynamics``.
 
+    ## Tasks
+
+    ``task`` (one registered id each; ``swarm_envs.tasks``, docs/tasks.md) says what
+    the swarm must do; each brings its defaults, which the given values override:
+
+    - ``"navigation"`` (``swarm_envs/SwarmNav-v0``): gather inside the goal radius.
+    - ``"informed"`` (``swarm_envs/SwarmInformed-v0``): the same, when only a fraction
+      ``informed_fraction`` of each swarm (default 0.3; a ``[low, high]`` range is
+      drawn per episode; ``⌊f·N⌋`` agents, at least one, drawn per episode) observes
+      the goal. The others read zeros for the goal offset; every agent observes its
+      own informed flag and each neighbour's (below). Couzin's informed individuals
+      (Naterop §4.1): the analytic baselines act through the informed agents only.
+      Runs on every ``dynamics``, with the numpy and cut-off backends.
+    - ``"mill"`` (``swarm_envs/SwarmMill-v0``): reach the goal and circle it, on the
+      self-propelled social potential (``physics.alpha > 0``: the friction becomes
+      the Rayleigh term ``(α − β|v|²) v``, cruise speed ``v₀ = √(α/β)``; default α = β
+      = 1) with the sink acting passively (``goal_in_physics``). The reward adds
+      ``w_mill · mill_order`` every step; the episode never terminates (it is truncated
+      at ``max_steps``, 300 by default), and ``success`` reports each step whether the
+      members have arrived and circle the goal at ``mill_order ≥ 0.5``.
+
     ## Action Space
 
     Per agent ``Box(-1, 1, (d,), float32)``; the control is ``u_i = u_max · a_i`` (a
@@ -90,17 +111,24 @@ SWARM_NAV_DOC = """
     ``2d + 2``): 1 when that neighbour is active, 0 when it has failed; the Gymnasium
     env then ends its observation with every agent's flag (``N`` more entries).
 
+    With ``task="informed"`` the goal offset of an agent that is not informed is zero,
+    the own features end with the agent's informed flag (``2d + 1`` entries), and each
+    neighbour block ends with that neighbour's informed flag (one more entry, after the
+    status flag if any). The layout is ``swarm_envs.envs.task.observation``'s.
+
     ## Rewards
 
     Cooperative: every agent receives the same reward each step,
 
     ``r = w_progress (D_{t−1} − D_t)/D_0 + w_arrival (A_t − A_{t−1}) + w_success 1[success]
-    − w_collision C_t/N − w_effort mean_i |a_i|² − w_time``
+    − w_collision C_t/N − w_effort mean_i |a_i|² − w_time + w_mill M_t``
 
     with ``D`` the mean agent-to-goal distance (``D_0`` at the start), ``A`` the fraction
     of agents within ``goal_radius``, ``C_t`` the number of pairs closer than
-    ``collision_radius``. Weights: ``reward`` in the config (defaults 10, 1, 5, 0.5,
-    0.01, 0.05).
+    ``collision_radius``, ``M_t`` the ``mill_order`` (the tangential speed about the
+    goal of the agents within the goal radius, ``|Σ_i r̂_ig × v_i|/N``, over ``v₀``, at
+    most 1). Weights: ``reward`` in the config (defaults 10, 1, 5, 0.5, 0.01, 0.05, 0;
+    the mill task: success 0, time 0, mill 0.1).
 
     ## Starting State
 
@@ -110,10 +138,12 @@ SWARM_NAV_DOC = """
 
     ## Episode End
 
-    Terminated (success) when at least ``success_fraction`` of the swarm's members
+    Navigation and informed: terminated (success) when at least ``success_fraction``
+    of the swarm's members
     (every agent, unless ``perturbations`` fail some: then the agents that still move,
     active or failed passively) are within ``goal_radius`` of the goal at once;
-    truncated after ``max_steps`` steps (``max_cycles`` in PettingZoo). ``gym.make``
+    truncated after ``max_steps`` steps (``max_cycles`` in PettingZoo). The mill task
+    never terminates: it is truncated after ``max_steps``. ``gym.make``
     adds no ``TimeLimit``: ``max_steps`` is the only episode length (a
     ``max_episode_steps`` given to ``gym.make`` adds one).
 
@@ -142,8 +172,11 @@ SWARM_NAV_DOC = """
     ``angular_momentum`` (unit-heading forms), ``expanse``,
     ``nearest_neighbor_distance``, ``energy`` (eq. 16 with the sink; ``L`` for the
     Lagrangian model, kinetic energy for the zone and piecewise models), ``fraction_arrived``,
-    ``collisions`` (this step), ``centroid_distance``, ``mean_goal_distance``, ``success``
-    (Python floats). With ``info_kinematics=True`` also ``pos`` (``r_i``), ``vel``
+    ``collisions`` (this step), ``centroid_distance``, ``mean_goal_distance``,
+    ``goal_angular_momentum`` (``|Σ_i (r_i − r_g) × v_i|/N``, the true angular momentum
+    about the goal), ``mill_speed`` and ``mill_order`` (the mill's tangential speed and
+    its fraction of ``v₀``), ``success``, ``substeps``, ``unstable`` (Python floats). With
+    ``info_kinematics=True`` also ``pos`` (``r_i``), ``vel``
     (``v_i``) and ``goal_offset`` (``r_g − r_i``), float32 in world units (unscaled,
     unclipped): ``(d,)`` in each agent's info in PettingZoo, ``(N, d)`` in Gymnasium —
     the node positions and velocities a graph policy builds its edges from.
@@ -171,8 +204,9 @@ SWARM_NAV_DOC = """
 
     ## Version History
 
-    * v0: initial release; ``dynamics`` (zone, piecewise, Lagrangian) added without
-      changing the default social-potential env.
+    * v0: initial release; ``dynamics`` (zone, piecewise, Lagrangian) and the informed
+      and mill tasks (their own ids) added without changing the default
+      social-potential navigation env.
 """
 
 

@@ -6,7 +6,7 @@ config of its learned policy and the analytic baselines it is compared with::
 
     entries:
       - name: navigation/zone          # unique; the folder of its models
-        task: navigation               # a label of the tables and the plot
+        task: navigation               # the task (SwarmConfig.task), for training and evaluation
         dynamics: zone                 # SwarmConfig.dynamics, for training and evaluation
         train: configs/train/demo.yaml # the training config
         env: {n_agents: 10}            # optional SwarmConfig overrides (training and evaluation)
@@ -26,7 +26,7 @@ override fails at once.
 ...           train="configs/train/demo.yaml")
 >>> e.train_config(seed=1).env["dynamics"], [v.label for v in e.evaluations]
 ('zone', ['default'])
->>> Entry(name="x", task="t", dynamics="zone", train="demo", colour="red")  # doctest: +ELLIPSIS
+>>> Entry(name="x", task="mill", dynamics="zone", train="demo", colour="red")  # doctest: +ELLIPSIS
 Traceback (most recent call last):
 ...
 TypeError: ...got an unexpected keyword argument 'colour'
@@ -41,6 +41,7 @@ from pathlib import Path
 from typing import Any
 
 from swarm_envs.config import DYNAMICS, SwarmConfig, load_swarm_config, resolve_config_path
+from swarm_envs.tasks import TASKS
 from train.config import TrainConfig, load_train_config, merge_overrides, read_yaml_mapping
 
 __all__ = ["DEFAULT_MATRIX", "Entry", "Evaluation", "Matrix", "load_matrix"]
@@ -115,7 +116,8 @@ class Entry:
         _text(owner, "name", self.name, _NAME)
         if any(part in (".", "..") for part in self.name.split("/")):
             raise ValueError(f"{owner}.name must not hold '.' or '..' parts")
-        _text(owner, "task", self.task)
+        if self.task not in TASKS:
+            raise ValueError(f"{owner}.task must be one of {', '.join(TASKS)}, got {self.task!r}")
         if self.dynamics not in DYNAMICS:
             raise ValueError(
                 f"{owner}.dynamics must be one of {', '.join(DYNAMICS)}, got {self.dynamics!r}"
@@ -127,7 +129,11 @@ class Entry:
                 f"{owner}.env.dynamics ({env['dynamics']!r}) contradicts "
                 f"dynamics ({self.dynamics!r}); give it once"
             )
-        object.__setattr__(self, "env", {**env, "dynamics": self.dynamics})
+        if env.get("task", self.task) != self.task:
+            raise ValueError(
+                f"{owner}.env.task ({env['task']!r}) contradicts task ({self.task!r}); give it once"
+            )
+        object.__setattr__(self, "env", {**env, "dynamics": self.dynamics, "task": self.task})
         overrides = _mapping(owner, "train_overrides", self.train_overrides)
         if "seed" in overrides:
             raise ValueError(f"{owner}.train_overrides.seed: the seeds come from --seeds")
