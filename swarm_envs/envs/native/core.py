@@ -153,12 +153,13 @@ class NativeSwarmNavCore:
         # The statistics the kernel does not write, and the task's success where it is
         # not the kernel's (arrival alone): evaluated on the state by their definitions.
         own_success = cfg.task != "mill"
+        # (Their indices into STATISTICS: the core pickles, the definitions need not.)
         self._extra = tuple(
-            s
-            for s in STATISTICS
+            i
+            for i, s in enumerate(STATISTICS)
             if s.name not in library.info.statistics or (s.name == "success" and not own_success)
         )
-        self._extra_pairs = any(s.pairwise for s in self._extra)
+        self._extra_pairs = any(STATISTICS[i].pairwise for i in self._extra)
         self._measure()
         self._prev, self._start = self.stats(), self.stats()
 
@@ -257,7 +258,7 @@ class NativeSwarmNavCore:
         stats = {key: packed[:, i].astype(self._wide[key]) for i, key in enumerate(STAT_KEYS)}
         if self._extra:
             frame = self._frame(packed)
-            for s in self._extra:
+            for s in (STATISTICS[i] for i in self._extra):
                 stats[s.name] = np.asarray(s.value(frame, self.cfg, NUMPY), self._wide[s.name])
         return stats
 
