@@ -12,11 +12,13 @@ modules:
 - :mod:`~swarm_envs.papers.mabrouk_mcinnes.common`: :class:`RunSetup` and the
   statistics helpers;
 - :mod:`~swarm_envs.papers.mabrouk_mcinnes.sweeps` (Figs. 1–10) and
-  :mod:`~swarm_envs.papers.mabrouk_mcinnes.navigation` (Fig. 11): one function per
-  figure, computing its numbers;
+  :mod:`~swarm_envs.papers.mabrouk_mcinnes.navigation` (Fig. 11, with the decay law
+  and the self-propelled mill of :mod:`~swarm_envs.papers.mabrouk_mcinnes.mill`): one
+  function per figure, computing its numbers;
 - :mod:`~swarm_envs.papers.mabrouk_mcinnes.claims`: what the paper states, as claims
   on those numbers;
-- :mod:`~swarm_envs.papers.mabrouk_mcinnes.plots`: the PNGs and the Fig. 11 GIF.
+- :mod:`~swarm_envs.papers.mabrouk_mcinnes.plots` and
+  :mod:`~swarm_envs.papers.mabrouk_mcinnes.plots_fig11`: the PNGs and the Fig. 11 GIF.
 
 Every ``fig*`` function runs the physics for several random seeds at once (leading
 batch dimension), and returns a plain, JSON-ready ``dict`` of numbers:
@@ -94,14 +96,23 @@ from swarm_envs.papers.mabrouk_mcinnes.common import (
     RELAX_SPEED,
     RunSetup,
 )
-from swarm_envs.papers.mabrouk_mcinnes.navigation import fig11_navigation
+from swarm_envs.papers.mabrouk_mcinnes.mill import (
+    MILL_ALPHA,
+    MILL_BETA,
+    fig11_decay_law,
+    fig11_self_propelled,
+)
+from swarm_envs.papers.mabrouk_mcinnes.navigation import fig11_navigation, fig11_reproduction
 from swarm_envs.papers.mabrouk_mcinnes.plots import (
     plot_fig1,
     plot_fig4_5,
     plot_fig6_8,
     plot_fig9,
     plot_fig10,
+)
+from swarm_envs.papers.mabrouk_mcinnes.plots_fig11 import (
     plot_fig11,
+    plot_fig11_decay,
     write_fig11_gif,
 )
 from swarm_envs.papers.mabrouk_mcinnes.sweeps import (
@@ -126,6 +137,8 @@ __all__ = [
     "DEFAULT_C_RATIOS",
     "DEFAULT_L_RATIOS",
     "FIGURES",
+    "MILL_ALPHA",
+    "MILL_BETA",
     "NAME",
     "NAV_GOAL",
     "NAV_SNAPSHOT_TIMES",
@@ -139,13 +152,17 @@ __all__ = [
     "fig6_8_alignment_sweep",
     "fig9_range_ratio_sweep",
     "fig10_amplitude_ratio_sweep",
+    "fig11_decay_law",
     "fig11_navigation",
+    "fig11_reproduction",
+    "fig11_self_propelled",
     "plot_fig1",
     "plot_fig4_5",
     "plot_fig6_8",
     "plot_fig9",
     "plot_fig10",
     "plot_fig11",
+    "plot_fig11_decay",
     "run",
     "write_fig11_gif",
 ]
@@ -159,31 +176,37 @@ TITLE = (
 
 @dataclass(frozen=True)
 class FigureSpec:
-    """One reproduced figure: how to compute it (full or quick), plot and animate it.
+    """One reproduced figure: how to compute it (full or quick), plot it, extra files.
 
-    ``animate(result, out, setup, quick)`` writes an extra file (a GIF) and returns
-    its path; ``None`` for the figures without one.
+    ``extras(result, out, setup, quick)`` writes further files (another PNG, a GIF)
+    into ``out`` and returns their paths; ``None`` for the figures without any.
     """
 
     name: str
     title: str
     compute: Callable[[RunSetup, bool], dict[str, Any]]
     plot: Callable[..., Path]
-    animate: Callable[[dict[str, Any], Path, RunSetup, bool], Path] | None = None
+    extras: Callable[[dict[str, Any], Path, RunSetup, bool], list[Path]] | None = None
 
 
 def _quick_values(values: Sequence[float]) -> tuple[float, ...]:
     return (values[0], values[len(values) // 2], values[-1])
 
 
-def _fig11_gif(result: dict[str, Any], out: Path, setup: RunSetup, quick: bool) -> Path:
-    return write_fig11_gif(
-        out / "fig11.gif",
-        setup=setup,
-        duration=result["setup"]["duration"],
-        frames=20 if quick else 64,
-        size=(120, 120) if quick else (300, 300),
-    )
+def _fig11_extras(result: dict[str, Any], out: Path, setup: RunSetup, quick: bool) -> list[Path]:
+    params = result["self_propelled"]["parameters"]
+    return [
+        plot_fig11_decay(result, out / "fig11_decay.png"),
+        write_fig11_gif(
+            out / "fig11.gif",
+            setup=setup,
+            duration=result["setup"]["duration"],
+            alpha=params["alpha"],
+            beta=params["beta"],
+            frames=20 if quick else 56,
+            size=(120, 120) if quick else (300, 300),
+        ),
+    ]
 
 
 FIGURES: dict[str, FigureSpec] = {
@@ -230,13 +253,14 @@ FIGURES: dict[str, FigureSpec] = {
         FigureSpec(
             "fig11",
             "navigation to a sink",
-            lambda s, q: fig11_navigation(
+            lambda s, q: fig11_reproduction(
                 setup=s,
                 duration=20.0 if q else 318.0,
                 snapshot_times=(0.0, 5.0, 10.0, 20.0) if q else NAV_SNAPSHOT_TIMES,
+                decay_duration=10.0 if q else 100.0,
             ),
             plot_fig11,
-            _fig11_gif,
+            _fig11_extras,
         ),
     )
 }
@@ -256,7 +280,8 @@ def run(
 
     Args:
         out_dir: where to write ``<fig>.json`` and ``<fig>.png`` per figure,
-            ``fig11.gif`` and ``summary.json``; ``None`` writes nothing.
+            ``fig11_decay.png``, ``fig11.gif`` and ``summary.json``; ``None`` writes
+            nothing.
         quick: :meth:`RunSetup.quick` sizes and three values per sweep (seconds).
         seeds: random initial conditions averaged over (``None``: 8, quick 2).
         only: figures of :data:`PARTS` to run (``None``: all). ``summary.json`` keeps
@@ -284,8 +309,8 @@ def run(
         if out is not None:
             written.append(write_json(out / f"{name}.json", doc))
             written.append(spec.plot(result, out / f"{name}.png"))
-            if spec.animate is not None:
-                written.append(spec.animate(result, out, setup, quick))
+            if spec.extras is not None:
+                written += spec.extras(result, out, setup, quick)
         parts[name] = PartResult(
             name=name,
             title=doc["title"],

@@ -21,6 +21,8 @@ __all__ = [
     "fig9_claims",
     "fig10_claims",
     "fig11_claims",
+    "fig11_decay_claims",
+    "fig11_mill_claims",
 ]
 
 _STATS = ("time_mean", "final")
@@ -200,5 +202,106 @@ def fig11_claims(
             expected="> 0.5 (rotating ring ≈ 1, random headings ≈ 0.18)",
             observed=f"{vortex_mean:.3g}",
             holds=vortex_mean > 0.5,
+        ),
+    ]
+
+
+def fig11_decay_claims(cases: Sequence[dict[str, Any]], *, rel_floor: float) -> list[Claim]:
+    """Fig. 11, linear friction: ``L_G`` follows ``L_G(0)(1 − β dt/m)^n`` to round-off.
+
+    A fact of the model, not a statement of the paper (``paper_form`` false): it is
+    why the paper's parameters cannot produce a lasting vortex. ``cases`` are the
+    entries of :func:`~swarm_envs.papers.mabrouk_mcinnes.mill.fig11_decay_law`.
+    """
+    dev = max(c["max_deviation_over_scale"] for c in cases)
+    rel = max(c["max_relative_error"] for c in cases)
+    labels = "; ".join(
+        f"{c['label']}: {c['max_relative_error']:.1e} / {c['max_deviation_over_scale']:.1e}"
+        for c in cases
+    )
+    return [
+        claim(
+            "with linear friction the angular momentum about G only decays, "
+            "L_G(t_n) = L_G(0)(1 − β dt/m)^n",
+            measure="goal angular momentum L_G = mean_i (r_i − G) × v_i",
+            statistic=f"max relative error while |prediction| ≥ {rel_floor:g}·S₀; "
+            "max |deviation|/S₀ (S₀ = mean_i |r_i − G||v_i| at t = 0); all seeds and cases",
+            expected="relative error < 1e-6 and deviation < 1e-12 (round-off)",
+            observed=f"{rel:.2e} and {dev:.2e} ({labels})",
+            holds=rel < 1e-6 and dev < 1e-12,
+            paper_form=False,
+        )
+    ]
+
+
+def fig11_mill_claims(
+    arrival: Sequence[float],
+    hold: dict[str, list[float]],
+    approach_milling: Sequence[float],
+    *,
+    goal_radius: float,
+    duration: float,
+    hold_from: float,
+    fraction: float = 0.5,
+    centred: float = 0.25,
+    milling: float = 0.8,
+) -> list[Claim]:
+    """Fig. 11 with self-propulsion: the swarm reaches the sink and holds a mill on it.
+
+    ``hold`` and ``approach_milling`` are the entries of
+    :func:`~swarm_envs.papers.mabrouk_mcinnes.mill.fig11_self_propelled`. Every
+    claim must hold in every seed. The first four count toward that run's own verdict;
+    the last (a vortex already during the approach) is reported beside them, since it
+    depends on whether the random start carries rotation.
+    """
+    n = len(arrival)
+    window = f"t ≥ {hold_from:g}, every sample, all seeds"
+    reached = sum(math.isfinite(a) for a in arrival)
+    v_t = min(hold["tangential_speed_over_v0_min"])
+    l_g = min(hold["L_G_over_R_v0_min"])
+    off = max(hold["centroid_distance_over_R_max"])
+    mill = min(hold["milling_min"])
+    n_vortex = sum(m > 0.5 for m in approach_milling if math.isfinite(m))
+    return [
+        claim(
+            "self-propelled: the swarm reaches the potential sink at G",
+            measure="centroid distance to G",
+            statistic=f"centroid within {goal_radius:g} by t = {duration:g}",
+            expected="all seeds",
+            observed=f"{reached}/{n} seeds",
+            holds=reached == n,
+        ),
+        claim(
+            "self-propelled: the swarm rotates about G and keeps rotating (a held mill)",
+            measure="σ·tangential speed / v₀ and σ·L_G / (R̄ v₀) about G (σ: sense)",
+            statistic=f"minimum over {window}",
+            expected=f"both > {fraction:g}",
+            observed=f"{v_t:.3g} and {l_g:.3g}",
+            holds=v_t > fraction and l_g > fraction,
+        ),
+        claim(
+            "self-propelled: the mill is centred on G",
+            measure="centroid distance to G / mean radius R̄ about G",
+            statistic=f"maximum over {window}",
+            expected=f"< {centred:g}",
+            observed=f"{off:.3g} (largest distance {max(hold['centroid_distance_max']):.3g})",
+            holds=off < centred,
+        ),
+        claim(
+            "self-propelled: the swarm has a vortex-like shape at the sink",
+            measure="angular_momentum (unit headings, about the centroid)",
+            statistic=f"minimum over {window}",
+            expected=f"> {milling:g} (rotating ring ≈ 1, random headings ≈ 0.18)",
+            observed=f"{mill:.3g}",
+            holds=mill > milling,
+        ),
+        claim(
+            "self-propelled: the swarm is already a vortex while approaching",
+            measure="angular_momentum (unit headings, about the centroid)",
+            statistic="mean from t = 5 to arrival, per seed",
+            expected="> 0.5 in all seeds",
+            observed=f"{n_vortex}/{n} seeds",
+            holds=n_vortex == n,
+            paper_form=False,
         ),
     ]

@@ -1,4 +1,9 @@
-"""The numbers of Mabrouk & McInnes' Fig. 11: a swarm navigating to a potential sink."""
+"""The numbers of Mabrouk & McInnes' Fig. 11: a swarm navigating to a potential sink.
+
+:func:`fig11_navigation` is the paper's run (linear friction ``β = 1``);
+:func:`fig11_reproduction` puts it together with the decay law of the angular momentum
+and the self-propelled mill (:mod:`~swarm_envs.papers.mabrouk_mcinnes.mill`).
+"""
 
 from __future__ import annotations
 
@@ -13,9 +18,15 @@ from swarm_envs.papers.claims import verdict
 from swarm_envs.papers.mabrouk_mcinnes import common
 from swarm_envs.papers.mabrouk_mcinnes.claims import fig11_claims
 from swarm_envs.papers.mabrouk_mcinnes.common import NAV_GOAL, NAV_SNAPSHOT_TIMES, RunSetup
+from swarm_envs.papers.mabrouk_mcinnes.mill import (
+    MILL_ALPHA,
+    MILL_BETA,
+    fig11_decay_law,
+    fig11_self_propelled,
+)
 from swarm_envs.physics import SocialPotentialParams
 
-__all__ = ["fig11_navigation", "fig11_seed0_positions"]
+__all__ = ["fig11_navigation", "fig11_reproduction"]
 
 
 def fig11_navigation(
@@ -141,22 +152,62 @@ def fig11_navigation(
     }
 
 
-def fig11_seed0_positions(
+def _tagged(claims: list[dict[str, Any]], part: str, *, extra: bool) -> list[dict[str, Any]]:
+    return [c | {"part": part} | ({"paper_form": False} if extra else {}) for c in claims]
+
+
+def fig11_reproduction(
     *,
     setup: RunSetup | None = None,
     goal: Sequence[float] = NAV_GOAL,
     duration: float = 318.0,
+    snapshot_times: Sequence[float] = NAV_SNAPSHOT_TIMES,
+    decay_duration: float = 100.0,
+    alpha: float = MILL_ALPHA,
+    beta: float = MILL_BETA,
     n_agents: int = 31,
-) -> np.ndarray:
-    """Positions ``(T + 1, N, 2)`` of seed 0 of :func:`fig11_navigation` (re-simulated)."""
+) -> dict[str, Any]:
+    """Fig. 11 in three parts: the paper's run, the decay law, the self-propelled mill.
+
+    - ``linear_friction``: :func:`fig11_navigation`, the paper's parameters (β = 1).
+    - ``decay_law``: :func:`~swarm_envs.papers.mabrouk_mcinnes.mill.fig11_decay_law`
+      over ``decay_duration``: with linear friction the angular momentum about ``G``
+      is ``L_G(0)(1 − β dt/m)^n`` exactly, so no lasting vortex can appear.
+    - ``self_propelled``: :func:`~swarm_envs.papers.mabrouk_mcinnes.mill.
+      fig11_self_propelled`, the same swarm with the Rayleigh term (``α``, ``β_R =
+      beta``) instead of ``−βv``: it reaches the sink and holds a mill centred on it.
+
+    ``claims`` lists all of them, each with a ``part`` key. The ``verdict`` counts the
+    paper-model claims only (those of ``linear_friction``); the decay law is a fact of
+    the model and the self-propelled run adds an ingredient the paper does not have,
+    so their claims are extras here; ``self_propelled_verdict`` is the verdict of the
+    self-propelled run's own claims.
+    """
     setup = common.setup_for(setup)
-    x0, v0 = setup.initial(n_agents=n_agents)
-    xs, _ = common.run_physics(
-        SocialPotentialParams.navigation(),
-        x0[0],
-        v0[0],
-        dt=setup.dt,
-        duration=duration,
-        goal=np.asarray(goal, dtype=np.float64),
+    nav = fig11_navigation(
+        setup=setup, goal=goal, duration=duration, snapshot_times=snapshot_times,
+        n_agents=n_agents,
+    )  # fmt: skip
+    decay = fig11_decay_law(setup=setup, goal=goal, duration=decay_duration, n_agents=n_agents)
+    mill = fig11_self_propelled(
+        setup=setup, goal=goal, duration=duration, snapshot_times=snapshot_times,
+        alpha=alpha, beta=beta, n_agents=n_agents,
+    )  # fmt: skip
+    claims = (
+        _tagged(nav["claims"], "linear_friction", extra=False)
+        + _tagged(decay["claims"], "decay_law", extra=True)
+        + _tagged(mill["claims"], "self_propelled", extra=True)
     )
-    return xs
+    return {
+        "figure": "fig11",
+        "title": "Navigation to a potential sink (N = 31)",
+        "paper": nav["paper"],
+        "setup": nav["setup"],
+        "goal": nav["goal"],
+        "linear_friction": nav,
+        "decay_law": decay,
+        "self_propelled": mill,
+        "claims": claims,
+        "verdict": verdict(claims),
+        "self_propelled_verdict": mill["verdict"],
+    }

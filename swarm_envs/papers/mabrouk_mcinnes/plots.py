@@ -1,9 +1,9 @@
-"""Plots of Mabrouk & McInnes' figures (PNG, matplotlib) and the Fig. 11 animation (GIF).
+"""Plots of Mabrouk & McInnes' Figs. 1–10 (PNG, matplotlib); Fig. 11 is in ``plots_fig11``.
 
 Every ``plot_*`` function draws the ``dict`` its figure function returned (or the
 figure's JSON file, loaded) and writes a PNG; matplotlib is imported inside the
-functions only. :func:`write_fig11_gif` re-simulates seed 0 of Fig. 11 and draws it
-with :mod:`swarm_envs.render`.
+functions only. :func:`figure` and :func:`save` are shared with
+:mod:`~swarm_envs.papers.mabrouk_mcinnes.plots_fig11`.
 """
 
 from __future__ import annotations
@@ -14,18 +14,15 @@ from typing import Any
 
 import numpy as np
 
-from swarm_envs.papers.mabrouk_mcinnes.common import NAV_GOAL, RunSetup
-from swarm_envs.papers.mabrouk_mcinnes.navigation import fig11_seed0_positions
-
 __all__ = [
     "LABELS",
+    "figure",
     "plot_fig1",
     "plot_fig4_5",
     "plot_fig6_8",
     "plot_fig9",
     "plot_fig10",
-    "plot_fig11",
-    "write_fig11_gif",
+    "save",
 ]
 
 #: Axis labels of the statistics.
@@ -41,7 +38,8 @@ LABELS = {
 }
 
 
-def _figure(width: float, height: float, ncols: int, nrows: int = 1):
+def figure(width: float, height: float, ncols: int, nrows: int = 1) -> tuple[Any, Any]:
+    """A constrained-layout matplotlib figure and its ``(nrows, ncols)`` axes array."""
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(width, height), layout="constrained")
@@ -49,7 +47,8 @@ def _figure(width: float, height: float, ncols: int, nrows: int = 1):
     return fig, axes
 
 
-def _save(fig: Any, path: str | Path, dpi: int) -> Path:
+def save(fig: Any, path: str | Path, dpi: int) -> Path:
+    """Write ``fig`` to ``path`` (parent folders created) and return the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=dpi)
@@ -64,7 +63,7 @@ def _errorline(ax: Any, x: Sequence[float], stat: dict[str, list[float]], key: s
 
 def plot_fig1(result: dict[str, Any], path: str | Path, *, dpi: int = 80) -> Path:
     """Fig. 1 as three panels: eq. 2 polarization over time per β; both forms vs β."""
-    fig, axes = _figure(11.5, 3.4, 3)
+    fig, axes = figure(11.5, 3.4, 3)
     ax0, ax1, ax2 = axes[0]
     betas = result["x"]["values"]
     ts = result["time_series"]
@@ -91,12 +90,12 @@ def plot_fig1(result: dict[str, Any], path: str | Path, *, dpi: int = 80) -> Pat
     ax1.set_yscale("log")
     ax1.set_ylim(bottom=1e-10)  # below: rounding noise of a momentum that is zero
     fig.suptitle("Fig. 1 — polarization vs dissipation β (mean ± sd over seeds)", fontsize=10)
-    return _save(fig, path, dpi)
+    return save(fig, path, dpi)
 
 
 def plot_fig4_5(result: dict[str, Any], path: str | Path, *, dpi: int = 80) -> Path:
     """Figs. 4–5: spherical variance, eq. 3 and unit angular momentum vs time, per β."""
-    fig, axes = _figure(11.5, 3.4, 3)
+    fig, axes = figure(11.5, 3.4, 3)
     t = np.asarray(result["t"])
     for run, color in zip(result["runs"], ("tab:blue", "tab:red"), strict=False):
         for ax, name in zip(
@@ -117,12 +116,12 @@ def plot_fig4_5(result: dict[str, Any], path: str | Path, *, dpi: int = 80) -> P
         ax.title.set_fontsize(9)
         ax.legend(fontsize=7)
     fig.suptitle("Figs. 4–5 — β = 0.01 vs β = 1.8 (mean ± sd over seeds)", fontsize=10)
-    return _save(fig, path, dpi)
+    return save(fig, path, dpi)
 
 
 def plot_fig6_8(result: dict[str, Any], path: str | Path, *, dpi: int = 80) -> Path:
     """Figs. 6–8: angular momentum, polarization, expanse and NND vs ``C_o``."""
-    fig, axes = _figure(11.5, 3.4, 3)
+    fig, axes = figure(11.5, 3.4, 3)
     x = result["x"]["values"]
     m = result["metrics"]
     panels = (
@@ -148,13 +147,13 @@ def plot_fig6_8(result: dict[str, Any], path: str | Path, *, dpi: int = 80) -> P
     ax.set(xlabel="C_o", title="Fig. 8 — expanse and average NND")
     ax.legend(fontsize=6)
     fig.suptitle("Figs. 6–8 — alignment strength C_o (β = 0.1; mean ± sd over seeds)", fontsize=10)
-    return _save(fig, path, dpi)
+    return save(fig, path, dpi)
 
 
 def _plot_ratio(
     result: dict[str, Any], path: str | Path, dpi: int, keys: tuple[str, str], title: str
 ) -> Path:
-    fig, axes = _figure(9.0, 3.4, 2)
+    fig, axes = figure(9.0, 3.4, 2)
     x = result["x"]["values"]
     for ax, stat in zip(axes[0], ("final", "time_mean"), strict=True):
         for key, ls in zip(keys, ("-", "--"), strict=True):
@@ -166,7 +165,7 @@ def _plot_ratio(
         ax.set(xlabel=result["x"]["name"], title=f"{stat.replace('_', ' ')} of the run")
         ax.legend(fontsize=7)
     fig.suptitle(title, fontsize=10)
-    return _save(fig, path, dpi)
+    return save(fig, path, dpi)
 
 
 def plot_fig9(result: dict[str, Any], path: str | Path, *, dpi: int = 80) -> Path:
@@ -183,122 +182,3 @@ def plot_fig10(result: dict[str, Any], path: str | Path, *, dpi: int = 80) -> Pa
         result, path, dpi, ("vary_C_r", "vary_C_a"),
         "Fig. 10 — amplitude ratio C = C_r/C_a (l = 0.2, β = 0.1; mean ± sd over seeds)",
     )  # fmt: skip
-
-
-def plot_fig11(result: dict[str, Any], path: str | Path, *, dpi: int = 80) -> Path:
-    """Fig. 11: overview of the approach, zoomed snapshots of seed 0, and time series."""
-    snaps = result["snapshots"]
-    n_snap = len(snaps["t"])
-    ncols = 4
-    nrows = 2
-    fig, axes = _figure(12.0, 6.0, ncols, nrows)
-    flat = list(axes.ravel())
-    g = np.asarray(result["goal"])
-    radius = result["goal_radius"]
-    overview = flat[0]
-    ts = result["time_series"]
-    path_c = np.asarray(ts["centroid_path_seed0"])
-    overview.plot(path_c[:, 0], path_c[:, 1], color="0.6", lw=0.8)
-    pos = np.asarray(snaps["positions_seed0"])
-    for k in range(n_snap):
-        overview.scatter(pos[k, :, 0], pos[k, :, 1], s=2, label=f"t = {snaps['t'][k]:g}")
-    overview.plot(*g, marker="x", color="tab:red", ms=8, mew=2)
-    overview.add_patch(_circle(g, radius))
-    overview.set_aspect("equal", adjustable="datalim")
-    overview.set_title("seed 0 at the snapshot times; G = ×", fontsize=8)
-    overview.legend(fontsize=5, markerscale=3)
-    panels = flat[1 : 1 + min(n_snap, 6)]
-    vel = np.asarray(snaps["velocities_seed0"])
-    for ax, k in zip(panels, range(n_snap), strict=False):
-        p = pos[k]
-        c = p.mean(axis=0)
-        ax.scatter(p[:, 0], p[:, 1], s=8)
-        speed = np.linalg.norm(vel[k], axis=-1, keepdims=True)
-        u = vel[k] / np.maximum(speed, 1e-12)
-        ax.quiver(p[:, 0], p[:, 1], u[:, 0], u[:, 1], angles="xy", scale=25, width=0.006,
-                  color="0.4")  # fmt: skip
-        half = max(0.8, 1.3 * float(np.abs(p - c).max()))
-        ax.set_xlim(c[0] - half, c[0] + half)
-        ax.set_ylim(c[1] - half, c[1] + half)
-        ax.set_aspect("equal")
-        if np.all(np.abs(g - c) <= half):
-            ax.plot(*g, marker="x", color="tab:red", ms=8, mew=2)
-            ax.add_patch(_circle(g, radius))
-        d = snaps["metrics"]["centroid_distance"][k]
-        am = snaps["metrics"]["angular_momentum"][k]
-        ax.set_title(f"t = {snaps['t'][k]:g}: |c − G| = {d:.2f}, L̂ = {am:.2f}", fontsize=8)
-        ax.tick_params(labelsize=6)
-    ax = flat[-1]
-    ax.plot(ts["t"], ts["centroid_distance"], color="tab:blue", label="|centroid − G|")
-    ax.set(xlabel="t", ylabel="distance")
-    twin = ax.twinx()
-    ss = result["sampled_series"]
-    twin.plot(ss["t"], ss["angular_momentum"], color="tab:orange", label="unit ang. mom.")
-    twin.plot(ss["t"], ss["polarization"], color="tab:green", label="unit polarization")
-    twin.set_ylim(0, 1.05)
-    lines = ax.get_legend_handles_labels()
-    lines2 = twin.get_legend_handles_labels()
-    ax.legend(lines[0] + lines2[0], lines[1] + lines2[1], fontsize=6, loc="center left")
-    ax.set_title("seed means", fontsize=8)
-    for extra in flat[1 + min(n_snap, 6) : -1]:
-        extra.set_axis_off()
-    fig.suptitle(
-        "Fig. 11 — navigation to a sink (N = 31, C_g = 15, l_g = 5, C_o = 0.7, β = 1)",
-        fontsize=10,
-    )
-    return _save(fig, path, dpi)
-
-
-def _circle(center: np.ndarray, radius: float) -> Any:
-    from matplotlib.patches import Circle
-
-    return Circle(tuple(center), radius, fill=False, color="tab:red", lw=0.8)
-
-
-def write_fig11_gif(
-    path: str | Path,
-    *,
-    setup: RunSetup | None = None,
-    goal: Sequence[float] = NAV_GOAL,
-    duration: float = 318.0,
-    goal_radius: float = 1.0,
-    n_agents: int = 31,
-    frames: int = 64,
-    size: tuple[int, int] = (300, 300),
-    fps: float = 12,
-) -> Path:
-    """GIF of seed 0 of Fig. 11 (the same initial condition, re-simulated).
-
-    The view is centred between the swarm's centroid and the goal and zooms in as the
-    swarm approaches (half-width ``0.6·distance + 1.5``), so that the goal stays in
-    view and the swarm's shape becomes visible near the sink. The ``frames`` frames
-    are spaced evenly in a progress variable that mixes elapsed time and distance
-    covered (half each), so the slow far-away drift does not take up the whole
-    animation; each frame has a trail of the previous four frames' positions.
-    """
-    from swarm_envs.render import Viewport, draw_swarm, write_gif
-
-    g = np.asarray(goal, dtype=np.float64)
-    xs = fig11_seed0_positions(setup=setup, goal=g, duration=duration, n_agents=n_agents)
-    centres = xs.mean(axis=1)
-    dist = np.linalg.norm(centres - g, axis=-1)
-    covered = np.maximum.accumulate(dist[0] - dist)
-    span = max(float(covered[-1]), 1e-12)
-    progress = 0.5 * np.arange(dist.size) / max(1, dist.size - 1) + 0.5 * covered / span
-    pick = np.unique(np.searchsorted(progress, np.linspace(0.0, progress[-1], frames)))
-    pick = np.minimum(pick, dist.size - 1)
-    images = []
-    for k, i in enumerate(pick):
-        vp = Viewport(center=tuple((centres[i] + g) / 2), half_width=0.6 * dist[i] + 1.5, size=size)
-        trail = xs[pick[max(0, k - 4) : k]] if k > 0 else None
-        images.append(
-            draw_swarm(
-                xs[i],
-                goal=g,
-                goal_radius=goal_radius,
-                trails=trail,
-                viewport=vp,
-                agent_radius_px=max(2.0, min(size) / 110),
-            )
-        )
-    return write_gif(images, path, fps=fps, max_frames=None)
