@@ -95,13 +95,16 @@ def task_config(task: str, **overrides: Any) -> Any:
 
 
 def informed_count(fraction: float, n_agents: int) -> int:
-    """How many of ``n_agents`` observe the goal: ``⌊fraction · N⌋`` (to round-off), at
-    least one.
+    """How many of ``n_agents`` observe the goal: ``fraction · N`` rounded to the nearest
+    whole agent (halves up), at least one. A range ``[0.1, 0.3]`` of 10 agents thus
+    gives 1, 2 or 3 informed agents (a quarter, a half and a quarter of the episodes).
 
     >>> informed_count(0.1, 10), informed_count(0.3, 10), informed_count(0.05, 10)
     (1, 3, 1)
+    >>> informed_count(0.24, 10), informed_count(0.25, 10)
+    (2, 3)
     """
-    return max(1, min(n_agents, math.floor(fraction * n_agents + 1e-9)))
+    return max(1, min(n_agents, math.floor(fraction * n_agents + 0.5 + 1e-9)))
 
 
 __all__ = [

@@ -73,7 +73,14 @@ def test_registered_ids_and_modules_run_their_task():
 
 
 def test_informed_counts_and_draws_are_seeded_and_in_range():
-    assert [informed_count(f, 10) for f in (0.05, 0.1, 0.29, 0.3, 1.0)] == [1, 1, 2, 3, 10]
+    assert [informed_count(f, 10) for f in (0.01, 0.1, 0.149, 0.15, 0.3, 1.0)] == [
+        1,
+        1,
+        1,
+        2,
+        3,
+        10,
+    ]
     cfg = task_config("informed", informed_fraction=[0.1, 0.5])
     a = draw_informed(cfg, np.random.default_rng(3), 200)
     b = draw_informed(cfg, np.random.default_rng(3), 200)

@@ -63,7 +63,7 @@ SWARM_NAV_DOC = """
     - ``"navigation"`` (``swarm_envs/SwarmNav-v0``): gather inside the goal radius.
     - ``"informed"`` (``swarm_envs/SwarmInformed-v0``): the same, when only a fraction
       ``informed_fraction`` of each swarm (default 0.3; a ``[low, high]`` range is
-      drawn per episode; ``⌊f·N⌋`` agents, at least one, drawn per episode) observes
+      drawn per episode; ``f·N`` agents rounded, at least one, drawn per episode) observes
       the goal. The others read zeros for the goal offset; every agent observes its
       own informed flag and each neighbour's (below). Couzin's informed individuals
       (Naterop §4.1): the analytic baselines act through the informed agents only.

@@ -1,6 +1,6 @@
 """Who observes the goal in the informed task (``task="informed"``), drawn per episode.
 
-Each swarm's informed agents are ``⌊f·N⌋`` of them (at least one;
+Each swarm's informed agents are ``f·N`` of them, rounded (at least one;
 :func:`~swarm_envs.tasks.informed_count`), chosen uniformly, with ``f`` the config's
 ``informed_fraction`` or, for a ``[low, high]`` range, drawn uniformly from it. An
 agent that is not informed sees zeros for the goal offset; every agent sees its own
@@ -20,7 +20,7 @@ def draw_informed(task: Any, rng: np.random.Generator, n_swarms: int) -> np.ndar
     """Which agents of ``n_swarms`` new swarms are informed, ``(n, N)`` bool.
 
     Per swarm, in this order: the fraction (only for a range), then one permutation of
-    the agents, whose first ``⌊f·N⌋`` are informed.
+    the agents, whose first :func:`~swarm_envs.tasks.informed_count` are informed.
 
     >>> from swarm_envs.tasks import task_config
     >>> cfg = task_config("informed", informed_fraction=0.3)
