@@ -67,11 +67,15 @@ def test_every_backend_runs_the_default_and_the_navigation_configs(variant):
         assert check(variant, cfg) == []
 
 
-#: Configs whose steps take several substeps, and one with a cap that some steps exceed
-#: (their episodes truncated and reset, as the VecEnv resets them).
+#: Configs whose steps take several substeps (one of them a self-propelled swarm started
+#: fast: the Rayleigh term's rate), and one with a cap that some steps exceed (their
+#: episodes truncated and reset, as the VecEnv resets them).
 SUBSTEP_CONFIGS = (
     SwarmConfig(n_agents=24, dt=0.3),
     SwarmConfig(n_agents=10, dt=0.5, dim=3, goal_in_physics=True),
+    SwarmConfig(
+        n_agents=10, n_neighbors=3, dt=0.3, init_speed=4.0, physics=SocialPotentialParams(alpha=1.0)
+    ),
     SwarmConfig(n_agents=10, dt=0.5, max_substeps=4, on_unstable="truncate"),
 )
 
@@ -137,6 +141,18 @@ PERTURBED_CONFIGS = (
         max_steps=8,
         perturbations=Perturbations(
             failed_fraction=[0.1, 0.3], failure_mode="removed", failure_time=2, obs_noise=0.1
+        ),
+    ),
+    SwarmConfig(  # self-propelled: passive failed agents and joining ones cruise too
+        n_agents=10,
+        n_neighbors=2,
+        max_steps=8,
+        init_radius=3.0,
+        init_speed=2.0,
+        observe_status=True,
+        physics=SocialPotentialParams(alpha=0.5, beta=0.5),
+        perturbations=Perturbations(
+            failed_fraction=0.3, failure_time=[0, 3], join_fraction=0.2, join_time=[1, 5]
         ),
     ),
 )

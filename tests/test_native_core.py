@@ -507,9 +507,9 @@ def test_the_kernel_declares_what_it_implements():
     assert set(info.statistics) <= set(contract.PACKED_COLUMNS)
     from swarm_envs.physics import SocialPotentialParams
 
-    # every field but self-propulsion, which the C step refuses (test_self_propulsion.py)
+    # every field, self-propulsion included (test_self_propulsion.py)
     fields = {f.name for f in dataclasses.fields(SocialPotentialParams)}
-    assert set(info.physics) == fields - {"alpha"}
+    assert set(info.physics) == fields
 
 
 # --------------------------------------------------------------------------- build

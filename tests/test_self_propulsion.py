@@ -1,6 +1,6 @@
-"""Self-propulsion (docs/models.md §1.2): the Rayleigh term ``(α − β|v|²) v`` in place of
-the linear friction, its fixed speed, its energy balance, its step-size rate, and the
-backends that run it or refuse it."""
+"""Self-propulsion (docs/models.md §1.7): the Rayleigh term ``(α − β|v|²) v`` in place of
+the linear friction, its fixed speed, its energy balance, its step-size rate, and every
+backend that runs it (numpy, torch, sparse and the C step) against the numpy core."""
 
 from __future__ import annotations
 
@@ -10,10 +10,12 @@ import warnings
 
 import numpy as np
 import pytest
+from helpers import CORE_TOL, assert_same_status_rollout, status_perturbations, status_rollout
 
 from swarm_envs.config import SwarmConfig, load_swarm_config
 from swarm_envs.envs.backends import unsupported
 from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.native import native_support
 from swarm_envs.physics import SocialPotentialParams, energy, forces, pair_geometry, simulate
 from swarm_envs.physics.integrators import STEP_SAFETY, euler_update, stable_substep
 from swarm_envs.physics.social_potential import (
@@ -260,13 +262,6 @@ def test_the_numpy_core_steps_a_fast_self_propelled_swarm_to_cruise():
 # --------------------------------------------------------------------------- backends
 
 
-def test_the_c_step_refuses_self_propulsion_with_a_reason():
-    cfg = _active_config()
-    why = unsupported(cfg, "native")
-    assert why is not None and "physics.alpha" in why
-    assert "alpha" not in str(unsupported(_active_config(physics=ACTIVE_OFF), "native"))
-
-
 def _rollout(core, steps: int = 25) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     core.reset(np.random.default_rng(6))
     rng = np.random.default_rng(7)
@@ -310,18 +305,123 @@ def test_the_sparse_core_matches_the_numpy_core(integrator):
         np.testing.assert_allclose(a, b, rtol=1e-7, atol=1e-7)
 
 
-def test_the_env_takes_physics_alpha_and_falls_back_from_the_c_step(monkeypatch):
+#: Self-propelled configs for the C step: a fast start (the Rayleigh rate ``3β|v|²``
+#: asks for several substeps), a lone slow agent without stiffness (a negative rate:
+#: ``h* = inf``, one substep) and 3-D with the passive sink and without alignment.
+C_CONFIGS = {
+    "fast": SwarmConfig(n_agents=12, dt=0.3, init_speed=6.0, physics=ACTIVE),
+    "lone-slow": SwarmConfig(
+        n_agents=1, dt=0.5, init_speed=0.2, physics=dataclasses.replace(ACTIVE, C_g=0.0)
+    ),
+    "3d-sink": SwarmConfig(
+        n_agents=9,
+        dim=3,
+        dt=0.3,
+        init_speed=5.0,
+        goal_in_physics=True,
+        physics=dataclasses.replace(ACTIVE, C_o=0.0),
+    ),
+}
+
+
+NATIVE, WHY_NOT = native_support()
+needs_native = pytest.mark.skipif(not NATIVE, reason=f"C step unavailable: {WHY_NOT}")
+
+
+@needs_native
+@pytest.mark.parametrize("dtype", [np.float64, np.float32], ids=["f64", "f32"])
+@pytest.mark.parametrize(
+    ("name", "arch"),
+    [(name, None) for name in C_CONFIGS] + [("fast", "x86-64-v3"), ("3d-sink", "x86-64-v3")],
+    ids=lambda v: v or "native",
+)
+def test_the_c_step_matches_the_numpy_core(monkeypatch, name, arch, dtype):
+    """Step by step against the numpy core in the same dtype: the substep counts (from
+    the carried ``h*`` with the Rayleigh rate) exactly, ``h*``, the state, the
+    observations, the statistics and the rewards to round-off (float32: to 2e-4); also
+    in the portable build (no AVX-512 branches)."""
+    from swarm_envs.envs.native import NativeSwarmNavCore, build
+
+    if arch is not None:
+        monkeypatch.setenv(build.ARCH_ENV, arch)
+    cfg = C_CONFIGS[name]
+    assert unsupported(cfg, "native") is None
+    B, N, d = 4, cfg.n_agents, cfg.dim
+    core, ref = NativeSwarmNavCore(cfg, B, dtype), SwarmNavCore(cfg, B, dtype)
+    core.reset(np.random.default_rng(0))
+    ref.reset(np.random.default_rng(0))
+    tol = CORE_TOL[dtype]
+    h_rtol = 1e-12 if dtype == np.float64 else 1e-4
+    counts, hs = [], [core._h.copy()]
+    for a in np.random.default_rng(1).uniform(-1, 1, (10, B, N, d)).astype(dtype):
+        got, want = core.step(a), ref.step(a)
+        np.testing.assert_array_equal(got[3]["substeps"], want[3]["substeps"])
+        np.testing.assert_array_equal(got[3]["unstable"], want[3]["unstable"])
+        np.testing.assert_array_equal(got[1], want[1])
+        np.testing.assert_array_equal(got[2], want[2])
+        np.testing.assert_allclose(got[0], want[0], **tol, err_msg="reward")
+        for key, value in got[3].items():
+            np.testing.assert_allclose(value, want[3][key], **tol, err_msg=key)
+        np.testing.assert_allclose(core.x, ref.x, **tol, err_msg="x")
+        np.testing.assert_allclose(core.v, ref.v, **tol, err_msg="v")
+        np.testing.assert_allclose(core.observe(), ref.observe(), **tol, err_msg="observations")
+        np.testing.assert_allclose(core._h, ref.dynamics._h_stable, rtol=h_rtol)
+        counts.append(got[3]["substeps"])
+        hs.append(core._h.copy())
+    assert np.array(counts).min() >= 1
+    if name == "lone-slow":  # slower than v₀/√3 and nothing stiff: any step is stable
+        assert np.isinf(hs).any() and np.isfinite(hs).any()
+    else:
+        assert np.max(counts) > 1
+
+
+@needs_native
+@pytest.mark.parametrize("dtype", [np.float64, np.float32], ids=["f64", "f32"])
+@pytest.mark.parametrize("kind", ["removed", "frozen", "passive", "joining"])
+def test_the_c_step_with_statuses_matches_the_numpy_core(kind, dtype):
+    """Failed, frozen, removed and joining agents in a fast self-propelled swarm, with
+    observed statuses: the C step against the numpy core in float64 (float64 to
+    round-off, float32 to 2e-3), every statistic (substeps included) and observation."""
+    from swarm_envs.envs.backends import make_core
+
+    perturbations, statuses = status_perturbations()[kind]
+    cfg = SwarmConfig(
+        n_agents=10,
+        n_neighbors=6,
+        max_steps=6,
+        dt=0.2,
+        init_speed=4.0,
+        collision_radius=0.6,
+        observe_status=True,
+        perturbations=perturbations,
+        physics=ACTIVE,
+    )
+    runs = []
+    for backend, dt in (("native", dtype), ("numpy", np.float64)):
+        core = make_core(dataclasses.replace(cfg, backend=backend), 3, dt)
+        assert core.backend == backend
+        runs.append(status_rollout(core, cfg.n_agents, cfg.dim, 14, dt))
+    (got, seen), (want, ref_seen) = runs
+    assert seen == ref_seen and statuses <= seen
+    assert max(stats["substeps"].max() for _, _, stats in want) > 1
+    tol = dict(rtol=1e-9, atol=1e-9) if dtype == np.float64 else dict(rtol=2e-3, atol=2e-3)
+    assert_same_status_rollout(got, want, tol)
+
+
+def test_the_env_takes_physics_alpha_on_every_backend_it_runs_on():
     from swarm_envs import swarm_nav_v0
     from swarm_envs.envs import backends
 
-    if backends.unsupported(SwarmConfig(), "native"):
-        pytest.skip(f"C step unavailable: {backends.unsupported(SwarmConfig(), 'native')}")
-    monkeypatch.setattr(backends, "_WARNED", set())
-    with pytest.warns(UserWarning, match=r"backend 'native' cannot run .*physics\.alpha"):
+    native = NATIVE and backends.unsupported(SwarmConfig(), "native") is None
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no fallback warning: the C step runs it
         env = swarm_nav_v0.parallel_env(
-            n_agents=5, backend="native", physics={"alpha": 1.0, "beta": 0.25}
+            n_agents=5,
+            backend="native" if native else "numpy",
+            physics={"alpha": 1.0, "beta": 0.25},
         )
-    assert env.core.backend == "numpy" and env.core.cfg.physics.cruise_speed == 2.0
+    assert env.core.backend == ("native" if native else "numpy")
+    assert env.core.cfg.physics.cruise_speed == 2.0
     obs, _ = env.reset(seed=0)
     actions = {agent: np.zeros(2, np.float32) for agent in env.agents}
     obs, *_ = env.step(actions)

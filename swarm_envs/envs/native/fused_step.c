@@ -36,7 +36,7 @@
 double exp(double);
 
 /* What this kernel implements (read by swarm_envs.envs.native.contract.KernelInfo). */
-#define KERNEL_PHYSICS "C_a C_r l_a l_r C_o l_o beta C_g l_g m"
+#define KERNEL_PHYSICS "C_a C_r l_a l_r C_o l_o beta C_g l_g m alpha"
 #define KERNEL_STATS                                                                        \
     "polarization angular_momentum expanse nearest_neighbor_distance energy "              \
     "fraction_arrived collisions centroid_distance mean_goal_distance success substeps "   \

@@ -146,6 +146,13 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
     const REAL omega2_sink =
         (REAL)(P->physics_C_g / (P->physics_l_g * P->physics_l_g * P->physics_m));
     const REAL gamma_still = (REAL)(P->physics_beta / P->physics_m);
+    /* Self-propulsion (social_potential.dissipation and dissipation_rate): with α > 0
+     * the Rayleigh term (α − β|v_i|²) v_i replaces the friction −β v_i, and the damping
+     * rate 3β max_i |v_i|² − α (which may be negative) replaces β. */
+    const int rayleigh = P->physics_alpha > 0;
+    const REAL alpha = (REAL)P->physics_alpha;
+    const REAL three_beta = (REAL)(3.0 * P->physics_beta);
+    const int friction = !rayleigh && beta > 0;
     const double cap = (double)P->max_substeps;
     const int same_decay = l_a == l_r, alignment = C_o > 0;
     const REAL Nr = (REAL)N;
@@ -410,10 +417,26 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
             }
         }
 
-        /* Dissipation, then the goal sink (eqs. 19-20), in the numpy core's order. */
+        /* Dissipation, then the goal sink (eqs. 19-20), in the numpy core's order. The
+         * Rayleigh term also takes the largest squared speed for the damping rate (NaN
+         * kept, as numpy's max keeps it). */
+        REAL speed2_max = 0;
+        int speed_nan = 0;
+        if (rayleigh) {
+#pragma omp simd reduction(max : speed2_max) reduction(| : speed_nan)
+            for (int64_t i = 0; i < N; i++) {
+                REAL s2 = vs[i] * vs[i];
+                for (int64_t c = 1; c < d; c++) s2 = s2 + vs[c * S + i] * vs[c * S + i];
+                const REAL gain = alpha - beta * s2;
+                for (int64_t c = 0; c < d; c++)
+                    fs[c * S + i] = fs[c * S + i] + gain * vs[c * S + i];
+                speed2_max = s2 > speed2_max ? s2 : speed2_max;
+                speed_nan |= s2 != s2;
+            }
+        }
         for (int64_t c = 0; c < d; c++)
             for (int64_t i = 0; i < N; i++) {
-                if (beta > 0) fs[c * S + i] = fs[c * S + i] - beta * vs[c * S + i];
+                if (friction) fs[c * S + i] = fs[c * S + i] - beta * vs[c * S + i];
                 off[c * S + i] = g[c] - xs[c * S + i];
             }
 #pragma omp simd
@@ -435,7 +458,8 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
         /* The stable substep of the new state (pair_rates, then STABLE_SUBSTEP, in
          * REAL as numpy computes them in the state's dtype): ω² = (2/m) max_i Σ_j κ_ij
          * (+ the sink's C_g/(l_g² m) where it acts passively), γ = (β + 2 max_i Σ_j
-         * w_ij)/m; a NaN sum makes ω² NaN, as numpy's max keeps a NaN. */
+         * w_ij)/m, with β replaced by 3β max_i |v_i|² − α under self-propulsion; a NaN
+         * sum or speed makes ω² NaN (h* is then inf, as numpy's is for a NaN rate). */
         REAL kmax = 0, wmax = 0;
         int nan = 0;
 #pragma omp simd reduction(max : kmax, wmax) reduction(| : nan)
@@ -444,10 +468,15 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
             wmax = ws[i] > wmax ? ws[i] : wmax;
             nan |= (ks[i] != ks[i]) | (ws[i] != ws[i]);
         }
-        REAL omega2 = nan ? (REAL)NAN : omega2_scale * kmax;
+        REAL omega2 = nan | speed_nan ? (REAL)NAN : omega2_scale * kmax;
         if (physics_goal) omega2 = omega2 + omega2_sink;
-        const REAL gamma =
-            alignment ? (beta + (REAL)2 * wmax) / m : gamma_still + (REAL)0 * omega2;
+        REAL gamma;
+        if (rayleigh) {
+            const REAL rate = three_beta * speed2_max - alpha;
+            gamma = alignment ? (rate + (REAL)2 * wmax) / m : rate / m + (REAL)0 * omega2;
+        } else {
+            gamma = alignment ? (beta + (REAL)2 * wmax) / m : gamma_still + (REAL)0 * omega2;
+        }
         hs = STABLE_SUBSTEP(omega2, gamma);
         if (last) break;
     }
