@@ -223,10 +223,10 @@ class SwarmConfig:
     (:mod:`swarm_envs.tasks`)."""
     informed_fraction: float | tuple[float, float] = 1.0
     """Fraction of each swarm's agents that observe the goal (``task="informed"``), in
-    ``(0, 1]``, or a ``[low, high]`` range drawn per episode; ``f·N`` agents rounded to the
-    nearest (at least one), drawn per episode. Must stay 1 for the other tasks. (The zone model's own
-    ``zone.informed_fraction`` is another thing: the agents its passive physics steers
-    to the goal with ``goal_in_physics``.)"""
+    ``(0, 1]``, or a ``[low, high]`` range drawn per episode; ``f·N`` agents rounded to
+    the nearest (at least one), drawn per episode. Must stay 1 for the other tasks. (The
+    zone model's own ``zone.informed_fraction`` is another thing: the agents its
+    passive physics steers to the goal with ``goal_in_physics``.)"""
     reward: RewardWeights = field(default_factory=RewardWeights)
     """Reward weights."""
     perturbations: Perturbations = field(default_factory=Perturbations)
