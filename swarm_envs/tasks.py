@@ -50,9 +50,10 @@ TASK_DEFAULTS: dict[str, dict[str, Any]] = {
     "navigation": {},
     "informed": {"informed_fraction": 0.3},
     "mill": {
-        # The navigation set with self-propulsion: v₀ = √(α/β) = 1, and the sink acts
-        # passively, so the passive swarm itself falls into a (slow) mill at the goal.
-        "physics": {"alpha": 1.0, "beta": 1.0},
+        # The navigation set with self-propulsion, as the Fig. 11 reproduction runs it:
+        # v₀ = √(α/β) = 1, and the sink acts passively, so the passive swarm itself
+        # falls into a (slow) mill at the goal.
+        "physics": {"alpha": 0.5, "beta": 0.5},
         "goal_in_physics": True,
         "goal_distance_min": 4.0,
         "goal_distance_max": 8.0,
@@ -87,7 +88,7 @@ def task_config(task: str, **overrides: Any) -> Any:
 
     >>> cfg = task_config("mill", n_agents=12)
     >>> cfg.task, cfg.physics.alpha, cfg.goal_in_physics, cfg.n_agents
-    ('mill', 1.0, True, 12)
+    ('mill', 0.5, True, 12)
     """
     from swarm_envs.config import load_swarm_config
 

@@ -48,7 +48,7 @@ def test_bad_task_settings_are_refused_naming_the_key(overrides: dict, message: 
 
 def test_each_task_brings_its_defaults_under_the_given_values():
     mill = task_config("mill", physics={"alpha": 2.0}, max_steps=50)
-    assert mill.physics.alpha == 2.0 and mill.physics.beta == 1.0  # only alpha changed
+    assert mill.physics.alpha == 2.0 and mill.physics.beta == 0.5  # only alpha changed
     assert mill.goal_in_physics and mill.max_steps == 50 and mill.reward.mill > 0
     assert task_config("informed").informed_fraction == 0.3
     assert task_config("informed", informed_fraction=[0.1, 0.3]).informed_fraction == (0.1, 0.3)
@@ -62,7 +62,7 @@ def test_registered_ids_and_modules_run_their_task():
     for task, env_id in TASK_IDS.items():
         assert gym.make(env_id).unwrapped.cfg.task == task
     assert swarm_informed_v0.parallel_env().cfg.informed_fraction == 0.3
-    assert swarm_mill_v0.parallel_env().cfg.physics.alpha == 1.0
+    assert swarm_mill_v0.parallel_env().cfg.physics.cruise_speed == 1.0
     with pytest.raises(ValueError, match="runs task='mill'"):
         swarm_mill_v0.parallel_env(task="navigation")
     yaml_cfg = load_swarm_config("configs/env/mill.yaml")

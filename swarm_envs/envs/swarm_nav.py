@@ -71,7 +71,7 @@ SWARM_NAV_DOC = """
     - ``"mill"`` (``swarm_envs/SwarmMill-v0``): reach the goal and circle it, on the
       self-propelled social potential (``physics.alpha > 0``: the friction becomes
       the Rayleigh term ``(α − β|v|²) v``, cruise speed ``v₀ = √(α/β)``; default α = β
-      = 1) with the sink acting passively (``goal_in_physics``). The reward adds
+      = 0.5, ``v₀ = 1``) with the sink acting passively (``goal_in_physics``). The reward adds
       ``w_mill · mill_order`` every step; the episode never terminates (it is truncated
       at ``max_steps``, 300 by default), and ``success`` reports each step whether the
       members have arrived and circle the goal at ``mill_order ≥ 0.5``.

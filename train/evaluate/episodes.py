@@ -34,6 +34,7 @@ FINAL_KEYS = (
     "nearest_neighbor_distance",
     "centroid_distance",
     "fraction_arrived",
+    "mill_order",
 )
 
 
