@@ -33,8 +33,9 @@ from swarm_envs.envs.core import SwarmNavCore
 from swarm_envs.envs.perturbed import PerturbedCore
 from swarm_envs.envs.task import STAT_KEYS, ranked_neighbors
 from swarm_envs.envs.task.agent_status import masks
-from swarm_envs.envs.task.observation import block_size
+from swarm_envs.envs.task.observation import observation_size
 from swarm_envs.perturbations import FAILURE_MODES
+from swarm_envs.tasks import TASKS
 
 #: Tolerances against the float64 reference, per state dtype (float64: round-off).
 TOLERANCE = {
@@ -188,9 +189,11 @@ def field_strategies(dynamics: tuple[str, ...] = ("social_potential",)) -> dict[
         "obs_velocity_scale": _real(0.2, 5.0),
         "observe_status": st.booleans(),
         "perturbations": perturbation_strategies(),
+        "task": st.sampled_from(TASKS),
+        "informed_fraction": _ranged(_real(0.05, 1.0)),
         "reward": {
             name: weight
-            for name in ("progress", "arrival", "success", "collision", "effort", "time")
+            for name in ("progress", "arrival", "success", "collision", "effort", "time", "mill")
         },
         "physics": {
             "C_a": _real(0.0, 2.0),
@@ -236,8 +239,17 @@ def configs(draw: Any, dynamics: tuple[str, ...] = ("social_potential",)) -> Swa
         else:
             fields[name] = draw(strategy)
     fields["goal_distance_max"] += fields["goal_distance_min"]
-    if fields["physics"]["alpha"] > 0:  # self-propulsion needs a Rayleigh coefficient
-        fields["physics"]["beta"] = max(fields["physics"]["beta"], 0.25)
+    physics = fields["physics"]
+    if fields["task"] == "mill" and fields["dynamics"] != "social_potential":
+        fields["task"] = "navigation"  # the mill is a task of the social potential
+    if fields["task"] == "mill" and physics["alpha"] == 0:
+        physics["alpha"] = 0.5  # and of its self-propelled form
+    if fields["task"] != "informed":
+        fields["informed_fraction"] = 1.0  # the fraction of the informed task only
+    if physics["alpha"] == 0:
+        fields["reward"]["mill"] = 0.0  # the mill's order needs a cruise speed
+    if physics["alpha"] > 0:  # self-propulsion needs a Rayleigh coefficient
+        physics["beta"] = max(physics["beta"], 0.25)
     if fields["dynamics"] == "lagrangian":
         fields["init_density"] = None  # its start checks read init_radius
         fields["lagrangian"] = {"r": 0.01}  # bins small enough for any start radius
@@ -390,12 +402,17 @@ def observation_features(cfg: SwarmConfig) -> list[str]:
     d, k = cfg.dim, cfg.n_neighbors
     axes = "xyz"[:d]
     names = [f"goal_offset.{a}" for a in axes] + [f"velocity.{a}" for a in axes]
+    if cfg.informs_agents:
+        names.append("informed")
     for s in range(k):
         names += [f"neighbor{s}.offset.{a}" for a in axes]
         names += [f"neighbor{s}.relative_velocity.{a}" for a in axes]
         names.append(f"neighbor{s}.mask")
-        if block_size(cfg) > 2 * d + 1:
+        if cfg.observe_status:
             names.append(f"neighbor{s}.status")
+        if cfg.informs_agents:
+            names.append(f"neighbor{s}.informed")
+    assert len(names) == observation_size(cfg)
     return names
 
 

@@ -241,7 +241,15 @@ def test_not_a_swarm_env_raises():
 
 def test_make_controller_by_name():
     cfg = SwarmConfig()
-    assert set(CONTROLLERS) == {"potential", "informed", "goal_force", "lyapunov", "zero", "random"}
+    assert set(CONTROLLERS) == {
+        "potential",
+        "informed",
+        "goal_force",
+        "lyapunov",
+        "mill",
+        "zero",
+        "random",
+    }
     assert isinstance(make_controller("potential", cfg), PotentialFieldController)
     assert isinstance(make_controller("analytic", cfg), PotentialFieldController)
     r1, r2 = make_controller("random", cfg, seed=1), make_controller("random", cfg, seed=1)

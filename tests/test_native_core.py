@@ -588,7 +588,8 @@ def test_a_statistic_the_kernel_does_not_write_comes_from_the_shared_definition(
     cfg = SwarmConfig(n_agents=7, n_neighbors=3)
     core, ref = NativeSwarmNavCore(cfg, batch=2), SwarmNavCore(cfg, batch=2)
     names = ("polarization", "nearest_neighbor_distance", "fraction_arrived")
-    core._extra = tuple(s for s in STATISTICS if s.name in names)
+    core._extra = tuple(i for i, s in enumerate(STATISTICS) if s.name in names)
+    core._extra_pairs = True
     core._packed[:] = np.nan  # the kernel's columns for them must not be read
     rng, ref_rng = np.random.default_rng(3), np.random.default_rng(3)
     core.reset(rng)

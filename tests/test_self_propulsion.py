@@ -426,3 +426,25 @@ def test_the_env_takes_physics_alpha_on_every_backend_it_runs_on():
     actions = {agent: np.zeros(2, np.float32) for agent in env.agents}
     obs, *_ = env.step(actions)
     assert all(np.isfinite(o).all() for o in obs.values())
+
+
+@pytest.mark.parametrize("name", ["fast", "lone-slow"])
+def test_the_sparse_core_plans_verlet_substeps_at_the_state_velocities(name):
+    # With self-propulsion the damping rate depends on the velocities: the stable
+    # substep of the state after a Verlet step is the one at its velocities, as the
+    # dense core has it, not at the force pass's extrapolated ones.
+    from swarm_envs.envs.sparse_core import SparseSwarmNavCore
+
+    cfg = dataclasses.replace(C_CONFIGS[name], integrator="velocity_verlet", max_steps=50)
+    cores = [SwarmNavCore(cfg, batch=3)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cores.append(SparseSwarmNavCore(cfg, batch=3, cutoff_tol=1e-12))
+    for core in cores:
+        core.reset(np.random.default_rng(4))
+    actions = np.random.default_rng(5)
+    for _ in range(12):
+        a = actions.uniform(-1, 1, (3, cfg.n_agents, cfg.dim))
+        ref, ours = (core.step(a)[3] for core in cores)
+        np.testing.assert_array_equal(ours["substeps"], ref["substeps"])
+        np.testing.assert_allclose(cores[1].v, cores[0].v, rtol=1e-7, atol=1e-7)

@@ -85,7 +85,7 @@ from swarm_envs.physics.integrators import SubstepBudget, euler_update, stable_s
 from swarm_envs.physics.neighbors import knn
 from swarm_envs.physics.pair_sums import swarm_rates
 from swarm_envs.physics.present_neighbors import close_pairs_among, knn_among
-from swarm_envs.physics.social_potential import components, dissipation
+from swarm_envs.physics.social_potential import components, dissipation, dissipation_rate
 
 #: Agents per swarm from which to use :class:`SparseSwarmNavCore`: above the crossover
 #: with the dense cores that ``benchmarks/large_swarms.py`` measures (default config at
@@ -200,6 +200,8 @@ class _Pass(NamedTuple):
     potential: np.ndarray  # (b,) Σ U over the pairs within the cut-off
     collisions: np.ndarray  # (b,) pairs closer than collision_radius
     finite: np.ndarray  # (b,) bool: the state was sound (else NaN force, not searched)
+    omega2: np.ndarray | None = None  # (b,) the stiffness rate ω² of the step-size rule
+    pair_damping: np.ndarray | None = None  # (b,) the damping rate's pair part, times m
 
 
 def _sound_swarms(x: np.ndarray, v: np.ndarray | None, span: float) -> np.ndarray:
@@ -410,6 +412,10 @@ class SparseSwarmNavCore(SparseStatuses, SwarmNavCore):
                 )
                 out.force[ok], out.h_stable[ok] = part.force, part.h_stable
                 out.potential[ok], out.collisions[ok] = part.potential, part.collisions
+                assert part.omega2 is not None and part.pair_damping is not None
+                omega2, pair_damping = np.zeros(b), np.zeros(b)
+                omega2[ok], pair_damping[ok] = part.omega2, part.pair_damping
+                out = out._replace(omega2=omega2, pair_damping=pair_damping)
             return out
         cfg, p = self.cfg, self.cfg.physics
         b, N, d = x.shape
@@ -434,7 +440,21 @@ class SparseSwarmNavCore(SparseStatuses, SwarmNavCore):
         omega2, gamma = swarm_rates(
             kappa.reshape(b, N), damping.reshape(b, N), p, sink=goal is not None, v=velocity
         )
-        return _Pass(force, stable_substep(omega2, gamma), potential, collisions, ok)
+        pair_damping = gamma * p.m - dissipation_rate(components(velocity), p)
+        return _Pass(
+            force, stable_substep(omega2, gamma), potential, collisions, ok, omega2, pair_damping
+        )
+
+    def _rates_at(self, res: _Pass, v: np.ndarray) -> _Pass:
+        """``res`` with its stable substep at the velocities ``v`` (with self-propulsion
+        the damping rate depends on them): Verlet's state after the second kick, whose
+        velocities are not the pass's (the dense core's rule)."""
+        p = self.cfg.physics
+        if p.alpha <= 0 or res.omega2 is None or res.pair_damping is None:
+            return res
+        gamma = (dissipation_rate(components(v), p) + res.pair_damping) / p.m
+        h = np.where(res.finite, stable_substep(res.omega2, gamma), res.h_stable)
+        return res._replace(h_stable=h)
 
     def _keep(self, rows: np.ndarray | None, res: _Pass) -> None:
         """Store a pass's rates, potential and collisions for ``rows`` (``None``: all)."""
@@ -499,6 +519,7 @@ class SparseSwarmNavCore(SparseStatuses, SwarmNavCore):
             if verlet:
                 accel = res.force if ur is None else res.force + ur
                 vr = v_half + (0.5 / m) * hb * accel
+                res = self._rates_at(res, vr)
             if every:
                 v, f = vr, res.force
             else:

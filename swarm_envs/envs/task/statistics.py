@@ -161,12 +161,16 @@ def _mill_speed(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
     return _about_goal(f, xp.where(inside, 1.0 / xp.where(inside, dist, 1.0), 0.0), xp)
 
 
+#: ``v₀`` below this counts as this in ``mill_order`` (a ratio finite in float32).
+MIN_CRUISE_SPEED = 1e-30
+
+
 def _mill_order(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
     """``min(mill_speed / v₀, 1)``; 0 without self-propulsion (no ``v₀``)."""
     v0 = task.physics.cruise_speed
     if v0 <= 0:
         return xp.zeros(f.energy.shape, like=f.energy)
-    return xp.clip(_mill_speed(f, task, xp) / v0, None, 1.0)
+    return xp.clip(_mill_speed(f, task, xp) / max(v0, MIN_CRUISE_SPEED), None, 1.0)
 
 
 def _task_success(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
