@@ -386,6 +386,14 @@ def _about_goal(x: Any, v: Any, goal: Any) -> tuple[Any, Any, ArrayNamespace]:
     return x - goal[..., None, :], v, xp
 
 
+def _cross_mean(r: Any, v: Any, members: Any | None, xp: ArrayNamespace) -> Any:
+    """``|Σ_i r_i × v_i| / N``, or over the members only (divided by their count)."""
+    if members is None:
+        return _cross_sum_norm(r, v, xp) / r.shape[-2]
+    w, count = _weights(members, r, xp)
+    return _cross_sum_norm(r * w[..., None], v, xp) / count
+
+
 def goal_angular_momentum(
     x: ArrayLike, v: ArrayLike, goal: ArrayLike, members: ArrayLike | None = None
 ) -> np.ndarray:
@@ -409,12 +417,7 @@ def goal_angular_momentum(
     0.6
     """
     r, v, xp = _about_goal(x, v, goal)
-    if members is None:
-        value = _cross_sum_norm(r, v, xp) / x.shape[-2]
-    else:
-        w, count = _weights(members, r, xp)
-        value = _cross_sum_norm(r * w[..., None], v, xp) / count
-    return _result(value, _common(r, v))
+    return _result(_cross_mean(r, v, members, xp), _common(r, v))
 
 
 def tangential_speed(
@@ -455,13 +458,7 @@ def tangential_speed(
         if not radius >= 0:
             raise ValueError(f"tangential_speed: radius must be >= 0, got {radius!r}")
         keep = keep & (dist <= radius)
-    unit = _unit(r, dist, keep, xp)
-    if members is None:
-        value = _cross_sum_norm(unit, v, xp) / x.shape[-2]
-    else:
-        w, count = _weights(members, unit, xp)
-        value = _cross_sum_norm(unit * w[..., None], v, xp) / count
-    return _result(value, _common(r, v))
+    return _result(_cross_mean(_unit(r, dist, keep, xp), v, members, xp), _common(r, v))
 
 
 def nearest_neighbor_distance(x: ArrayLike) -> np.ndarray:

@@ -11,6 +11,7 @@ Every API here follows one input rule for actions and seeds (``docs/inputs.md``)
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from pettingzoo.utils import wrappers
@@ -83,4 +84,28 @@ def for_task(task: str, module: str, kwargs: dict[str, Any]) -> dict[str, Any]:
     return {**kwargs, "task": task}
 
 
-__all__ = ["env", "for_task", "parallel_env", "raw_env", "vec_env"]
+def task_functions(task: str, module: str) -> tuple[Callable[..., Any], ...]:
+    """``(parallel_env, raw_env, env, vec_env)`` of the PettingZoo module ``module`` of
+    ``task``: this module's functions with ``task`` set (:func:`for_task`)."""
+
+    def task_parallel_env(**kwargs: Any) -> SwarmNavParallelEnv:
+        return parallel_env(**for_task(task, module, kwargs))
+
+    def task_raw_env(**kwargs: Any) -> AECEnv:
+        return raw_env(**for_task(task, module, kwargs))
+
+    def task_env(**kwargs: Any) -> AECEnv:
+        return env(**for_task(task, module, kwargs))
+
+    def task_vec_env(n_swarms: int = 1, **kwargs: Any):
+        return vec_env(n_swarms, **for_task(task, module, kwargs))
+
+    made = (task_parallel_env, task_raw_env, task_env, task_vec_env)
+    for fn, base in zip(made, (parallel_env, raw_env, env, vec_env), strict=True):
+        fn.__name__ = fn.__qualname__ = base.__name__
+        fn.__module__ = module
+        fn.__doc__ = f"{base.__doc__}\n\n    With ``task={task!r}`` (and its defaults)."
+    return made
+
+
+__all__ = ["env", "for_task", "parallel_env", "raw_env", "task_functions", "vec_env"]
