@@ -42,6 +42,8 @@ NOT_RUN: dict[str, str] = {
     "pip install -e .[dev,fast]": "installs packages (network)",
     "tensorboard --logdir runs/demo/tensorboard": "a web server that runs until stopped; "
     "the tiny run checks that the folder it reads exists",
+    "make benchmark": "trains every entry of configs/benchmark/results.yaml with 3 seeds "
+    "(hours); tests/test_benchmark.py runs swarm-benchmark --quick end to end",
     "make reproduce": "every paper at full size (= swarm-reproduce --out reproductions); "
     "the README's one-paper command runs here, tests/test_papers_cli.py runs the others",
 }

@@ -129,12 +129,13 @@ def test_informed_runs_on_the_backends_that_write_its_observation():
     np.testing.assert_allclose(sparse.observe(), dense.observe(), atol=1e-5)
 
 
-def test_the_informed_baseline_moves_only_the_informed_agents():
-    cfg = task_config("informed", informed_fraction=0.3)
+@pytest.mark.parametrize("dynamics", ["social_potential", "zone"])
+def test_the_informed_baseline_moves_only_the_informed_agents(dynamics: str):
+    cfg = task_config("informed", informed_fraction=0.3, dynamics=dynamics)
     core = SwarmNavCore(cfg, batch=4)
     core.reset(np.random.default_rng(1))
     obs = core.observe()
-    for name in ("potential", "analytic"):
+    for name in (analytic_name(cfg), "analytic"):
         action, _ = make_controller(name, cfg).predict(obs.reshape(-1, obs.shape[-1]))
         moving = np.abs(action.reshape(4, 10, 2)).sum(-1) > 0
         np.testing.assert_array_equal(moving, core.informed)
@@ -277,3 +278,16 @@ def test_ppo_trains_a_shared_policy_on_the_vec_env(task: str):
 def test_navigation_modules_refuse_nothing_they_used_to_take():
     env = swarm_nav_v0.parallel_env(task="navigation")
     assert env.cfg == SwarmConfig()
+
+
+def test_the_evaluation_judges_the_mill_at_its_last_step():
+    from train.evaluate.episodes import run_episodes
+    from train.evaluate.measures import summarize
+
+    cfg = task_config("mill", max_steps=120)
+    held = summarize(run_episodes(MillController(cfg), cfg, 4, seed=3, record_episode=False))
+    assert held["success_rate"] == 1.0 and held["mean_episode_length"] == 120
+    assert 0 < held["mean_time_to_goal"] < 120 * cfg.dt  # the first step of the held mill
+    assert held["final_mill_order"] >= MILL_SUCCESS_SPEED
+    idle = summarize(run_episodes(make_controller("zero", cfg), cfg, 4, seed=3))
+    assert idle["final_mill_order"] < held["final_mill_order"]
