@@ -253,6 +253,7 @@ STATISTICS: tuple[Statistic, ...] = (
         f"and mill_order ≥ {MILL_SUCCESS_SPEED:g})",
         _task_success,
         wide=True,
+        pairwise=False,
     ),
     Statistic(
         "substeps",
