@@ -26,7 +26,9 @@ from swarm_envs.envs.common import SwarmUnstableError
 from swarm_envs.envs.core import SwarmNavCore
 from swarm_envs.envs.native import NativeSwarmNavCore, build, contract, native_support
 from swarm_envs.envs.native.build import resolve_native
+from swarm_envs.envs.task import STATISTICS
 from swarm_envs.physics import SocialPotentialParams
+from swarm_envs.tasks import task_config
 
 SUPPORTED, WHY = native_support()
 needs_native = pytest.mark.skipif(not SUPPORTED, reason=f"C step unavailable: {WHY}")
@@ -582,12 +584,16 @@ def test_the_switch_turns_it_off_or_requires_it(monkeypatch):
 @needs_native
 def test_a_statistic_the_kernel_does_not_write_comes_from_the_shared_definition():
     # As if the kernel did not declare these statistics: the core computes them from its
-    # state with the definitions of swarm_envs.envs.task.statistics.
-    from swarm_envs.envs.task import STATISTICS
-
+    # state with the definitions of swarm_envs.envs.task.statistics (the pair measures
+    # in numpy where one of them may read them).
     cfg = SwarmConfig(n_agents=7, n_neighbors=3)
     core, ref = NativeSwarmNavCore(cfg, batch=2), SwarmNavCore(cfg, batch=2)
-    names = ("polarization", "nearest_neighbor_distance", "fraction_arrived")
+    names = (
+        "polarization",
+        "nearest_neighbor_distance",
+        "fraction_arrived",
+        "goal_angular_momentum",
+    )
     core._extra = tuple(i for i, s in enumerate(STATISTICS) if s.name in names)
     core._extra_pairs = True
     core._packed[:] = np.nan  # the kernel's columns for them must not be read
@@ -599,3 +605,44 @@ def test_a_statistic_the_kernel_does_not_write_comes_from_the_shared_definition(
         got, want = core.step(a)[3], ref.step(a)[3]
         for key in names:
             np.testing.assert_allclose(got[key], want[key], rtol=1e-12, atol=1e-12)
+
+
+@needs_native
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("dim", [2, 3])
+def test_the_statistics_about_the_goal_are_the_kernels_and_match_the_numpy_core(dim, dtype):
+    # goal_angular_momentum, mill_speed and mill_order come from the kernel (the core
+    # computes none of them in Python; the mill's success alone, without pair measures),
+    # step after step as the numpy core gives them: a self-propelled swarm started about
+    # its goal, agents inside and outside the arrival radius.
+    cfg = task_config(
+        "mill",
+        n_agents=12,
+        dim=dim,
+        goal_distance_min=0.0,
+        goal_distance_max=1.0,
+        goal_radius=2.0,
+        init_speed=1.0,
+        max_steps=6,
+    )
+    about_goal = ("goal_angular_momentum", "mill_speed", "mill_order")
+    assert set(about_goal) <= set(build.load_library().info.statistics)
+    B, N = 4, cfg.n_agents
+    core, ref = NativeSwarmNavCore(cfg, B, dtype), SwarmNavCore(cfg, B, dtype)
+    assert [STATISTICS[i].name for i in core._extra] == ["success"]
+    assert not core._extra_pairs
+    rng, ref_rng = np.random.default_rng(0), np.random.default_rng(0)
+    core.reset(rng)
+    ref.reset(ref_rng)
+    seen = []
+    for a in np.random.default_rng(1).uniform(-1, 1, (12, B, N, dim)).astype(dtype):
+        got, want = core.step(a), ref.step(a)
+        _assert_same_step(got, want, core, ref, dtype)
+        seen.append([got[3][key] for key in about_goal])
+        ended = got[1] | got[2]
+        core.reset(rng, which=ended)
+        ref.reset(ref_rng, which=ended)
+    momentum, speed, order = np.moveaxis(np.array(seen), 1, 0)
+    assert (momentum > 0).all() and (speed > 0).any() and (speed < momentum).any()
+    assert ((order > 0) & (order < 1)).any()
+    np.testing.assert_allclose(order, np.minimum(speed / cfg.physics.cruise_speed, 1.0))

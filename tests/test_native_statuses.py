@@ -28,6 +28,7 @@ from swarm_envs.envs.task import STAT_KEYS
 from swarm_envs.envs.task.agent_status import ABSENT, ACTIVE, FAILED, FROZEN
 from swarm_envs.perturbations import Perturbations
 from swarm_envs.physics import SocialPotentialParams
+from swarm_envs.tasks import task_config
 
 SUPPORTED, WHY = native_support()
 needs_native = pytest.mark.skipif(not SUPPORTED, reason=f"C step unavailable: {WHY}")
@@ -100,6 +101,32 @@ def test_the_portable_build_matches_the_numpy_core(monkeypatch, kind, shape, dty
     monkeypatch.setenv(build.ARCH_ENV, "x86-64-v3")
     got, _ = _rollout(_config(kind, shape, True), "native", dtype)
     _assert_same_rollout(got, _reference(kind, shape, True)[0], dtype)
+
+
+@needs_native
+@pytest.mark.parametrize("dtype", [np.float64, np.float32], ids=["f64", "f32"])
+@pytest.mark.parametrize("dim", [2, 3])
+def test_the_statistics_about_the_goal_over_the_members_match_the_numpy_core(dim, dtype):
+    # goal_angular_momentum, mill_speed and mill_order are sums over the members divided
+    # by their count (frozen agents are none): the mill, a self-propelled swarm started
+    # about its goal, agents inside and outside the arrival radius.
+    cfg = task_config(
+        "mill",
+        n_agents=10,
+        dim=dim,
+        goal_distance_min=0.0,
+        goal_distance_max=1.0,
+        goal_radius=2.0,
+        init_speed=1.0,
+        max_steps=6,
+    )
+    cfg = dataclasses.replace(cfg, perturbations=PERTURBATIONS["frozen"][0])
+    got, seen = _rollout(cfg, "native", dtype)
+    want, ref_seen = _rollout(cfg, "numpy", np.float64)
+    assert seen == ref_seen and FROZEN in seen
+    _assert_same_rollout(got, want, dtype)
+    order = np.array([stats["mill_order"] for _, _, stats in want])
+    assert ((order > 0) & (order < 1)).any()
 
 
 # --------------------------------------------------------------------------- the rules

@@ -47,6 +47,7 @@ from swarm_envs.envs.task import (
     success_count,
 )
 from swarm_envs.envs.task.observation import LAYOUT, layout
+from swarm_envs.envs.task.statistics import mill_speed_scale
 from swarm_envs.metrics import CENTRE_RTOL
 from swarm_envs.physics import SocialPotentialParams
 from swarm_envs.physics.integrators import STEP_SAFETY
@@ -108,7 +109,7 @@ HOST_CONFIG_FIELDS = {
     "on_unstable": "the guard after the step runs in Python (it raises, or undoes the step)",
     "perturbations": "drawn and applied in Python (PerturbedCore: the schedule, the noise, "
     "the dropout); the agents' statuses reach the kernel as an array (set_status)",
-    "task": "navigation and mill (termination and the mill's statistics in Python); "
+    "task": "navigation and mill (termination and the mill's success in Python); "
     "'informed' refused (checked)",
     "informed_fraction": "task='informed' only, which is refused",
 }
@@ -145,6 +146,12 @@ DERIVED: tuple[tuple[str, str, Callable[[SwarmConfig, np.dtype], float], str], .
     ("need", "int64_t", lambda c, dt: success_count(c.n_agents, c.success_fraction), "success"),
     ("obs_dim", "int64_t", lambda c, dt: observation_size(c), "observation size"),
     ("arrival_radius", "double", lambda c, dt: c.arrival_radius, "arrived within this"),
+    (
+        "cruise_speed",
+        "double",
+        lambda c, dt: mill_speed_scale(c),
+        "v0 of self-propulsion, floored (mill_order; 0 without)",
+    ),
     (
         "physics_goal",
         "int64_t",

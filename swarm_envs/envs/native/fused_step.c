@@ -39,8 +39,8 @@ double exp(double);
 #define KERNEL_PHYSICS "C_a C_r l_a l_r C_o l_o beta C_g l_g m alpha"
 #define KERNEL_STATS                                                                        \
     "polarization angular_momentum expanse nearest_neighbor_distance energy "              \
-    "fraction_arrived collisions centroid_distance mean_goal_distance success substeps "   \
-    "unstable"
+    "fraction_arrived collisions centroid_distance mean_goal_distance "                    \
+    "goal_angular_momentum mill_speed mill_order success substeps unstable"
 /* The observation layouts it writes, one per line: without and with observe_status. */
 #define KERNEL_OBS_LAYOUT                                                                   \
     "goal_offset/obs_goal_scale,velocity/obs_velocity_scale;"                              \

@@ -643,7 +643,7 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
      * whose divisor is replaced by 1 where they are 0: the loops vectorise. */
     REAL *pk = packed + b * PK_SIZE;
     if (masked) {
-        MEMBER_STATS(N, d, S, xs, vs, gd, near_d, alive, g, centre_tol, goal_radius,
+        MEMBER_STATS(N, d, S, xs, vs, off, gd, near_d, alive, g, centre_tol, goal_radius,
                      (REAL)P->success_threshold, pk);
     } else {
         const REAL *x0 = xs, *x1 = xs + S, *x2 = xs + 2 * S;
@@ -695,13 +695,34 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
         angular = angular > 1 ? 1 : angular;
         REAL cd2 = 0;
         for (int64_t c = 0; c < d; c++) cd2 += (centre[c] - g[c]) * (centre[c] - g[c]);
+        /* The goal distances, and the angular momenta about the goal: Σ (r_i − r_g) × v_i
+         * (goal_angular_momentum) and the same weighted by 1/|r_i − r_g| within the
+         * arrival radius (mill_speed), from the offsets r_g − r_i (the sign goes in the
+         * norm). */
         int64_t arrived_count = 0;
-        REAL gd_sum = 0;
-#pragma omp simd reduction(+ : arrived_count, gd_sum)
+        REAL gd_sum = 0, am0 = 0, am1 = 0, am2 = 0, ms0 = 0, ms1 = 0, ms2 = 0;
+#pragma omp simd reduction(+ : arrived_count, gd_sum, am0, am1, am2, ms0, ms1, ms2)
         for (int64_t i = 0; i < N; i++) {
-            arrived_count += gd[i] <= goal_radius;
-            gd_sum += gd[i];
+            const REAL dist = gd[i];
+            const int arrived = dist <= goal_radius, inside = arrived & (dist > 0);
+            arrived_count += arrived;
+            gd_sum += dist;
+            const REAL w = (inside ? 1 : 0) / (inside ? dist : 1);
+            const REAL o0 = off[i], o1 = off[S + i], o2 = d == 3 ? off[2 * S + i] : 0;
+            const REAL vz = d == 3 ? v2[i] : 0;
+            const REAL z = o0 * v1[i] - o1 * v0[i];
+            am2 += z;
+            ms2 += w * z;
+            if (d == 3) {
+                const REAL cx = o1 * vz - o2 * v1[i], cy = o2 * v0[i] - o0 * vz;
+                am0 += cx;
+                am1 += cy;
+                ms0 += w * cx;
+                ms1 += w * cy;
+            }
         }
+        const REAL goal_turn = d == 2 ? FABS(am2) : SQRT(am0 * am0 + am1 * am1 + am2 * am2);
+        const REAL mill_turn = d == 2 ? FABS(ms2) : SQRT(ms0 * ms0 + ms1 * ms1 + ms2 * ms2);
         pk[PK_polarization] = polarization;
         pk[PK_angular_momentum] = angular;
         pk[PK_expanse] = radius_sum / Nr;
@@ -709,8 +730,14 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
         pk[PK_fraction_arrived] = (REAL)arrived_count / Nr;
         pk[PK_centroid_distance] = SQRT(cd2);
         pk[PK_mean_goal_distance] = gd_sum / Nr;
+        pk[PK_goal_angular_momentum] = goal_turn / Nr;
+        pk[PK_mill_speed] = mill_turn / Nr;
         pk[PK_success] = arrived_count >= need ? 1 : 0;
     }
+    /* mill_order: mill_speed / v0, at most 1; 0 without self-propulsion (v0 = 0). */
+    const REAL cruise = (REAL)P->cruise_speed;
+    const REAL mill = pk[PK_mill_speed] / (cruise > 0 ? cruise : 1);
+    pk[PK_mill_order] = cruise > 0 ? (mill > 1 ? (REAL)1 : mill) : 0;
     REAL effort = 0;
 #pragma omp simd reduction(+ : effort)
     for (int64_t t = 0; t < N * d; t++) {

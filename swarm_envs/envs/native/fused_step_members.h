@@ -4,15 +4,16 @@
 
 /* The group statistics of the swarm's members, the mobile agents, where agents have
  * statuses (swarm_envs.envs.task.statistics with Frame.members, swarm_envs.metrics with
- * members=): headings, centroid, expanse, nearest-neighbour distance, goal distances and
- * arrivals summed over the members and divided by their count (no member: NaN, and
- * success 0, as the shared definitions give). The centring tolerance scales with the
- * largest coordinate of every agent, as metrics._unit_relative's; an agent's nearest
- * distance is 0 where it has no present other (inf). */
+ * members=): headings, centroid, expanse, nearest-neighbour distance, goal distances,
+ * arrivals and angular momenta about the goal (off: the offsets r_g − r_i) summed over
+ * the members and divided by their count (no member: NaN, and success 0, as the shared
+ * definitions give). The centring tolerance scales with the largest coordinate of every
+ * agent, as metrics._unit_relative's; an agent's nearest distance is 0 where it has no
+ * present other (inf). */
 static inline void MEMBER_STATS(const int64_t N, const int64_t d, const int64_t S,
-                                const REAL *xs, const REAL *vs, const REAL *gd,
-                                const REAL *near_d, const INDEX *alive, const REAL *g,
-                                const REAL centre_tol, const REAL goal_radius,
+                                const REAL *xs, const REAL *vs, const REAL *off,
+                                const REAL *gd, const REAL *near_d, const INDEX *alive,
+                                const REAL *g, const REAL centre_tol, const REAL goal_radius,
                                 const REAL threshold, REAL *pk) {
     const REAL *x0 = xs, *x1 = xs + S, *x2 = xs + 2 * S;
     const REAL *v0 = vs, *v1 = vs + S, *v2 = vs + 2 * S;
@@ -41,8 +42,9 @@ static inline void MEMBER_STATS(const int64_t N, const int64_t d, const int64_t 
     polarization = polarization > 1 ? 1 : polarization;
     const REAL tol = centre_tol * scale;
     REAL cross0 = 0, cross1 = 0, cross2 = 0, radius_sum = 0, gd_sum = 0, near_sum = 0;
-    REAL arrived_count = 0;
-#pragma omp simd reduction(+ : cross0, cross1, cross2, radius_sum, gd_sum, near_sum, arrived_count)
+    REAL arrived_count = 0, am0 = 0, am1 = 0, am2 = 0, ms0 = 0, ms1 = 0, ms2 = 0;
+#pragma omp simd reduction(+ : cross0, cross1, cross2, radius_sum, gd_sum, near_sum,       \
+                               arrived_count, am0, am1, am2, ms0, ms1, ms2)
     for (int64_t i = 0; i < N; i++) {
         const int member = (alive[i] & AG_MOBILE) != 0;
         const REAL w = member ? 1 : 0;
@@ -66,8 +68,23 @@ static inline void MEMBER_STATS(const int64_t N, const int64_t d, const int64_t 
         REAL nearest = N > 1 ? near_d[i] : 0;
         nearest = nearest - nearest == 0 ? nearest : 0; /* none present (inf): 0 */
         near_sum += member ? nearest : 0;
-        gd_sum += member ? gd[i] : 0;
-        arrived_count += member & (gd[i] <= goal_radius) ? 1 : 0;
+        const REAL dist = gd[i];
+        const int arrived = member & (dist <= goal_radius), inside = arrived & (dist > 0);
+        gd_sum += member ? dist : 0;
+        arrived_count += arrived ? 1 : 0;
+        /* the angular momenta about the goal (fused_step_body.h), of the members */
+        const REAL wm = (inside ? 1 : 0) / (inside ? dist : 1);
+        const REAL o0 = off[i], o1 = off[S + i], o2 = d == 3 ? off[2 * S + i] : 0;
+        const REAL z = o0 * v1[i] - o1 * v0[i];
+        am2 += member ? z : 0;
+        ms2 += inside ? wm * z : 0;
+        if (d == 3) {
+            const REAL cx = o1 * vz - o2 * v1[i], cy = o2 * v0[i] - o0 * vz;
+            am0 += member ? cx : 0;
+            am1 += member ? cy : 0;
+            ms0 += inside ? wm * cx : 0;
+            ms1 += inside ? wm * cy : 0;
+        }
     }
     const REAL turn =
         d == 2 ? FABS(cross2) : SQRT(cross0 * cross0 + cross1 * cross1 + cross2 * cross2);
@@ -83,5 +100,8 @@ static inline void MEMBER_STATS(const int64_t N, const int64_t d, const int64_t 
     pk[PK_fraction_arrived] = arrived;
     pk[PK_centroid_distance] = SQRT(cd2);
     pk[PK_mean_goal_distance] = gd_sum / count;
+    pk[PK_goal_angular_momentum] =
+        (d == 2 ? FABS(am2) : SQRT(am0 * am0 + am1 * am1 + am2 * am2)) / count;
+    pk[PK_mill_speed] = (d == 2 ? FABS(ms2) : SQRT(ms0 * ms0 + ms1 * ms1 + ms2 * ms2)) / count;
     pk[PK_success] = arrived >= threshold ? 1 : 0;
 }

@@ -165,12 +165,19 @@ def _mill_speed(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
 MIN_CRUISE_SPEED = 1e-30
 
 
+def mill_speed_scale(task: Any) -> float:
+    """The speed ``mill_order`` divides by: the cruise speed ``v₀``, at least
+    :data:`MIN_CRUISE_SPEED`; 0 without self-propulsion (then ``mill_order`` is 0)."""
+    v0 = task.physics.cruise_speed
+    return max(v0, MIN_CRUISE_SPEED) if v0 > 0 else 0.0
+
+
 def _mill_order(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
     """``min(mill_speed / v₀, 1)``; 0 without self-propulsion (no ``v₀``)."""
-    v0 = task.physics.cruise_speed
+    v0 = mill_speed_scale(task)
     if v0 <= 0:
         return xp.zeros(f.energy.shape, like=f.energy)
-    return xp.clip(_mill_speed(f, task, xp) / max(v0, MIN_CRUISE_SPEED), None, 1.0)
+    return xp.clip(_mill_speed(f, task, xp) / v0, None, 1.0)
 
 
 def _task_success(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
@@ -257,6 +264,7 @@ STATISTICS: tuple[Statistic, ...] = (
         f"and mill_order ≥ {MILL_SUCCESS_SPEED:g})",
         _task_success,
         wide=True,
+        pairwise=False,
     ),
     Statistic(
         "substeps",
