@@ -58,16 +58,27 @@ def no_nan(text: str) -> dict:
 # --------------------------------------------------------------------------- the matrix
 
 
-def test_the_shipped_matrix_covers_navigation_on_every_dynamics():
+def test_the_shipped_matrix_covers_every_task_and_dynamics():
     m = load_matrix(DEFAULT_MATRIX)
-    assert [e.dynamics for e in m.entries] == list(DYNAMICS)
+    navigation = [e for e in m.entries if e.task == "navigation"]
+    assert [e.dynamics for e in navigation] == list(DYNAMICS)
+    assert {(e.task, e.dynamics) for e in m.entries if e.task != "navigation"} == {
+        ("informed", "social_potential"),
+        ("informed", "zone"),
+        ("mill", "social_potential"),
+    }
     for e in m.entries:
-        assert e.name == f"navigation/{e.dynamics}" and e.task == "navigation"
-        assert e.baselines == ("analytic",)
-        assert [v.label for v in e.evaluations] == ["default"]
+        assert e.name == f"{e.task}/{e.dynamics}"
+        assert "analytic" in e.baselines
         tc = e.train_config(seed=2)
-        assert tc.seed == 2 and tc.swarm_config().dynamics == e.dynamics
-        assert e.eval_config(e.evaluations[0], tc) == tc.swarm_config()
+        cfg = tc.swarm_config()
+        assert tc.seed == 2 and cfg.dynamics == e.dynamics and cfg.task == e.task
+        for evaluation in e.evaluations:
+            ev = e.eval_config(evaluation, tc)
+            assert ev.task == e.task and ev.dynamics == e.dynamics
+        if e.task == "informed":  # both fractions of the task's statement
+            fractions = [e.eval_config(v, tc).informed_fraction for v in e.evaluations]
+            assert fractions == [0.1, 0.3]
 
 
 def test_an_entry_with_evaluations_and_overrides():
@@ -80,7 +91,8 @@ def test_an_entry_with_evaluations_and_overrides():
         )
     )
     tc = e.train_config(seed=1)
-    assert tc.total_timesteps == 5000 and tc.env == {"n_agents": 6, "dynamics": "zone"}
+    assert tc.total_timesteps == 5000
+    assert tc.env == {"n_agents": 6, "dynamics": "zone", "task": "navigation"}
     cfgs = [e.eval_config(v, tc) for v in e.evaluations]
     assert [c.n_agents for c in cfgs] == [6, 12]
     assert {c.dynamics for c in cfgs} == {"zone"}
@@ -283,3 +295,12 @@ def test_cli_mistakes_are_one_line_before_anything_is_written(tmp_path, capsys, 
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("swarm-benchmark: error: ") and match in err
     assert not out.exists()
+
+
+def test_an_entry_names_a_known_task_once():
+    with pytest.raises(ValueError, match="task must be one of"):
+        Entry(**entry(task="flock"))
+    with pytest.raises(ValueError, match="contradicts task"):
+        Entry(**entry(env={"task": "mill"}))
+    informed = Entry(**entry(name="informed/zone", task="informed"))
+    assert informed.train_config(seed=0).swarm_config().informed_fraction == 0.3

@@ -218,18 +218,25 @@ def _episodes(policy: Any, cfg: SwarmConfig, s: Settings, name: str) -> dict[str
     batch = run_episodes(
         policy, cfg, s.episodes, s.eval_seed, name=name, progress=False, record_episode=False
     )
-    return {"return": batch.returns, "success": batch.success, "steps": batch.lengths}
+    reached = batch.lengths if batch.first_success is None else batch.first_success
+    return {
+        "return": batch.returns,
+        "success": batch.success,
+        "steps": batch.lengths,
+        "reached": reached,
+    }
 
 
 def _policy_result(
     runs: Sequence[Mapping[str, np.ndarray]], cfg: SwarmConfig, s: Settings, **extra: Any
 ) -> dict[str, Any]:
     """The measures, intervals and per-episode values of ``runs`` (one per seed)."""
-    arrays = {k: np.stack([r[k] for r in runs]) for k in ("return", "success", "steps")}
+    keys = ("return", "success", "steps", "reached")
+    arrays = {k: np.stack([r[k] for r in runs]) for k in keys}
     summary = summarize_runs(
         arrays["return"],
         arrays["success"],
-        arrays["steps"],
+        arrays["reached"],  # the time to goal: to the first step of success
         cfg.dt,
         n_resamples=s.n_resamples,
         seed=s.bootstrap_seed,

@@ -212,8 +212,8 @@ def summarize_runs(
     """The benchmark's measures of one policy with their intervals and per-seed values.
 
     Args:
-        returns, success, steps: per-episode returns, success flags and lengths (in
-            steps), each shaped ``(S, E)``.
+        returns, success, steps: per-episode returns, success flags and the steps to
+            the first success (the episode's length in navigation), each ``(S, E)``.
         dt: the step's simulated seconds (time to goal = steps × dt).
 
     Returns ``{"n_seeds", "n_episodes", "<statistic>": Interval.to_dict(), ...,
