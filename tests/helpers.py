@@ -187,3 +187,21 @@ def assert_same_status_rollout(got: list, want: list, tol: dict) -> None:
         assert list(stats) == list(STAT_KEYS)
         for key in STAT_KEYS:
             np.testing.assert_allclose(stats[key], ref_stats[key], **tol, err_msg=f"{key} at {t}")
+
+
+def mill_about_goal(n_agents: int, dim: int) -> Any:
+    """The mill task with a self-propelled swarm started about its goal (goal within 1
+    of the start's centre, arrival radius 2, fast start): agents inside and outside the
+    arrival radius, circling or not, for comparing the statistics about the goal."""
+    from swarm_envs.tasks import task_config
+
+    return task_config(
+        "mill",
+        n_agents=n_agents,
+        dim=dim,
+        goal_distance_min=0.0,
+        goal_distance_max=1.0,
+        goal_radius=2.0,
+        init_speed=1.0,
+        max_steps=6,
+    )

@@ -18,7 +18,7 @@ import pickle
 
 import numpy as np
 import pytest
-from helpers import CORE_TOL
+from helpers import CORE_TOL, mill_about_goal
 
 from swarm_envs import swarm_nav_v0
 from swarm_envs.config import SwarmConfig, load_swarm_config
@@ -28,7 +28,6 @@ from swarm_envs.envs.native import NativeSwarmNavCore, build, contract, native_s
 from swarm_envs.envs.native.build import resolve_native
 from swarm_envs.envs.task import STATISTICS
 from swarm_envs.physics import SocialPotentialParams
-from swarm_envs.tasks import task_config
 
 SUPPORTED, WHY = native_support()
 needs_native = pytest.mark.skipif(not SUPPORTED, reason=f"C step unavailable: {WHY}")
@@ -615,16 +614,7 @@ def test_the_statistics_about_the_goal_are_the_kernels_and_match_the_numpy_core(
     # computes none of them in Python; the mill's success alone, without pair measures),
     # step after step as the numpy core gives them: a self-propelled swarm started about
     # its goal, agents inside and outside the arrival radius.
-    cfg = task_config(
-        "mill",
-        n_agents=12,
-        dim=dim,
-        goal_distance_min=0.0,
-        goal_distance_max=1.0,
-        goal_radius=2.0,
-        init_speed=1.0,
-        max_steps=6,
-    )
+    cfg = mill_about_goal(12, dim)
     about_goal = ("goal_angular_momentum", "mill_speed", "mill_order")
     assert set(about_goal) <= set(build.load_library().info.statistics)
     B, N = 4, cfg.n_agents

@@ -18,7 +18,12 @@ import pickle
 
 import numpy as np
 import pytest
-from helpers import assert_same_status_rollout, status_perturbations, status_rollout
+from helpers import (
+    assert_same_status_rollout,
+    mill_about_goal,
+    status_perturbations,
+    status_rollout,
+)
 
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs import backends
@@ -28,7 +33,6 @@ from swarm_envs.envs.task import STAT_KEYS
 from swarm_envs.envs.task.agent_status import ABSENT, ACTIVE, FAILED, FROZEN
 from swarm_envs.perturbations import Perturbations
 from swarm_envs.physics import SocialPotentialParams
-from swarm_envs.tasks import task_config
 
 SUPPORTED, WHY = native_support()
 needs_native = pytest.mark.skipif(not SUPPORTED, reason=f"C step unavailable: {WHY}")
@@ -110,16 +114,7 @@ def test_the_statistics_about_the_goal_over_the_members_match_the_numpy_core(dim
     # goal_angular_momentum, mill_speed and mill_order are sums over the members divided
     # by their count (frozen agents are none): the mill, a self-propelled swarm started
     # about its goal, agents inside and outside the arrival radius.
-    cfg = task_config(
-        "mill",
-        n_agents=10,
-        dim=dim,
-        goal_distance_min=0.0,
-        goal_distance_max=1.0,
-        goal_radius=2.0,
-        init_speed=1.0,
-        max_steps=6,
-    )
+    cfg = mill_about_goal(10, dim)
     cfg = dataclasses.replace(cfg, perturbations=PERTURBATIONS["frozen"][0])
     got, seen = _rollout(cfg, "native", dtype)
     want, ref_seen = _rollout(cfg, "numpy", np.float64)
