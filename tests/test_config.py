@@ -36,6 +36,8 @@ def test_every_shipped_env_config_loads(path: Path):
         if isinstance(value, dict):
             for sub, subval in value.items():
                 assert getattr(getattr(cfg, key), sub) == pytest.approx(subval)
+        elif isinstance(value, list):  # a range [low, high], held as a tuple
+            assert getattr(cfg, key) == tuple(value)
         else:
             assert getattr(cfg, key) == value
 
