@@ -75,6 +75,7 @@ __all__ = [
     "first_passage_time",
     "fraction_within",
     "goal_angular_momentum",
+    "mean_cross_about_goal",
     "nearest_neighbor_distance",
     "packing_density",
     "polarization",
@@ -386,12 +387,22 @@ def _about_goal(x: Any, v: Any, goal: Any) -> tuple[Any, Any, ArrayNamespace]:
     return x - goal[..., None, :], v, xp
 
 
-def _cross_mean(r: Any, v: Any, members: Any | None, xp: ArrayNamespace) -> Any:
-    """``|Σ_i r_i × v_i| / N``, or over the members only (divided by their count)."""
-    if members is None:
-        return _cross_sum_norm(r, v, xp) / r.shape[-2]
-    w, count = _weights(members, r, xp)
-    return _cross_sum_norm(r * w[..., None], v, xp) / count
+def mean_cross_about_goal(
+    r: Any, v: Any, weights: Any | None, members: Any | None, xp: ArrayNamespace
+) -> Any:
+    """``|Σ_i w_i r_i × v_i| / n`` for offsets from the goal ``r`` ``(..., N, d)``: the
+    definition behind :func:`goal_angular_momentum` (``w = 1``) and
+    :func:`tangential_speed` (``w_i = 1/|r_i|`` within the radius, else 0). Over the
+    ``members`` only when given (``n`` their count, else ``N``). Unchecked and in the
+    namespace ``xp`` of its arrays, for code that has checked them (a step's
+    statistics)."""
+    count: Any = r.shape[-2]
+    w = weights
+    if members is not None:
+        member, count = _weights(members, r, xp)
+        w = member if w is None else w * member
+    wv = v if w is None else v * w[..., None]
+    return _cross_sum_norm(r, wv, xp) / count
 
 
 def goal_angular_momentum(
@@ -417,7 +428,7 @@ def goal_angular_momentum(
     0.6
     """
     r, v, xp = _about_goal(x, v, goal)
-    return _result(_cross_mean(r, v, members, xp), _common(r, v))
+    return _result(mean_cross_about_goal(r, v, None, members, xp), _common(r, v))
 
 
 def tangential_speed(
@@ -458,7 +469,8 @@ def tangential_speed(
         if not radius >= 0:
             raise ValueError(f"tangential_speed: radius must be >= 0, got {radius!r}")
         keep = keep & (dist <= radius)
-    return _result(_cross_mean(_unit(r, dist, keep, xp), v, members, xp), _common(r, v))
+    weights = 1.0 / xp.where(keep, dist, xp.inf)  # 0 where the agent does not count
+    return _result(mean_cross_about_goal(r, v, weights, members, xp), _common(r, v))
 
 
 def nearest_neighbor_distance(x: ArrayLike) -> np.ndarray:

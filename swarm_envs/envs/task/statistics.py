@@ -126,39 +126,17 @@ def _success(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
     return xp.astype(fraction >= task.success_fraction - 1e-9, f.goal_distance)
 
 
-def _about_goal(f: Frame, weights: Array | None, xp: ArrayNamespace) -> Array:
-    """``|Σ_i w_i (r_i − r_g) × v_i| / n`` over the members (``n`` their count): the
-    cross product's z-component in 2-D (absolute value), its vector in 3-D (norm).
-
-    The definitions of :func:`~swarm_envs.metrics.goal_angular_momentum` and
-    :func:`~swarm_envs.metrics.tangential_speed` (``weights`` ``1/|r_i − r_g|`` within
-    the radius), written on the frame's arrays without their checks: a step evaluates
-    them every time."""
-    r = f.x - f.goal[:, None, :]
-    w, count = weights, f.x.shape[-2]
-    if f.members is not None:
-        member = xp.astype(f.members, f.goal_distance)
-        w = member if w is None else w * member
-        count = xp.sum(member, axis=-1)
-    v = f.v if w is None else f.v * w[..., None]
-    z = xp.sum(r[..., 0] * v[..., 1] - r[..., 1] * v[..., 0], axis=-1)
-    if r.shape[-1] == 2:
-        total = xp.abs(z)
-    else:
-        cx = xp.sum(r[..., 1] * v[..., 2] - r[..., 2] * v[..., 1], axis=-1)
-        cy = xp.sum(r[..., 2] * v[..., 0] - r[..., 0] * v[..., 2], axis=-1)
-        total = xp.sqrt(cx * cx + cy * cy + z * z)
-    return total / count
-
-
 def _goal_angular_momentum(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
-    return _about_goal(f, None, xp)
+    r = f.x - f.goal[:, None, :]
+    return metrics.mean_cross_about_goal(r, f.v, None, f.members, xp)
 
 
 def _mill_speed(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
+    # metrics.tangential_speed's weights, from the distances the frame holds
     dist = f.goal_distance
     inside = (dist > 0) & (dist <= task.arrival_radius)
-    return _about_goal(f, xp.where(inside, 1.0 / xp.where(inside, dist, 1.0), 0.0), xp)
+    weights = xp.where(inside, 1.0 / xp.where(inside, dist, 1.0), 0.0)
+    return metrics.mean_cross_about_goal(f.x - f.goal[:, None, :], f.v, weights, f.members, xp)
 
 
 #: ``v₀`` below this counts as this in ``mill_order`` (a ratio finite in float32).
