@@ -502,6 +502,41 @@ def test_swarm_infos_are_recycled_only_once_the_caller_dropped_them():
         del infos
 
 
+def test_a_dropped_list_of_infos_is_recycled_with_every_slot_quiet_again():
+    from swarm_envs.envs.infos import QuietInfo, SwarmInfo, TerminalInfo
+
+    venv = swarm_nav_v0.vec_env(3, n_agents=2, max_steps=2)
+    venv.reset()
+    zeros = np.zeros((6, 2), np.float32)
+    first_id = id(venv.step(zeros)[3])  # dropped at once
+    infos = venv.step(zeros)[3]  # every swarm ends here: terminal infos in every slot
+    assert id(infos) == first_id
+    assert all(isinstance(info, TerminalInfo) for info in infos)
+    infos[1]["mine"] = 1  # a write to an info, not to the list
+    del infos
+    again = venv.step(zeros)[3]
+    assert id(again) == first_id
+    assert [type(info) for info in again] == [SwarmInfo, QuietInfo] * 3
+    assert all(len(again[i]) == 0 for i in (1, 3, 5))
+
+
+def test_a_held_or_changed_list_of_infos_is_never_reused():
+    venv = swarm_nav_v0.vec_env(2, n_agents=2, max_steps=10**6)
+    venv.reset()
+    zeros = np.zeros((4, 2), np.float32)
+    held = venv.step(zeros)[3]
+    snapshot = list(held)
+    for _ in range(3):
+        assert venv.step(zeros)[3] is not held
+    assert list(held) == snapshot  # the VecEnv never wrote into it again
+    changed = venv.step(zeros)[3]
+    changed[1] = {"mine": 1}  # the caller's own change to the list
+    del changed
+    for _ in range(4):
+        infos = venv.step(zeros)[3]
+        assert dict(infos[1]) == {}
+
+
 def test_a_partial_reset_does_not_rewrite_the_returned_statistics():
     venv = swarm_nav_v0.vec_env(3, n_agents=3, max_steps=2)
     venv.seed(0)

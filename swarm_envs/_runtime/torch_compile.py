@@ -41,6 +41,7 @@ from typing import Any
 
 import torch
 
+from swarm_envs._runtime.module_guards import ModuleGuards
 from swarm_envs.physics.integrators import step
 from swarm_envs.physics.social_potential import SocialPotentialParams
 
@@ -137,31 +138,40 @@ def _warn_not_compiled(reason: str) -> None:
 
 
 _COPIES = itertools.count()
-_CODE_FOR: dict[tuple[Any, Any], types.CodeType] = {}
+_CODE_FOR: dict[tuple[Any, Any], tuple[types.CodeType, ModuleGuards | None]] = {}
 
 
-def _own_code(fn: Callable[..., Any], key: Any = None) -> Callable[..., Any]:
-    """``fn`` with a code object of its own per ``key`` (same behaviour, a numbered name).
+def _own_code(
+    fn: Callable[..., Any], key: Any = None, module_guards: bool = False
+) -> tuple[Callable[..., Any], ModuleGuards | None]:
+    """``fn`` with a code object of its own per ``key`` (same behaviour, a numbered name),
+    and, with ``module_guards``, the :class:`ModuleGuards` of that code object.
 
     TorchDynamo caches compiled graphs per code object and, past its recompile limit
     (8 per code object), refuses to compile more (with ``fullgraph=True`` it raises).
     Closures built by one factory share their code, so the ninth differently-shaped or
     differently-configured core in a process (a benchmark sweep, a test session) would
     lose its compilation. Functions with equal ``key`` (``None``: never equal) share one
-    copy, so that an identical second instance reuses the compiled graph.
+    copy, so that an identical second instance reuses the compiled graph; with
+    ``module_guards``, only while the module objects it was compiled against are
+    unchanged (else a new copy is made, and compiled anew).
     """
     if not isinstance(fn, types.FunctionType):
-        return fn
-    cache_key = (fn.__code__, key)
-    code = _CODE_FOR.get(cache_key) if key is not None else None
-    if code is None:
+        return fn, None
+    cache_key = (fn.__code__, key, module_guards)
+    cached = _CODE_FOR.get(cache_key) if key is not None else None
+    if cached is not None and cached[1] is not None and not cached[1].unchanged():
+        cached = None
+    if cached is None:
         name = f"{fn.__code__.co_name}_{next(_COPIES)}"
         code = fn.__code__.replace(co_name=name, co_qualname=name)
+        cached = code, (ModuleGuards(fn.__globals__) if module_guards else None)
         if key is not None:
-            _CODE_FOR[cache_key] = code
+            _CODE_FOR[cache_key] = cached
+    code, guards = cached
     own = types.FunctionType(code, fn.__globals__, code.co_name, fn.__defaults__, fn.__closure__)
     own.__kwdefaults__ = fn.__kwdefaults__
-    return own
+    return own, guards
 
 
 class MaybeCompiled:
@@ -176,6 +186,15 @@ class MaybeCompiled:
             ``options``), e.g. ``{"assert_indirect_indexing": False}``.
         key: a hashable description of what ``fn`` closes over (configuration, shapes):
             instances with equal keys share compiled graphs; ``None`` shares nothing.
+        module_guards: ``"call"`` (default): TorchDynamo checks at every call the
+            module-level objects ``fn`` reads (the functions it calls, module
+            constants), as well as its arguments; ``"build"``: it checks only the
+            arguments, the closure and torch's global state, and the module objects
+            are checked when an instance with an equal ``key`` is built
+            (:class:`~swarm_envs._runtime.module_guards.ModuleGuards`). For functions
+            called many times with arguments the caller builds itself, such as a
+            core's step: a replaced library function is then seen by the next core
+            built, not by the existing ones.
 
     Attributes:
         compiled: whether calls run the compiled function.
@@ -197,7 +216,10 @@ class MaybeCompiled:
         name: str = "",
         options: dict[str, Any] | None = None,
         key: Any = None,
+        module_guards: str = "call",
     ) -> None:
+        if module_guards not in ("call", "build"):
+            raise ValueError(f"module_guards must be 'call' or 'build', got {module_guards!r}")
         self.fn = fn
         self.name = name or getattr(fn, "__name__", "function")
         self._auto = compile == "auto"
@@ -205,11 +227,12 @@ class MaybeCompiled:
         if self._auto and not self.compiled:
             _warn_not_compiled(self.reason)
         self.device = torch.device(device)
-        self._call = (
-            torch.compile(_own_code(fn, key), dynamic=False, fullgraph=True, options=options)
-            if self.compiled
-            else self.fn
-        )
+        self._call = self.fn
+        if self.compiled:
+            own, guards = _own_code(fn, key, module_guards == "build")
+            if guards is not None:
+                options = {**(options or {}), "guard_filter_fn": guards.filter}
+            self._call = torch.compile(own, dynamic=False, fullgraph=True, options=options)
         self.compile_seconds: float | None = None
 
     def __call__(self, *args: Any, **kwargs: Any) -> Any:

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import copy
 import sys
-from collections.abc import Iterator, Mapping, MutableMapping
+from collections.abc import Callable, Iterable, Iterator, Mapping, MutableMapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -48,6 +48,19 @@ __all__ = [
 #: What ``sys.getrefcount`` says of an object that one list alone holds, measured as the
 #: pools measure (interpreters differ in what the count includes).
 _FREE_REFCOUNT = max(map(sys.getrefcount, [object()]))
+
+
+def _free_list_refcount() -> int:
+    """What ``sys.getrefcount`` says, in :meth:`QuietInfos.infos`'s loop, of a list that
+    the pool alone holds."""
+    pool = [[]]
+    for held in pool:
+        return sys.getrefcount(held)
+    raise AssertionError
+
+
+#: See :func:`_free_list_refcount`.
+_FREE_LIST_REFCOUNT = _free_list_refcount()
 
 
 class _PlainCopies:
@@ -111,17 +124,28 @@ class QuietInfo(_PlainCopies, MutableMapping[str, Any]):
 
 
 class QuietInfos:
-    """The quiet slots' infos: one :class:`QuietInfo` per slot, replaced once written.
+    """The step's list of infos, starting from every slot's :class:`QuietInfo`.
 
-    :meth:`infos` gives a step's list (an :class:`InfoList` of the current objects: one
-    list copy); a slot whose object was written since the last call gets a fresh one
-    first, so a step's quiet infos are always empty when handed out. Pickles as its size.
+    One :class:`QuietInfo` per slot, replaced once written (a slot whose object was
+    written since the last call gets a fresh one first, so a step's quiet infos are
+    always empty when handed out).
+
+    :meth:`infos` hands out an :class:`InfoList` of the current objects. The lists are
+    recycled: a list that nothing outside this object references (the caller dropped
+    it) and that the caller did not change is reused, with the slots the VecEnv put
+    other infos in since (:meth:`InfoList.put`) set back to their quiet objects; else a
+    new list is made (a copy of every slot). A step thus touches the slots it writes, not
+    every slot. Pickles as its size.
+
+    Args:
+        n_slots: the slots of a step (swarms × agents).
     """
 
     def __init__(self, n_slots: int) -> None:
         self._n = n_slots
         self._current = [QuietInfo(self, i) for i in range(n_slots)]
         self._written: list[int] = []
+        self._lists: list[InfoList] = []
 
     def __reduce__(self) -> tuple[type, tuple[int]]:
         return QuietInfos, (self._n,)
@@ -134,8 +158,22 @@ class QuietInfos:
         """A new step's list of infos, every slot's quiet info (empty)."""
         for slot in self._written:
             self._current[slot] = QuietInfo(self, slot)
-        self._written.clear()
-        return InfoList(self._current)
+        if self._written:
+            for kept in self._lists:  # they still hold the written objects
+                kept._dirty.extend(self._written)
+            self._written.clear()
+        self._lists = [kept for kept in self._lists if not kept._changed]
+        for infos in self._lists:
+            if sys.getrefcount(infos) <= _FREE_LIST_REFCOUNT:  # held here alone
+                current = self._current
+                for where in infos._dirty:
+                    list.__setitem__(infos, where, current[where])
+                infos._dirty.clear()
+                return infos
+        infos = InfoList(self._current)
+        if len(self._lists) < _MAX_INFO_SETS:
+            self._lists.append(infos)
+        return infos
 
 
 def _plain(info: Any) -> Any:
@@ -145,15 +183,60 @@ def _plain(info: Any) -> Any:
 
 class InfoList(list):
     """The list of a step's infos: a ``list`` whose deep copy and pickle are a plain list
-    with a plain dict of its own per slot (see the module docstring)."""
+    with a plain dict of its own per slot (see the module docstring).
 
-    __slots__ = ()
+    The VecEnv writes its slots with :meth:`put`, which notes them, so that the list
+    can be recycled (:class:`QuietInfos`); any other change to the list (``infos[i] =
+    ...``, ``append``, ``sort``, ...) works as on a list and retires it from recycling.
+    """
+
+    __slots__ = ("_changed", "_dirty")
+
+    def __init__(self, infos: Iterable[Any] = ()) -> None:
+        super().__init__(infos)
+        self._dirty: list[int | slice] = []  # the slots put since it was handed out
+        self._changed = False  # changed by someone else: never recycled
+
+    def put(self, where: int | slice, value: Any) -> None:
+        """``self[where] = value``, noted so that recycling restores the quiet infos."""
+        list.__setitem__(self, where, value)
+        self._dirty.append(where)
 
     def __deepcopy__(self, memo: dict[int, Any]) -> list[Any]:
         return [copy.deepcopy(_plain(info), memo) for info in self]
 
     def __reduce__(self) -> tuple[type, tuple[list[Any]]]:
         return list, ([_plain(info) for info in self],)
+
+
+def _retiring(name: str) -> Callable[..., Any]:
+    """``list``'s method ``name``, marking the list as changed first."""
+    method = getattr(list, name)
+
+    def changed(self: InfoList, *args: Any, **kwargs: Any) -> Any:
+        self._changed = True
+        return method(self, *args, **kwargs)
+
+    changed.__name__ = changed.__qualname__ = name
+    changed.__doc__ = method.__doc__
+    return changed
+
+
+for _name in (
+    "__setitem__",
+    "__delitem__",
+    "__iadd__",
+    "__imul__",
+    "append",
+    "extend",
+    "insert",
+    "pop",
+    "remove",
+    "clear",
+    "sort",
+    "reverse",
+):
+    setattr(InfoList, _name, _retiring(_name))
 
 
 class SwarmInfo(_PlainCopies, MutableMapping[str, Any]):

@@ -246,6 +246,9 @@ class TorchSwarmNavCore(SubstepControl, StatusControl):
         sums of the force, the energy and the stable substep's rates then share one loop
         and its exponentials. On the CPU a small step (at most
         :data:`SINGLE_THREAD_PAIRS` pair evaluations) is generated for one thread.
+        The core builds every argument itself, so a call checks those and torch's global
+        state only; the library functions the step reads are checked when a core is
+        built (``module_guards="build"``).
         """
         options: dict[str, Any] = {
             "assert_indirect_indexing": False,
@@ -260,6 +263,7 @@ class TorchSwarmNavCore(SubstepControl, StatusControl):
             name=name,
             options=options,
             key=(name, repr(self.cfg), batch, str(self.dtype), str(self.device)),
+            module_guards="build",
         )
 
     # ------------------------------------------------------------------ helpers

@@ -69,6 +69,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 from swarm_envs.envs.backends import make_core, resolve_backend
 from swarm_envs.envs.common import check_dtype
 from swarm_envs.envs.infos import (  # noqa: F401  (SwarmInfo: re-exported)
+    InfoList,
     QuietInfos,
     SwarmInfo,
     SwarmInfoPool,
@@ -136,7 +137,7 @@ class SwarmNavVecEnv(VecEnv):
         self.episode_lengths = np.zeros(self.n_swarms, np.int64)
         self._swarm_infos = SwarmInfoPool(self.n_swarms)
         self._terminal_infos = TerminalInfoPool(self.n_swarms, self.n_agents)
-        self._quiet_infos = QuietInfos(self.num_envs)  # each step's list starts as a copy
+        self._quiet_infos = QuietInfos(self.num_envs)  # each step's list, recycled
         self._t_start = time.time()  # the "t" of the episode infos, as VecMonitor's
         #: Which slots' agents act ``(B, N)``; ``None`` while every agent always does.
         self._active: np.ndarray | None = None
@@ -257,10 +258,9 @@ class SwarmNavVecEnv(VecEnv):
         self.episode_returns += reward
         self.episode_lengths += 1
         done = terminated | truncated
-        # Slots with nothing to report share one read-only empty mapping: building 32k
-        # fresh dicts per step would cost more than the fused step itself.
+        # Every slot's quiet info, the first slot of each swarm its SwarmInfo (infos.py).
         infos = self._quiet_infos.infos()
-        infos[::N] = self._swarm_infos.infos(stats)  # read on access; see the pool
+        infos.put(slice(None, None, N), self._swarm_infos.infos(stats))  # read on access
         was_active = self._active
         if done.any():
             self._end_episodes(done, truncated & ~terminated, stats, infos, was_active)
@@ -280,7 +280,7 @@ class SwarmNavVecEnv(VecEnv):
         obs: np.ndarray,
         rewards: np.ndarray,
         dones: np.ndarray,
-        infos: list[Any],
+        infos: InfoList,
         done: np.ndarray,
         was_active: np.ndarray,
     ) -> None:
@@ -308,14 +308,11 @@ class SwarmNavVecEnv(VecEnv):
         zeros.flags.writeable = False
         absorbing = {"terminal_observation": zeros, "TimeLimit.truncated": False}
         for slot in np.flatnonzero((going & idle & ~stopped).reshape(-1)).tolist():
-            infos[slot] = absorbing.copy() if slot % N else {**infos[slot], **absorbing}
+            infos.put(slot, absorbing.copy() if slot % N else {**infos[slot], **absorbing})
         for b, i in zip(*np.nonzero(stopped), strict=True):
             slot = int(b) * N + int(i)
-            infos[slot] = {
-                **infos[slot],
-                "terminal_observation": obs[b, i].copy(),
-                "TimeLimit.truncated": False,
-            }
+            last = {"terminal_observation": obs[b, i].copy(), "TimeLimit.truncated": False}
+            infos.put(slot, {**infos[slot], **last})
         rewards[idle.reshape(-1)] = 0.0
         dones[(stopped | (going & idle)).reshape(-1)] = True
         obs[~active] = 0.0
@@ -325,7 +322,7 @@ class SwarmNavVecEnv(VecEnv):
         done: np.ndarray,
         time_limit: np.ndarray,
         stats: dict[str, np.ndarray],
-        infos: list[Any],
+        infos: InfoList,
         was_active: np.ndarray | None = None,
     ) -> None:
         """Terminal infos for the swarms ``done`` (into ``infos``), then reset them.
@@ -361,7 +358,7 @@ class SwarmNavVecEnv(VecEnv):
         )
         terminal = self._terminal_infos.infos(record, swarms)
         for b in swarms:
-            infos[b * N : (b + 1) * N] = terminal[b]
+            infos.put(slice(b * N, (b + 1) * N), terminal[b])
         for core, sl in cores:  # in order: seeded
             core.reset(self._rng, which=done[sl])
         self.episode_returns[done] = 0.0
