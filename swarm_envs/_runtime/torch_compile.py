@@ -13,6 +13,8 @@ a function of them is executed.
   (``0``/``1``/``auto``; ``0`` runs plain torch without a warning) overrides ``"auto"``. The compile
   time is measured by :meth:`MaybeCompiled.warmup`, logged once, and kept out of the
   timed steps.
+  With ``direct=True`` (a core's step), calls after the warmup go to the compiled graph
+  directly (:class:`DirectCall`), without TorchDynamo's per-call guards.
 - :class:`CudaGraphed` captures a function of CUDA tensors once and replays it: one
   launch instead of one per kernel.
 - :class:`SocialPotentialStepper`: the Euler step of
@@ -41,7 +43,7 @@ from typing import Any
 
 import torch
 
-from swarm_envs._runtime.module_guards import ModuleGuards
+from swarm_envs._runtime.direct_call import NOTED, DirectCall, graphs_run, warn_not_direct
 from swarm_envs.physics.integrators import step
 from swarm_envs.physics.social_potential import SocialPotentialParams
 
@@ -138,40 +140,31 @@ def _warn_not_compiled(reason: str) -> None:
 
 
 _COPIES = itertools.count()
-_CODE_FOR: dict[tuple[Any, Any], tuple[types.CodeType, ModuleGuards | None]] = {}
+_CODE_FOR: dict[tuple[Any, Any], types.CodeType] = {}
 
 
-def _own_code(
-    fn: Callable[..., Any], key: Any = None, module_guards: bool = False
-) -> tuple[Callable[..., Any], ModuleGuards | None]:
-    """``fn`` with a code object of its own per ``key`` (same behaviour, a numbered name),
-    and, with ``module_guards``, the :class:`ModuleGuards` of that code object.
+def _own_code(fn: Callable[..., Any], key: Any = None) -> Callable[..., Any]:
+    """``fn`` with a code object of its own per ``key`` (same behaviour, a numbered name).
 
     TorchDynamo caches compiled graphs per code object and, past its recompile limit
     (8 per code object), refuses to compile more (with ``fullgraph=True`` it raises).
     Closures built by one factory share their code, so the ninth differently-shaped or
     differently-configured core in a process (a benchmark sweep, a test session) would
     lose its compilation. Functions with equal ``key`` (``None``: never equal) share one
-    copy, so that an identical second instance reuses the compiled graph; with
-    ``module_guards``, only while the module objects it was compiled against are
-    unchanged (else a new copy is made, and compiled anew).
+    copy, so that an identical second instance reuses the compiled graph.
     """
     if not isinstance(fn, types.FunctionType):
-        return fn, None
-    cache_key = (fn.__code__, key, module_guards)
-    cached = _CODE_FOR.get(cache_key) if key is not None else None
-    if cached is not None and cached[1] is not None and not cached[1].unchanged():
-        cached = None
-    if cached is None:
+        return fn
+    cache_key = (fn.__code__, key)
+    code = _CODE_FOR.get(cache_key) if key is not None else None
+    if code is None:
         name = f"{fn.__code__.co_name}_{next(_COPIES)}"
         code = fn.__code__.replace(co_name=name, co_qualname=name)
-        cached = code, (ModuleGuards(fn.__globals__) if module_guards else None)
         if key is not None:
-            _CODE_FOR[cache_key] = cached
-    code, guards = cached
+            _CODE_FOR[cache_key] = code
     own = types.FunctionType(code, fn.__globals__, code.co_name, fn.__defaults__, fn.__closure__)
     own.__kwdefaults__ = fn.__kwdefaults__
-    return own, guards
+    return own
 
 
 class MaybeCompiled:
@@ -186,15 +179,14 @@ class MaybeCompiled:
             ``options``), e.g. ``{"assert_indirect_indexing": False}``.
         key: a hashable description of what ``fn`` closes over (configuration, shapes):
             instances with equal keys share compiled graphs; ``None`` shares nothing.
-        module_guards: ``"call"`` (default): TorchDynamo checks at every call the
-            module-level objects ``fn`` reads (the functions it calls, module
-            constants), as well as its arguments; ``"build"``: it checks only the
-            arguments, the closure and torch's global state, and the module objects
-            are checked when an instance with an equal ``key`` is built
-            (:class:`~swarm_envs._runtime.module_guards.ModuleGuards`). For functions
-            called many times with arguments the caller builds itself, such as a
-            core's step: a replaced library function is then seen by the next core
-            built, not by the existing ones.
+        direct: after :meth:`warmup`, call the compiled graph that TorchDynamo chose
+            for the warmup's arguments directly (:class:`DirectCall`), without Dynamo's
+            per-call guards. Only for a pure function (it writes none of its arguments)
+            whose caller builds every argument itself, always of the warmup's shapes,
+            dtypes and device, as a core does with its step: a call with other
+            arguments is not checked (TorchInductor still asserts sizes and strides).
+            The guards run in the warmup call, so a changed library function is seen
+            by the next instance built.
 
     Attributes:
         compiled: whether calls run the compiled function.
@@ -216,10 +208,8 @@ class MaybeCompiled:
         name: str = "",
         options: dict[str, Any] | None = None,
         key: Any = None,
-        module_guards: str = "call",
+        direct: bool = False,
     ) -> None:
-        if module_guards not in ("call", "build"):
-            raise ValueError(f"module_guards must be 'call' or 'build', got {module_guards!r}")
         self.fn = fn
         self.name = name or getattr(fn, "__name__", "function")
         self._auto = compile == "auto"
@@ -227,15 +217,26 @@ class MaybeCompiled:
         if self._auto and not self.compiled:
             _warn_not_compiled(self.reason)
         self.device = torch.device(device)
+        self._direct_wanted = direct
+        self._direct: DirectCall | None = None
         self._call = self.fn
         if self.compiled:
-            own, guards = _own_code(fn, key, module_guards == "build")
-            if guards is not None:
-                options = {**(options or {}), "guard_filter_fn": guards.filter}
-            self._call = torch.compile(own, dynamic=False, fullgraph=True, options=options)
+            own = _own_code(fn, key)
+            if direct:
+                backend = graphs_run(options)
+                self._call = torch.compile(own, dynamic=False, fullgraph=True, backend=backend)
+            else:
+                self._call = torch.compile(own, dynamic=False, fullgraph=True, options=options)
         self.compile_seconds: float | None = None
 
+    @property
+    def direct(self) -> bool:
+        """Whether calls go to the compiled graph directly (see ``direct``)."""
+        return self._direct is not None
+
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        if self._direct is not None and not kwargs and len(args) == self._direct.arity:
+            return self._direct(args)
         return self._call(*args, **kwargs)
 
     def warmup(self, *args: Any, **kwargs: Any) -> Any:
@@ -245,6 +246,7 @@ class MaybeCompiled:
         operation) falls back to the plain function with a :class:`UserWarning`.
         """
         start = time.perf_counter()
+        NOTED.last = None
         try:
             out = self._call(*args, **kwargs)
             self._sync()
@@ -262,6 +264,12 @@ class MaybeCompiled:
             out = self._call(*args, **kwargs)
             self._sync()
         seconds = time.perf_counter() - start
+        if self._direct_wanted and self.compiled and not kwargs:
+            self._direct, why = DirectCall.of(
+                getattr(NOTED, "last", None), self.fn, self._call, args, out
+            )
+            if self._direct is None:
+                warn_not_direct(self.name, why)
         if self.compile_seconds is None:
             self.compile_seconds = seconds
             if self.compiled:

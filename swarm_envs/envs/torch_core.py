@@ -169,7 +169,13 @@ class TorchSwarmNavCore(SubstepControl, StatusControl):
         B, N, d = self.batch, cfg.n_agents, cfg.dim
         self.obs_dim = observation_size(cfg)
         self.t = np.zeros(B, np.int64)
-        self._wide = wide_dtypes(self.dtype)
+        # stats(): each statistic's row in the copy of its dtype (core's or float64).
+        wide_keys = {k for k, t in wide_dtypes(self.dtype).items() if t != self.dtype}
+        self._narrow_rows = [i for i, k in enumerate(STAT_KEYS) if k not in wide_keys]
+        self._wide_rows = [i for i, k in enumerate(STAT_KEYS) if k in wide_keys]
+        rows = {i: j for j, i in enumerate(self._narrow_rows)}
+        rows.update({i: j for j, i in enumerate(self._wide_rows)})
+        self._stat_rows = [(k, k in wide_keys, rows[i]) for i, k in enumerate(STAT_KEYS)]
         zeros = self._zeros
         # State component first, (d, B, N): the layout the fused step vectorises.
         self._x, self._v, self._f = zeros(d, B, N), zeros(d, B, N), zeros(d, B, N)
@@ -246,9 +252,9 @@ class TorchSwarmNavCore(SubstepControl, StatusControl):
         sums of the force, the energy and the stable substep's rates then share one loop
         and its exponentials. On the CPU a small step (at most
         :data:`SINGLE_THREAD_PAIRS` pair evaluations) is generated for one thread.
-        The core builds every argument itself, so a call checks those and torch's global
-        state only; the library functions the step reads are checked when a core is
-        built (``module_guards="build"``).
+        The core builds every argument itself, always of the same shapes, dtypes and
+        device: after the first call, the compiled graph is called directly, without
+        TorchDynamo's per-call guards (``direct=True``).
         """
         options: dict[str, Any] = {
             "assert_indirect_indexing": False,
@@ -263,7 +269,7 @@ class TorchSwarmNavCore(SubstepControl, StatusControl):
             name=name,
             options=options,
             key=(name, repr(self.cfg), batch, str(self.dtype), str(self.device)),
-            module_guards="build",
+            direct=True,
         )
 
     # ------------------------------------------------------------------ helpers
@@ -462,10 +468,9 @@ class TorchSwarmNavCore(SubstepControl, StatusControl):
     def stats(self) -> dict[str, np.ndarray]:
         """Group statistics and task measures per swarm, each ``(B,)`` (fresh arrays),
         in the numpy core's dtypes."""
-        packed = self._packed_host
-        return {
-            key: packed[:, i].astype(self._wide[key], copy=True) for i, key in enumerate(STAT_KEYS)
-        }
+        columns = self._packed_host.T  # two copies (one per dtype), each row a statistic
+        narrow, wide = columns[self._narrow_rows], columns[self._wide_rows].astype(np.float64)
+        return {key: (wide if w else narrow)[j] for key, w, j in self._stat_rows}
 
     def observe(self, which: np.ndarray | None = None) -> np.ndarray:
         """Local observations ``(B, N, obs_dim)``, float32, inside ``[−OBS_BOUND, OBS_BOUND]``.
