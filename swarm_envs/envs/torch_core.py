@@ -24,7 +24,7 @@ integration switched off, so the observations, statistics and carried force alwa
 describe the current state. A reset of a few swarms (at most
 :attr:`TorchSwarmNavCore.reset_batch`, 1/16 of a batch of 64 or more) evaluates them
 alone, through the same function compiled for that sub-batch: in a VecEnv some swarm
-ends on most steps.
+ends on most steps (:mod:`swarm_envs.envs.torch_resets`).
 
 Compile time: the constructor makes the first (compiling) calls of both functions, on
 the all-zero state, and stores their wall time in
@@ -63,36 +63,20 @@ from swarm_envs.envs.common import (
     check_actions,
     check_batch,
     check_dtype,
-    check_start,
-    draw_starts,
     wide_dtypes,
 )
 from swarm_envs.envs.task import STAT_KEYS, observation_size
 from swarm_envs.envs.task.episode import episode_end
+from swarm_envs.envs.torch_resets import PARTIAL_RESET_MIN_BATCH, ResetControl, partial_reset_batch
 from swarm_envs.envs.torch_statuses import StatusControl
 from swarm_envs.envs.torch_step import PACKED_KEYS, build_advance, build_substep
 from swarm_envs.envs.torch_substeps import UNSTABLE, SubstepControl
 
 __all__ = ["PARTIAL_RESET_MIN_BATCH", "TorchSwarmNavCore", "partial_reset_batch"]
 
-#: The smallest batch whose resets of a few swarms measure only those (see
-#: :func:`partial_reset_batch`); smaller batches re-measure every swarm on a reset.
-PARTIAL_RESET_MIN_BATCH = 64
-
-
 #: Pair evaluations per step (``B·N²``) up to which the compiled CPU step runs on one
 #: thread: below it the threads' synchronisation costs more than they share.
 SINGLE_THREAD_PAIRS = 8192
-
-
-def partial_reset_batch(batch: int) -> int | None:
-    """Sub-batch size ``R = batch // 16`` for resets of at most R swarms, or ``None``.
-
-    With ``batch ≥ PARTIAL_RESET_MIN_BATCH`` a reset of at most ``R`` swarms runs the
-    fused function on those swarms only (padded to R): 1/16 of a step. Below that size,
-    or for larger resets, every swarm is measured, which costs a whole step.
-    """
-    return batch // 16 if batch >= PARTIAL_RESET_MIN_BATCH else None
 
 
 def _torch_dtype(dtype: Any) -> tuple[np.dtype, torch.dtype]:
@@ -112,7 +96,7 @@ def _device(device: Any) -> torch.device:
     return dev
 
 
-class TorchSwarmNavCore(SubstepControl, StatusControl):
+class TorchSwarmNavCore(SubstepControl, StatusControl, ResetControl):
     """State and dynamics of ``batch`` independent SwarmNav swarms, in torch.
 
     A :class:`~swarm_envs.envs.protocol.Core` (numpy in, numpy out) for
@@ -339,78 +323,6 @@ class TorchSwarmNavCore(SubstepControl, StatusControl):
     def _measure(self, warmup: bool = False) -> None:
         """Observations, statistics and passive force of the current state (no step)."""
         self._run(self._no_action, self._no_step, warmup=warmup)
-
-    def _row_args(self, rows: torch.Tensor) -> tuple[torch.Tensor, ...]:
-        """The fused function's arguments for swarms ``rows`` only, measuring (no step)."""
-        n = rows.shape[0]
-        return (
-            self._x[:, rows],
-            self._v[:, rows],
-            self._f[:, rows],
-            self._goal[rows],
-            self._no_action[:n],
-            self._no_step[:n],
-            self._counted[rows],
-            self._prev[rows],
-            self._start[rows],
-            *self._status_arg(rows),
-        )
-
-    def _measure_rows(self, rows: torch.Tensor) -> None:
-        """:meth:`_measure` for swarms ``rows`` (at most :attr:`reset_batch`) only.
-
-        The rows are padded to ``reset_batch`` with copies of the first; the results of
-        the real ones are written into the force, observations and statistics; the
-        ``unstable`` statistic of every swarm but those :attr:`_flagged` becomes 0, as
-        the measure of the whole batch makes it (a reset clears the flags first).
-        """
-        assert self._advance_part is not None and self.reset_batch is not None
-        n = rows.shape[0]
-        padded = torch.cat([rows, rows[:1].expand(self.reset_batch - n)])
-        _, _, f, obs, packed, _, _ = self._advance_part(*self._row_args(padded))
-        self._f = self._f.clone()
-        self._f[:, rows] = f[:, :n]
-        if self._obs_given or self._obs_shared:  # handed out: leave that memory alone
-            self._obs = self._obs.clone()
-            self._obs_given = self._obs_shared = False
-        self._obs[rows] = obs[:n]
-        self._packed = self._packed.index_put((rows,), packed[:n])  # a new tensor
-        self._packed[:, UNSTABLE] = 0.0
-        if self._flagged is not None:
-            self._packed[torch.as_tensor(self._flagged, device=self.device), UNSTABLE] = 1.0
-        self._host_packed(whole=False)
-
-    # ------------------------------------------------------------------ reset
-    def reset(self, rng: np.random.Generator, which: np.ndarray | None = None) -> None:
-        """Draw new starts for the swarms in ``which`` (bool mask ``(B,)``; all if None),
-        with :func:`~swarm_envs.envs.common.draw_starts` as every core."""
-        idx = np.arange(self.batch) if which is None else np.flatnonzero(which)
-        if idx.size == 0:
-            return
-        x, v, goal = draw_starts(self.cfg, rng, idx.size)
-        self.t[idx] = 0
-        # Out of place: the old tensors may share memory with arrays handed out.
-        rows = torch.as_tensor(idx, device=self.device)
-        # No step yet for these swarms; the others keep their last step's substeps.
-        self._counted = self._counted.index_put((rows,), self._none_each[rows])
-        self._flagged = None
-        self._x = self._put(self._x, rows, x)
-        self._v = self._put(self._v, rows, v)
-        self._goal = self._goal.index_put((rows,), self._to_device(goal))
-        if self.reset_batch is not None and idx.size <= self.reset_batch:
-            self._measure_rows(rows)
-        else:
-            self._measure()
-        check_start(self.cfg, self.stats(), idx, self.dtype)
-        measured = self._packed[rows]
-        self._prev = self._prev.index_put((rows,), measured)
-        self._start = self._start.index_put((rows,), measured)
-
-    def _put(self, state: torch.Tensor, rows: torch.Tensor, new: np.ndarray) -> torch.Tensor:
-        """A copy of ``state`` ``(d, B, N)`` with swarms ``rows`` set from ``new`` ``(n, N, d)``."""
-        out = state.clone()
-        out[:, rows] = self._to_device(new).permute(2, 0, 1)
-        return out
 
     def _to_device(self, a: np.ndarray) -> torch.Tensor:
         """A host array in the core's dtype (cast as numpy casts), on the device."""
