@@ -153,3 +153,31 @@ def wide_dtypes(dtype: np.dtype) -> dict[str, np.dtype]:
     from swarm_envs.envs.task.statistics import STATISTICS
 
     return {s.name: np.dtype(np.float64) if s.wide else np.dtype(dtype) for s in STATISTICS}
+
+
+class StatisticColumns:
+    """The statistics of a packed ``(B, P)`` array whose first columns are
+    :data:`~swarm_envs.envs.task.STAT_KEYS`, as fresh ``(B,)`` arrays in the dtypes of
+    :func:`wide_dtypes`.
+
+    One copy per dtype (the core's, float64) holds every statistic of that dtype, one
+    row each; each statistic is a row of its copy. The arrays of one call share no
+    memory with the packed array, another call's, or each other's.
+    """
+
+    def __init__(self, dtype: np.dtype) -> None:
+        from swarm_envs.envs.task.statistics import STATISTICS
+
+        self._dtype = np.dtype(dtype)
+        wide = [s.wide and self._dtype != np.float64 for s in STATISTICS]
+        self._narrow = [i for i, w in enumerate(wide) if not w]
+        self._wide = [i for i, w in enumerate(wide) if w]
+        row = {i: j for j, i in enumerate(self._narrow)} | {i: j for j, i in enumerate(self._wide)}
+        self._rows = [(s.name, wide[i], row[i]) for i, s in enumerate(STATISTICS)]
+
+    def split(self, packed: np.ndarray) -> dict[str, np.ndarray]:
+        """``{key: (B,) array}`` of the statistics in ``packed``'s first columns."""
+        columns = packed.T
+        narrow = columns[self._narrow].astype(self._dtype, copy=False)  # a copy: indexed
+        wide = columns[self._wide].astype(np.float64, copy=False)
+        return {key: (wide if w else narrow)[j] for key, w, j in self._rows}

@@ -482,11 +482,14 @@ class SwarmNavParallelEnv(_SwarmState, _Rendering, ParallelEnv):
         r, term, trunc = float(reward[0]), bool(terminated[0]), bool(truncated[0])
         info = {k: float(v[0]) for k, v in stats.items()}
         active = self._status() == ACTIVE
-        ended = [a for a in agents if not active[self._agent_index[a]]]  # failed, removed
-        joined = [
-            a for a, on in zip(self.possible_agents, active, strict=True) if on and a not in agents
-        ]
-        agents = agents + joined
+        if len(agents) == n and active.all():  # every agent acted and acts on
+            ended, joined = [], []
+        else:
+            live = set(agents)
+            ended = [a for a in agents if not active[self._agent_index[a]]]  # failed, removed
+            acting = zip(self.possible_agents, active, strict=True)
+            joined = [a for a, on in acting if on and a not in live]
+            agents = agents + joined
         result = (
             {a: obs[self._agent_index[a]] for a in agents},
             dict.fromkeys(agents, r),
@@ -501,9 +504,11 @@ class SwarmNavParallelEnv(_SwarmState, _Rendering, ParallelEnv):
         if term or trunc:
             self.agents = []
             self._needs_reset = True
-        else:
+        elif ended:
             gone = set(ended)
             self.agents = [a for a in agents if a not in gone]
+        else:
+            self.agents = agents
         self._after_step_render()
         return result
 

@@ -60,12 +60,12 @@ import torch
 from swarm_envs._runtime.torch_compile import CudaGraphed, MaybeCompiled
 from swarm_envs.envs.common import (
     NON_FINITE_ACTIONS,
+    StatisticColumns,
     check_actions,
     check_batch,
     check_dtype,
-    wide_dtypes,
 )
-from swarm_envs.envs.task import STAT_KEYS, observation_size
+from swarm_envs.envs.task import observation_size
 from swarm_envs.envs.task.episode import episode_end
 from swarm_envs.envs.torch_resets import PARTIAL_RESET_MIN_BATCH, ResetControl, partial_reset_batch
 from swarm_envs.envs.torch_statuses import StatusControl
@@ -126,6 +126,7 @@ class TorchSwarmNavCore(SubstepControl, StatusControl, ResetControl):
     before).
 
     >>> from swarm_envs.config import SwarmConfig
+    >>> from swarm_envs.envs.task import STAT_KEYS
     >>> core = TorchSwarmNavCore(SwarmConfig(n_agents=4), batch=2, compile=False)
     >>> core.reset(np.random.default_rng(0))
     >>> reward, terminated, truncated, stats = core.step(np.zeros((2, 4, 2)))
@@ -153,13 +154,7 @@ class TorchSwarmNavCore(SubstepControl, StatusControl, ResetControl):
         B, N, d = self.batch, cfg.n_agents, cfg.dim
         self.obs_dim = observation_size(cfg)
         self.t = np.zeros(B, np.int64)
-        # stats(): each statistic's row in the copy of its dtype (core's or float64).
-        wide_keys = {k for k, t in wide_dtypes(self.dtype).items() if t != self.dtype}
-        self._narrow_rows = [i for i, k in enumerate(STAT_KEYS) if k not in wide_keys]
-        self._wide_rows = [i for i, k in enumerate(STAT_KEYS) if k in wide_keys]
-        rows = {i: j for j, i in enumerate(self._narrow_rows)}
-        rows.update({i: j for j, i in enumerate(self._wide_rows)})
-        self._stat_rows = [(k, k in wide_keys, rows[i]) for i, k in enumerate(STAT_KEYS)]
+        self._columns = StatisticColumns(self.dtype)
         zeros = self._zeros
         # State component first, (d, B, N): the layout the fused step vectorises.
         self._x, self._v, self._f = zeros(d, B, N), zeros(d, B, N), zeros(d, B, N)
@@ -380,9 +375,7 @@ class TorchSwarmNavCore(SubstepControl, StatusControl, ResetControl):
     def stats(self) -> dict[str, np.ndarray]:
         """Group statistics and task measures per swarm, each ``(B,)`` (fresh arrays),
         in the numpy core's dtypes."""
-        columns = self._packed_host.T  # two copies (one per dtype), each row a statistic
-        narrow, wide = columns[self._narrow_rows], columns[self._wide_rows].astype(np.float64)
-        return {key: (wide if w else narrow)[j] for key, w, j in self._stat_rows}
+        return self._columns.split(self._packed_host)
 
     def observe(self, which: np.ndarray | None = None) -> np.ndarray:
         """Local observations ``(B, N, obs_dim)``, float32, inside ``[−OBS_BOUND, OBS_BOUND]``.

@@ -37,6 +37,7 @@ import numpy as np
 from swarm_envs._array import NUMPY, SCALAR
 from swarm_envs.envs.common import (
     NON_FINITE_ACTIONS,
+    StatisticColumns,
     SwarmUnstableError,
     check_action_shape,
     check_batch,
@@ -130,6 +131,7 @@ class NativeSwarmNavCore:
         self.obs_dim = observation_size(cfg)
         self.t = np.zeros(B, np.int64)
         self._wide = wide_dtypes(self.dtype)
+        self._columns = StatisticColumns(self.dtype)
         self._x = np.zeros((d, B, N), self.dtype)
         self._v = np.zeros((d, B, N), self.dtype)
         self._f = np.zeros((d, B, N), self.dtype)
@@ -255,7 +257,7 @@ class NativeSwarmNavCore:
     def _unpack(self) -> dict[str, np.ndarray]:
         """The statistics of the packed columns, plus any the kernel does not write."""
         packed = self._packed
-        stats = {key: packed[:, i].astype(self._wide[key]) for i, key in enumerate(STAT_KEYS)}
+        stats = self._columns.split(packed)
         if self._extra:
             frame = self._frame(packed)
             for s in (STATISTICS[i] for i in self._extra):
