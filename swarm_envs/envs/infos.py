@@ -162,14 +162,16 @@ class QuietInfos:
             for kept in self._lists:  # they still hold the written objects
                 kept._dirty.extend(self._written)
             self._written.clear()
-        self._lists = [kept for kept in self._lists if not kept._changed]
         for infos in self._lists:
-            if sys.getrefcount(infos) <= _FREE_LIST_REFCOUNT:  # held here alone
-                current = self._current
-                for where in infos._dirty:
-                    list.__setitem__(infos, where, current[where])
-                infos._dirty.clear()
+            if sys.getrefcount(infos) <= _FREE_LIST_REFCOUNT and not infos._changed:
+                dirty = infos._dirty  # held here alone, as the VecEnv left it
+                if dirty:
+                    current = self._current
+                    for where in dirty:
+                        list.__setitem__(infos, where, current[where])
+                    dirty.clear()
                 return infos
+        self._lists = [kept for kept in self._lists if not kept._changed]
         infos = InfoList(self._current)
         if len(self._lists) < _MAX_INFO_SETS:
             self._lists.append(infos)
