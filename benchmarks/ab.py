@@ -14,11 +14,11 @@ busy machine slows both alike, and prints the medians, their ratio (this tree ov
 base: above 1 is faster) and the physical state of the swarms at the end of the timing
 (mean speed, expanse, nearest-neighbour distance), so that both timed the same physics.
 
-``--large-swarm`` runs the VecEnv rows on the large-swarm parameter set
+``--large-swarm`` runs every row on the large-swarm parameter set
 (``SocialPotentialParams.large_swarm()``, given as plain values so that older versions
-take it too) at its start density 0.3; with ``--zero-actions`` the swarms stay at that
-density and a step takes one substep at every N: rows that time the same work in versions
-with and without step-size control (compare the printed states).
+take it too) at its start density 0.3; with ``--zero-actions`` (every row) the swarms stay
+at that density and a step takes one substep at every N: rows that time the same work in
+versions with and without step-size control (compare the printed states).
 
 Rows (the same API calls in both versions):
 
@@ -60,14 +60,21 @@ def make(row, n, b, tune, env):
     rng = np.random.default_rng(0)
     if row == "physics":
         from swarm_envs.physics import SocialPotentialParams, random_swarm, step
-        p = SocialPotentialParams.navigation()
-        x, v = random_swarm(rng, n, radius=1.5, speed=0.1, batch_shape=(b,))
-        u = 3.0 * rng.uniform(-1, 1, x.shape)
+        if "physics" in env:
+            p = SocialPotentialParams(**env["physics"])
+        else:
+            p = SocialPotentialParams.navigation()
+        radius = env.get("init_radius", 1.5)
+        x, v = random_swarm(rng, n, radius=radius, speed=0.1, batch_shape=(b,))
+        u = 0.0 * x if zero else 3.0 * rng.uniform(-1, 1, x.shape)
         return (lambda: step(x, v, p, dt=0.1, control=u)), (lambda: state_of(x, v))
     if row == "parallel_env":
-        env = swarm_nav_v0.parallel_env(n_agents=n, max_cycles=200)
+        kw = {k: v for k, v in env.items() if k != "_zero_actions"}
+        env = swarm_nav_v0.parallel_env(n_agents=n, max_cycles=200, **kw)
         env.reset(seed=0)
         acts = {a: rng.uniform(-1, 1, 2).astype(np.float32) for a in env.possible_agents}
+        if zero:
+            acts = {a: 0.0 * act for a, act in acts.items()}
         def step():
             if not env.agents:
                 env.reset()
@@ -212,8 +219,8 @@ def main() -> None:
                     if row == "parallel_env" and b != 1:
                         continue
                     spec = dict(row=row, n=n, b=b)
-                    env = large_swarm_env(n) if args.large_swarm and "vec_env" in row else {}
-                    if args.zero_actions and "vec_env" in row:
+                    env = large_swarm_env(n) if args.large_swarm else {}
+                    if args.zero_actions:
                         env["_zero_actions"] = True
                     for w in workers.values():
                         w.ask(op="make", tune=args.tune_allocator, env=env, **spec)

@@ -748,9 +748,9 @@ def test_every_status_backend_keeps_an_undone_steps_flag_as_numpy_does(monkeypat
     starts = lambda cfg, rng, n: (x.copy(), np.zeros_like(x), goal)  # noqa: E731
     monkeypatch.setattr(core_module, "draw_starts", starts)
     monkeypatch.setattr(native_module, "draw_starts", starts)
-    import swarm_envs.envs.torch_core as torch_module
+    import swarm_envs.envs.torch_resets as torch_resets
 
-    monkeypatch.setattr(torch_module, "draw_starts", starts)
+    monkeypatch.setattr(torch_resets, "draw_starts", starts)
     stiff = dataclasses.replace(SwarmConfig().physics, C_r=4.0, l_r=0.05)
     fields = dict(n_agents=5, dt=0.1, max_substeps=2, on_unstable="truncate", physics=stiff)
     p = Perturbations(failed_fraction=0.2, failure_mode="frozen", failure_time=1)

@@ -490,8 +490,12 @@ class SwarmNavParallelEnv(_SwarmState, _Rendering, ParallelEnv):
             acting = zip(self.possible_agents, active, strict=True)
             joined = [a for a, on in acting if on and a not in live]
             agents = agents + joined
+        if agents == self.possible_agents:  # every agent, in the rows' order
+            agent_obs = dict(zip(agents, obs, strict=True))
+        else:
+            agent_obs = {a: obs[self._agent_index[a]] for a in agents}
         result = (
-            {a: obs[self._agent_index[a]] for a in agents},
+            agent_obs,
             dict.fromkeys(agents, r),
             dict.fromkeys(agents, term),
             dict.fromkeys(agents, trunc),
