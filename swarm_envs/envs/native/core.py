@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import ctypes
 import sys
+from collections.abc import Iterator, Mapping
 from typing import Any
 
 import numpy as np
@@ -71,6 +72,25 @@ _EFFORT = PACKED_COLUMNS.index("effort")
 _OVER_CAP = PACKED_COLUMNS.index("over_cap")
 _NEEDED = PACKED_COLUMNS.index("needed")
 _SUBSTEPS = PACKED_COLUMNS.index("substeps")
+
+
+class _FirstSwarm(Mapping[str, float]):
+    """The statistics of swarm 0 as floats, each read from its ``(B,)`` array when a
+    reward term asks for it (a term reads a few of them)."""
+
+    __slots__ = ("_stats",)
+
+    def __init__(self, stats: Mapping[str, np.ndarray]) -> None:
+        self._stats = stats
+
+    def __getitem__(self, key: str) -> float:
+        return float(self._stats[key][0])
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._stats)
+
+    def __len__(self) -> int:
+        return len(self._stats)
 
 
 class _BufferPool:
@@ -397,10 +417,8 @@ class NativeSwarmNavCore:
         prev, start = self._prev, self._start
         if self.batch == 1:  # plain floats: the same definitions, no array overhead
             xp = SCALAR
-            stats_1 = {k: float(v[0]) for k, v in stats.items()}
-            prev = {k: float(v[0]) for k, v in prev.items()}
-            start = {k: float(v[0]) for k, v in start.items()}
-            inputs = RewardInputs(stats_1, prev, start, float(effort[0]), self.cfg.n_agents, xp)
+            first = _FirstSwarm(stats), _FirstSwarm(prev), _FirstSwarm(start)
+            inputs = RewardInputs(*first, float(effort[0]), self.cfg.n_agents, xp)
             r = np.array([reward(self.cfg.reward, inputs)], dtype=np.float64)
         else:
             inputs = RewardInputs(stats, prev, start, effort, self.cfg.n_agents, xp)
