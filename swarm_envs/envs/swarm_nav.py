@@ -347,13 +347,14 @@ class SwarmNavParallelEnv(SwarmState, Rendering, ParallelEnv):
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         if self._needs_reset or not self.agents:
             raise RuntimeError("step() called before reset() or after the episode ended")
-        unknown = set(actions) - set(self.agents)
-        missing = set(self.agents) - set(actions)
-        if unknown or missing:
-            raise ValueError(
-                f"actions must hold exactly the live agents; missing {sorted(missing)}, "
-                f"unknown {sorted(unknown)}"
-            )
+        live = set(self.agents)
+        if not (isinstance(actions, Mapping) and actions.keys() == live):
+            unknown, missing = set(actions) - live, live - set(actions)
+            if unknown or missing:
+                raise ValueError(
+                    f"actions must hold exactly the live agents; missing {sorted(missing)}, "
+                    f"unknown {sorted(unknown)}"
+                )
         n, d = self.cfg.n_agents, self.cfg.dim
         agents = self.agents
         if len(agents) == n:
