@@ -169,7 +169,8 @@ class StatisticColumns:
         from swarm_envs.envs.task.statistics import STATISTICS
 
         self._dtype = np.dtype(dtype)
-        wide = [s.wide and self._dtype != np.float64 for s in STATISTICS]
+        dtypes = wide_dtypes(self._dtype)  # the dtype of each statistic, defined there
+        wide = [dtypes[s.name] != self._dtype for s in STATISTICS]
         self._narrow = [i for i, w in enumerate(wide) if not w]
         self._wide = [i for i, w in enumerate(wide) if w]
         row = {i: j for j, i in enumerate(self._narrow)} | {i: j for j, i in enumerate(self._wide)}
