@@ -15,7 +15,17 @@ One module per source paper:
   term of Vanualailai & Sharma's Lyapunov construction, for the Lagrangian model.
 - :class:`MillController` (:mod:`agents.mill`): the mill task's controller, straight to
   the goal, then a tangential push about it.
+- :class:`SaturatedPDController` (:mod:`agents.pd`): the saturated PD law toward the
+  goal, the strongest simple controller for navigation, every dynamics.
+- :class:`InformedFollowerController` (:mod:`agents.follow`): informed agents steer with
+  the PD law, the others follow their informed neighbours (the informed task).
 - :class:`ZeroController`, :class:`RandomController` (:mod:`agents.trivial`).
+
+The papers' controllers are weak by design (their pull decays with the distance to the
+goal); the simple controllers are what a practitioner would write with the same
+observation. Their gains are tuned on training seeds by ``swarm-tune`` and read from
+``configs/baselines/tuned.yaml`` (:mod:`agents.tuned`). :func:`baseline_names` lists, per
+task, every baseline an evaluation compares a learned policy with.
 
 Each model has its analytic baseline (:data:`ANALYTIC`); the name ``"analytic"`` picks
 the one that matches the environment's ``dynamics`` and task (the mill task has its own,
@@ -34,9 +44,11 @@ from __future__ import annotations
 from typing import Any
 
 from agents.base import Controller, swarm_config_of
+from agents.follow import InformedFollowerController
 from agents.mabrouk_mcinnes import PotentialFieldController
 from agents.mill import MillController
 from agents.naterop import GoalForceController, InformedIndividualController
+from agents.pd import SaturatedPDController
 from agents.trivial import RandomController, ZeroController
 from agents.vanualailai_sharma import LyapunovTargetController
 
@@ -48,6 +60,8 @@ CONTROLLERS: dict[str, type[Controller]] = {
     "goal_force": GoalForceController,
     "lyapunov": LyapunovTargetController,
     "mill": MillController,
+    "pd": SaturatedPDController,
+    "follow": InformedFollowerController,
     "zero": ZeroController,
     "random": RandomController,
 }
@@ -63,6 +77,27 @@ ANALYTIC: dict[str, str] = {
 
 #: Tasks whose analytic baseline is their own, whatever the dynamics.
 TASK_ANALYTIC: dict[str, str] = {"mill": "mill"}
+
+
+#: The simple controllers of each task, tuned on training seeds: every evaluation compares
+#: a learned policy with these as well as with the analytic baseline.
+SIMPLE: dict[str, tuple[str, ...]] = {
+    "navigation": ("pd",),
+    "informed": ("pd", "follow"),
+    "mill": (),
+}
+
+
+def baseline_names(env: Any) -> list[str]:
+    """Every baseline of ``env``'s task: the analytic controller (by its own name), then
+    the task's simple controllers (:data:`SIMPLE`).
+
+    >>> from swarm_envs.tasks import task_config
+    >>> baseline_names(task_config("informed"))
+    ['potential', 'pd', 'follow']
+    """
+    cfg = swarm_config_of(env)
+    return [analytic_name(cfg), *SIMPLE[cfg.task]]
 
 
 def analytic_name(env: Any) -> str:
@@ -98,16 +133,20 @@ def make_controller(name: str, env: Any, *, seed: int | None = None) -> Controll
 __all__ = [
     "ANALYTIC",
     "CONTROLLERS",
+    "SIMPLE",
     "TASK_ANALYTIC",
     "Controller",
     "GoalForceController",
+    "InformedFollowerController",
     "InformedIndividualController",
     "LyapunovTargetController",
     "MillController",
     "PotentialFieldController",
     "RandomController",
+    "SaturatedPDController",
     "ZeroController",
     "analytic_name",
+    "baseline_names",
     "make_controller",
     "swarm_config_of",
 ]

@@ -247,6 +247,8 @@ def test_make_controller_by_name():
         "goal_force",
         "lyapunov",
         "mill",
+        "pd",
+        "follow",
         "zero",
         "random",
     }

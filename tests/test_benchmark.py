@@ -190,8 +190,16 @@ def test_quick_run_of_two_shipped_entries(tmp_path, capsys):
     assert status(argv) == 0
     results = check_results(out, names, seeds=2, episodes=4)
     for e in results["entries"]:
-        analytic = e["evaluations"][0]["policies"]["analytic"]
+        ev = e["evaluations"][0]
+        analytic = ev["policies"]["analytic"]
         assert analytic["controller"] == ANALYTIC[e["dynamics"]]
+        assert set(ev["policies"]) == {"learned", "analytic", "pd"}  # the default baselines
+        best = ev["best_baseline"]
+        returns = {n: p["return"]["value"] for n, p in ev["policies"].items() if n != "learned"}
+        assert returns[best] == max(returns.values())
+        diff = ev["policies"]["learned"]["minus_best"]
+        assert diff["baseline"] == best and diff["return"]["ci"] is not None
+        assert (ev["time_to_goal_bound"] is None) == (e["dynamics"] == "piecewise")
         assert e["train_config"]["env"]["dynamics"] == e["dynamics"]
         assert {m["action"] for m in e["models"]} == {"trained"}
     assert (model_folder(out, load_matrix().select(names)[0], 1) / "model.zip").is_file()

@@ -196,7 +196,8 @@ def test_undefined_measures_are_null_and_shown_as_a_dash(tmp_path):
     row = next(line for line in format_table(res).splitlines() if line.startswith("| zero"))
     cells = [c.strip() for c in row.strip("|").split("|")]
     assert cells[0] == "zero" and cells[1] == "0%" and cells[3] == "—"
-    assert cells[-2:] == ["0", "1.0"]  # unstable episodes, substeps per step
+    assert cells[-3:-1] == ["0", "1.0"]  # unstable episodes, substeps per step
+    assert cells[-1] == "✓"  # zero is the only baseline, so the best
     assert "| — |" in (tmp_path / "summary.md").read_text()
 
 

@@ -405,11 +405,16 @@ def test_demo_pipeline_smoke(tmp_path: Path):
     for name in ("results.json", "summary.md", "report.md", "curves.png", "model.zip"):
         assert (tmp_path / "demo" / name).is_file()
     results = json.loads((tmp_path / "demo" / "results.json").read_text())
-    assert set(results["policies"]) == {"potential", "zero", "random", "learned"}
+    assert set(results["policies"]) == {"potential", "pd", "zero", "random", "learned"}
+    assert results["baselines"] == ["potential", "pd"]
+    report = (tmp_path / "demo" / "report.md").read_text()
+    best = results["best_baseline"]
+    assert best in ("potential", "pd") and f"the best baseline, `{best}`" in report
+    assert "Lower bound on the time to goal" in report
 
 
 @pytest.mark.slow
-def test_full_demo_learned_policy_beats_the_analytic_controller(tmp_path: Path):
+def test_full_demo_learned_policy_beats_the_best_baseline(tmp_path: Path):
     """The main job, as `make demo` runs it: the verdict on 100 held-out episodes."""
     code = demo.main(["--out", str(tmp_path / "demo"), "--no-progress"])
     report = (tmp_path / "demo" / "report.md").read_text()

@@ -99,6 +99,7 @@ class AnalyticBaselineEvalCallback(BaseCallback):
     def _evaluate(self) -> None:
         from agents import make_controller
         from train.evaluate import evaluate_policies
+        from train.residual import as_policy
 
         if self._baseline is None:  # the analytic baseline of the config's dynamics
             baseline = make_controller("analytic", self.cfg)
@@ -106,7 +107,7 @@ class AnalyticBaselineEvalCallback(BaseCallback):
                 {"analytic": baseline}, self.cfg, self.episodes, self.seed, progress=False
             )["policies"]["analytic"]
         learned = evaluate_policies(
-            {"learned": self.model}, self.cfg, self.episodes, self.seed, progress=False
+            {"learned": as_policy(self.model)}, self.cfg, self.episodes, self.seed, progress=False
         )["policies"]["learned"]
         for name, res in (("learned", learned), ("analytic", self._baseline)):
             self.logger.record(f"eval/{name}_mean_return", res["mean_return"])

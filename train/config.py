@@ -117,6 +117,14 @@ class TrainConfig(RunConfig):
     """Hidden layer sizes of the policy and value networks."""
     hyperparams: dict = field(default_factory=dict)
     """Extra SB3 constructor arguments, checked against the algorithm's signature."""
+    residual: str | None = None
+    """Shared mode: the name of a baseline (``pd``, ``follow``, ... of
+    :data:`agents.CONTROLLERS`) whose action the policy corrects, ``a = clip(b(o) +
+    r_θ(o), −1, 1)`` (:mod:`train.residual`); the baseline's gains are the tuned ones at
+    the start of training, and are recorded in the model. ``null``: the policy acts alone."""
+    residual_log_std: float = -1.0
+    """With ``residual``: the initial log standard deviation of the policy's Gaussian
+    (the exploration noise around the baseline's action; SB3's default is 0)."""
     eval_freq: int = 0
     """Evaluate against the analytic controller every this many timesteps (0 = never)."""
     eval_episodes: int = 10
@@ -193,6 +201,18 @@ class TrainConfig(RunConfig):
                     f"hyperparams.{key} is not a {self.algo} argument; "
                     f"allowed: {', '.join(sorted(allowed))}"
                 )
+        if self.residual is not None:
+            from agents import CONTROLLERS
+
+            if self.mode != "shared":
+                raise ValueError(f"residual needs mode 'shared', got mode {self.mode!r}")
+            if self.residual not in CONTROLLERS or self.residual == "random":
+                known = ", ".join(n for n in CONTROLLERS if n != "random")
+                raise ValueError(f"residual must be null or one of {known}, got {self.residual!r}")
+        if isinstance(self.residual_log_std, bool) or not isinstance(
+            self.residual_log_std, int | float
+        ):
+            raise ValueError(f"residual_log_std must be a number, got {self.residual_log_std!r}")
         self._check_env()  # a typo in the env part fails before any training starts
         n_envs = self.n_swarms * (self.swarm_config().n_agents if self.mode == "shared" else 1)
         hyper = check_hyperparams(self.algo, self.hyperparams, n_envs)

@@ -1,13 +1,17 @@
-"""``swarm-demo`` (``make demo``): train, evaluate against the analytic controller, report.
+"""``swarm-demo`` (``make demo``): train, evaluate against the best baseline, report.
 
 1. trains ``configs/train/demo.yaml`` (shared PPO policy) into ``OUT``;
-2. evaluates the trained policy beside ``potential`` (the paper's goal-sink controller),
-   ``zero`` (the passive swarm) and ``random`` on ``--episodes`` episodes whose seed
+2. evaluates the trained policy beside every baseline of the task
+   (:func:`agents.baseline_names`: ``potential``, the paper's goal-sink controller, and
+   ``pd``, the saturated PD law with the gains ``swarm-tune`` found on training seeds),
+   ``zero`` (the passive swarm) and ``random``, on ``--episodes`` episodes whose seed
    (``--seed``) training never used, writing ``results.json``, ``summary.md``,
    ``curves.png`` and one GIF per policy into ``OUT``;
-3. writes ``OUT/report.md`` with the verdict: does the learned policy beat the analytic
-   controller on the task's own measures (higher mean return, success rate at least as
-   high, shorter mean time to goal, no more collisions)?
+3. writes ``OUT/report.md`` with the lower bound on the time to goal
+   (:mod:`train.evaluate.bound`) and the verdict: does the learned policy beat the best
+   baseline (the one with the highest mean return) on the task's own measures (higher
+   mean return, success rate at least as high, shorter mean time to goal, no more
+   collisions)?
 
 ``OUT`` must be new or empty; ``--overwrite`` removes an earlier run's files there
 first. Ctrl-C or SIGTERM during training saves a checkpoint and ``model.zip`` (see
@@ -70,28 +74,32 @@ def _seconds(value: float | None) -> str:
 
 
 def write_report(results: dict[str, Any], out: Path, train_seconds: float | None) -> bool:
-    """Write ``report.md``; return whether the learned policy beats the baseline."""
+    """Write ``report.md``; return whether the learned policy beats the best baseline."""
     from train.evaluate import format_table
+    from train.evaluate.report import bound_line
 
-    criteria = compare(results["policies"][LEARNED], results["policies"]["potential"])
+    best = results["best_baseline"]
+    criteria = compare(results["policies"][LEARNED], results["policies"][best])
     beaten = all(ok for _, ok, _ in criteria)
     lines = [
-        "# SwarmNav demo: learned shared policy vs the analytic goal-sink controller",
+        "# SwarmNav demo: learned shared policy vs the best baseline",
         "",
         f"Evaluation: {results['episodes']} episodes, seed {results['seed']} "
-        "(never used in training), deterministic actions.",
+        "(never used in training), deterministic actions. Baselines: "
+        + ", ".join(f"`{n}`" for n in results["baselines"])
+        + f"; the best (highest mean return) is `{best}`.",
     ]
     if train_seconds is not None:
         lines.append(f"Training time: {train_seconds:.0f} s.")
-    lines += ["", format_table(results), "", "## Verdict", ""]
+    lines += ["", format_table(results), "", bound_line(results), "", "## Verdict", ""]
     lines += [f"- {'✅' if ok else '❌'} {name}: {detail}" for name, ok, detail in criteria]
     lines += [
         "",
-        "**The learned policy beats the analytic controller.**"
+        f"**The learned policy beats the best baseline, `{best}`.**"
         if beaten
-        else "**The learned policy does NOT beat the analytic controller on every measure.**",
+        else f"**The learned policy does NOT beat the best baseline, `{best}`, on every measure.**",
         "",
-        "![learned](episode0_learned.gif) ![potential](episode0_potential.gif)",
+        f"![learned](episode0_{LEARNED}.gif) ![{best}](episode0_{best}.gif)",
         "",
     ]
     (out / "report.md").write_text("\n".join(lines), encoding="utf-8")
@@ -138,7 +146,7 @@ def _main(args: argparse.Namespace) -> int:
 
     import json
 
-    from agents import make_controller
+    from agents import baseline_names, make_controller
     from train.evaluate import evaluate_policies, load_sb3_model
     from train.interrupt import TrainingAborted, TrainingInterrupted, exit_status
     from train.train import TrainSetupError, train
@@ -153,12 +161,11 @@ def _main(args: argparse.Namespace) -> int:
         print(f"{PROG}: {one_line(str(err))}", file=sys.stderr)
         return exit_status(err.signum)
     cfg = tc.swarm_config()
-    policies = {
-        "potential": make_controller("potential", cfg),
-        "zero": make_controller("zero", cfg),
-        "random": make_controller("random", cfg, seed=args.seed),
-        LEARNED: load_sb3_model(model_path),
-    }
+    baselines = baseline_names(cfg)
+    policies = {name: make_controller(name, cfg) for name in baselines}
+    policies["zero"] = make_controller("zero", cfg)
+    policies["random"] = make_controller("random", cfg, seed=args.seed)
+    policies[LEARNED] = load_sb3_model(model_path)
     print(f"evaluating on {args.episodes} episodes (seed {args.seed}) ...")
     results = evaluate_policies(
         policies,
@@ -168,7 +175,8 @@ def _main(args: argparse.Namespace) -> int:
         out_dir=out,
         env_id=tc.env_id,
         progress=not args.no_progress,
-        extra={"model": str(model_path), "train_config": tc.to_dict()},
+        extra={"model": str(model_path), "train_config": tc.to_dict(), "baselines": baselines},
+        baselines=baselines,
     )
     meta = json.loads((out / "meta.json").read_text())
     beaten = write_report(results, out, meta.get("train_seconds"))

@@ -97,6 +97,10 @@ def make_training_env(tc: TrainConfig):
     if tc.mode == "shared":
         venv = swarm_envs.swarm_nav_v0.vec_env(tc.n_swarms, config=tc.env_config, **tc.env)
         venv.seed(tc.seed)
+        if tc.residual is not None:
+            from train.residual import ResidualVecEnv, make_baseline
+
+            return ResidualVecEnv(venv, make_baseline(tc.residual, tc.swarm_config()))
         return venv
     import gymnasium as gym
 
@@ -147,6 +151,8 @@ def build_model(tc: TrainConfig, venv, tensorboard_log: str | None = None):
     cls = done_slots_only(algorithm_class(tc.algo))
     net = list(tc.net_arch)
     policy_kwargs: dict[str, Any] = {"net_arch": net if tc.algo == "SAC" else dict(pi=net, vf=net)}
+    if tc.residual is not None and tc.algo == "PPO":
+        policy_kwargs["log_std_init"] = tc.residual_log_std
     model = cls(
         "MlpPolicy",
         venv,
@@ -159,6 +165,10 @@ def build_model(tc: TrainConfig, venv, tensorboard_log: str | None = None):
     )
     # Saved in the zip's data (every model.zip, checkpoint and best_model.zip), set on load.
     setattr(model, TRAINED_ENV, trained_env_record(tc.swarm_config(), tc.env_id))
+    if tc.residual is not None:
+        from train.residual import RESIDUAL, residual_record
+
+        setattr(model, RESIDUAL, residual_record(tc.residual, venv.baseline))
     return model
 
 

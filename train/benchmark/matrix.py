@@ -14,7 +14,8 @@ config of its learned policy and the analytic baselines it is compared with::
         evaluations:                   # optional; default: one, label "default", no overrides
           - {label: N10, env: {}}
           - {label: N20, env: {n_agents: 20}}
-        baselines: [analytic]          # optional; names of agents.CONTROLLERS or "analytic"
+        baselines: [analytic, simple]  # optional; names of agents.CONTROLLERS, "analytic" (the
+                                       # paper's controller) or "simple" (agents.SIMPLE, tuned)
 
 Everything is checked when the file is loaded, before anything is trained: unknown keys
 and bad values raise ``ValueError`` naming the entry and the key (building an
@@ -109,7 +110,7 @@ class Entry:
     env: dict = field(default_factory=dict)
     train_overrides: dict = field(default_factory=dict)
     evaluations: tuple = (Evaluation(),)
-    baselines: tuple = ("analytic",)
+    baselines: tuple = ("analytic", "simple")
 
     def __post_init__(self) -> None:
         owner = f"entry {self.name!r}" if isinstance(self.name, str) else "entry"
@@ -164,7 +165,7 @@ class Entry:
         items = self.baselines
         if isinstance(items, (str, bytes)) or not isinstance(items, Sequence):
             raise ValueError(f"{owner}.baselines must be a list of policy names, got {items!r}")
-        known = [*CONTROLLERS, "analytic"]
+        known = [*CONTROLLERS, "analytic", "simple"]
         for name in items:
             if name not in known:
                 raise ValueError(

@@ -67,9 +67,19 @@ def _rows(results: Mapping[str, Any]) -> list[tuple[dict, dict, str, dict]]:
     ]
 
 
-def _policy_label(name: str, policy: Mapping[str, Any]) -> str:
+def _policy_label(name: str, policy: Mapping[str, Any], best: str | None = None) -> str:
     controller = policy.get("controller")
-    return f"{name} ({controller})" if controller and controller != name else name
+    label = f"{name} ({controller})" if controller and controller != name else name
+    return f"{label} **best baseline**" if name == best else label
+
+
+def _minus_best(policy: Mapping[str, Any]) -> str:
+    diff = policy.get("minus_best")
+    return format_measure(diff["return"], "{:+.2f}") if diff else ""
+
+
+def _over_bound(policy: Mapping[str, Any]) -> str:
+    return _fmt(policy.get("time_over_bound"), "{:+.0%}")
 
 
 def format_results_table(results: Mapping[str, Any]) -> str:
@@ -79,13 +89,14 @@ def format_results_table(results: Mapping[str, Any]) -> str:
     header = (
         "| entry | evaluation | policy | "
         + " | ".join(f"{h} [{pct} CI]" for _, h, _ in COLUMNS)
+        + f" | time over bound | learned − best baseline, return [{pct} CI, paired]"
         + " | n (seeds × episodes) |"
     )
-    rule = "|---|---|---|" + "---:|" * len(COLUMNS) + "---:|"
+    rule = "|---|---|---|" + "---:|" * len(COLUMNS) + "---:|---:|---:|"
     rows = [
-        f"| {entry['name']} | {ev['label']} | {_policy_label(name, p)} | "
+        f"| {entry['name']} | {ev['label']} | {_policy_label(name, p, ev.get('best_baseline'))} | "
         + " | ".join(format_measure(p[key], spec) for key, _, spec in COLUMNS)
-        + f" | {p['n_seeds']} × {p['n_episodes']} |"
+        + f" | {_over_bound(p)} | {_minus_best(p)} | {p['n_seeds']} × {p['n_episodes']} |"
         for entry, ev, name, p in _rows(results)
     ]
     return "\n".join([header, rule, *rows])
@@ -110,7 +121,25 @@ def _markdown(results: Mapping[str, Any]) -> str:
         f"{MISSING} marks an undefined value (no successful episode).",
         "",
         *[f"- `{k}`: {doc}" for k, doc in MEASURE_DOCS.items()],
+        "- time over bound: the time to goal over its lower bound (no policy can do "
+        "better; train/evaluate/bound.py), minus 1, over the successful episodes; "
+        f"{MISSING} where no bound is defined (piecewise, Lagrangian, the mill).",
+        "- learned − best baseline: the mean paired difference of the returns, on the "
+        "same episodes, with the best baseline (the highest mean return) of its "
+        "evaluation; above zero with its whole interval, learning wins.",
     ]
+    near = [
+        f"- {entry['name']} / {ev['label']}: the best baseline, "
+        f"{ev['best_baseline']}, is within 5 % of the lower bound on the time to goal "
+        f"({over:+.1%}): little is left to learn here."
+        for entry in results["entries"]
+        for ev in entry["evaluations"]
+        if ev.get("best_baseline")
+        and (over := ev["policies"][ev["best_baseline"]].get("time_over_bound")) is not None
+        and over <= 0.05
+    ]
+    if near:
+        lines += ["", "Near-optimal baselines:", "", *near]
     notes = [
         f"- {entry['name']} / {ev['label']}: evaluated off its training env: {'; '.join(n)}"
         for entry, ev, name, p in _rows(results)

@@ -28,8 +28,16 @@ import numpy as np
 
 from swarm_envs.config import SwarmConfig, as_dict
 from train.benchmark.matrix import Entry
-from train.benchmark.stats import BOOTSTRAP_SEED, CONFIDENCE, N_RESAMPLES, summarize_runs
+from train.benchmark.stats import (
+    BOOTSTRAP_SEED,
+    CONFIDENCE,
+    N_RESAMPLES,
+    paired_difference,
+    summarize_runs,
+)
 from train.config import TrainConfig, load_train_config
+from train.evaluate.bound import bound_reason, time_to_goal_bound
+from train.evaluate.measures import finite
 
 __all__ = [
     "DEFAULT_EVAL_SEED",
@@ -219,11 +227,13 @@ def _episodes(policy: Any, cfg: SwarmConfig, s: Settings, name: str) -> dict[str
         policy, cfg, s.episodes, s.eval_seed, name=name, progress=False, record_episode=False
     )
     reached = batch.lengths if batch.first_success is None else batch.first_success
+    bound = time_to_goal_bound(cfg, batch.start["x"], batch.start["v"], batch.start["goal"])
     return {
         "return": batch.returns,
         "success": batch.success,
         "steps": batch.lengths,
         "reached": reached,
+        "bound": np.full(len(batch.returns), np.nan) if bound is None else bound,
     }
 
 
@@ -247,7 +257,11 @@ def _policy_result(
         "success": arrays["success"].astype(bool).tolist(),
         "steps": arrays["steps"].astype(int).tolist(),
     }
-    return {**extra, **summary, "per_episode": per_episode}
+    bound = runs[0]["bound"]
+    ok = arrays["success"].astype(bool) & (bound[None, :] > 0)
+    over = arrays["reached"] * cfg.dt / np.where(bound > 0, bound, 1.0)[None, :] - 1.0
+    time_over_bound = finite(over[ok].mean()) if ok.any() else None
+    return {**extra, **summary, "time_over_bound": time_over_bound, "per_episode": per_episode}
 
 
 def evaluate_entry(
@@ -286,11 +300,29 @@ def evaluate_entry(
                 runs, cfg, s, kind="learned", seeds=[m.seed for m, _ in loaded], notes=notes
             )
         }
-        for name in entry.baselines:
+        baseline_runs = {}
+        for name in expand_baselines(entry.baselines, cfg.task):
             controller = name if name != "analytic" else analytic_name(cfg)
             policy = make_controller(controller, cfg, seed=s.eval_seed)
             run = _episodes(policy, cfg, s, name)
+            baseline_runs[name] = run
             policies[name] = _policy_result([run], cfg, s, kind="baseline", controller=controller)
+        best = max(
+            baseline_runs,
+            key=lambda n: (policies[n]["return"]["value"], policies[n]["success"]["value"]),
+        )
+        learned_returns = np.stack([r["return"] for r in runs])
+        policies["learned"]["minus_best"] = {
+            "baseline": best,
+            "return": paired_difference(
+                learned_returns,
+                baseline_runs[best]["return"],
+                n_resamples=s.n_resamples,
+                seed=s.bootstrap_seed,
+                confidence=s.confidence,
+            ),
+        }
+        bound = runs[0]["bound"] if runs else baseline_runs[best]["bound"]
         results.append(
             {
                 "label": ev.label,
@@ -300,10 +332,32 @@ def evaluate_entry(
                 "n_agents": cfg.n_agents,
                 "config": as_dict(cfg),
                 "eval_seconds": round(time.perf_counter() - started, 3),
+                "best_baseline": best,
+                "time_to_goal_bound": finite(np.nanmean(bound))
+                if np.isfinite(bound).any()
+                else None,
+                "bound_undefined": bound_reason(cfg),
                 "policies": policies,
             }
         )
     return results
+
+
+def expand_baselines(names: Sequence[str], task: str) -> list[str]:
+    """The baselines of an entry: ``names`` with ``"simple"`` replaced by the task's
+    simple controllers (:data:`agents.SIMPLE`), each once, in order.
+
+    >>> expand_baselines(["analytic", "simple"], "informed")
+    ['analytic', 'pd', 'follow']
+    """
+    from agents import SIMPLE
+
+    out: list[str] = []
+    for name in names:
+        for item in SIMPLE[task] if name == "simple" else (name,):
+            if item not in out:
+                out.append(item)
+    return out
 
 
 def model_folder(out: Path, entry: Entry, seed: int) -> Path:

@@ -75,6 +75,9 @@ class EpisodeBatch:
     substeps: np.ndarray
     integrated: np.ndarray
     trajectory: dict[str, np.ndarray] = field(default_factory=dict)
+    start: dict[str, np.ndarray] = field(default_factory=dict)
+    """Every episode's start state: positions and velocities ``(B, N, d)``, goals
+    ``(B, d)`` (the same for every policy run on the same seed)."""
     first_success: np.ndarray | None = None
     """The step at which each episode first succeeded ``(B,)`` (0: never): its end in
     navigation, the first step of the held mill in the mill task (``None``: the
@@ -136,6 +139,7 @@ def run_episodes(
     series = {k: [stats[k].astype(np.float64)] for k in CURVE_KEYS}
     xs, vs = [core.x[0].copy()], [core.v[0].copy()]
     goal0 = core.goal[0].copy()
+    start = {"x": np.array(core.x), "v": np.array(core.v), "goal": np.array(core.goal)}
     state: Any = None
     episode_start = np.ones(B, bool)
 
@@ -233,5 +237,6 @@ def run_episodes(
         substeps=substeps,
         integrated=integrated,
         trajectory=trajectory,
+        start=start,
         first_success=first_success,
     )

@@ -3,15 +3,16 @@
 from __future__ import annotations
 
 import warnings
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from agents.base import swarm_config_of
 from swarm_envs import ENV_ID
 from swarm_envs.config import SwarmConfig, as_dict
+from train.evaluate.bound import bound_reason, time_to_goal_bound
 from train.evaluate.episodes import run_episodes
-from train.evaluate.measures import METRIC_DOCS, summarize
+from train.evaluate.measures import METRIC_DOCS, finite, summarize
 from train.evaluate.policies import (
     TRAINED_ENV,
     SpaceMismatchError,
@@ -22,7 +23,31 @@ from train.evaluate.policies import (
 )
 from train.evaluate.report import write_outputs
 
-__all__ = ["TrainedEnvWarning", "check_policies", "evaluate_policies"]
+__all__ = ["TrainedEnvWarning", "best_baseline", "check_policies", "evaluate_policies"]
+
+#: The name of the trained policy in the demo's and the benchmark's evaluations.
+LEARNED = "learned"
+
+
+def best_baseline(
+    measures: Mapping[str, Mapping[str, Any]], baselines: Sequence[str] | None = None
+) -> str | None:
+    """The baseline with the highest mean return (ties: the higher success rate, then
+    the first named); ``baselines`` ``None``: every policy but ``"learned"``. ``None``
+    when there is none.
+
+    >>> best_baseline({"a": {"mean_return": 1.0}, "b": {"mean_return": 2.0},
+    ...                "learned": {"mean_return": 3.0}})
+    'b'
+    """
+    names = [n for n in (baselines if baselines is not None else measures) if n != LEARNED]
+    scored = [n for n in names if measures.get(n, {}).get("mean_return") is not None]
+    if not scored:
+        return None
+    return max(
+        scored,
+        key=lambda n: (measures[n]["mean_return"], measures[n].get("success_rate") or 0.0),
+    )
 
 
 class TrainedEnvWarning(UserWarning):
@@ -74,6 +99,7 @@ def evaluate_policies(
     plots: bool = True,
     gif_size: int = 300,
     extra: Mapping[str, Any] | None = None,
+    baselines: Sequence[str] | None = None,
 ) -> dict[str, Any]:
     """Evaluate every policy on the same ``episodes`` seeded episodes.
 
@@ -90,6 +116,9 @@ def evaluate_policies(
         gif, plots: write the GIFs / the curves figure (with ``out_dir``).
         gif_size: GIF width and height in pixels.
         extra: more top-level entries for the results (e.g. the config path).
+        baselines: the names among ``policies`` that are baselines: the one with the
+            highest mean return is recorded as ``"best_baseline"`` (and marked in the
+            tables). ``None``: every policy but ``"learned"``.
 
     The episodes run on the backend and device that ``cfg`` names (``backend``,
     ``device``; ``auto`` picks one), recorded as ``"backend"``. A model that records
@@ -120,6 +149,9 @@ def evaluate_policies(
         )
         for name, policy in policies.items()
     }
+    first = next(iter(batches.values()))
+    bound = time_to_goal_bound(cfg, first.start["x"], first.start["v"], first.start["goal"])
+    measures = {name: summarize(b, bound) for name, b in batches.items()}
     results: dict[str, Any] = {
         "env": env_id,
         **dict(extra or {}),
@@ -128,7 +160,11 @@ def evaluate_policies(
         "episodes": int(episodes),
         "seed": int(seed),
         "metrics": METRIC_DOCS,
-        "policies": {name: summarize(b) for name, b in batches.items()},
+        "policies": measures,
+        "time_to_goal_bound": None if bound is None else finite(bound.mean()),
+        "time_to_goal_bound_per_episode": None if bound is None else bound.tolist(),
+        "bound_undefined": bound_reason(cfg),
+        "best_baseline": best_baseline(measures, baselines),
     }
     if out_dir is not None:
         write_outputs(results, batches, cfg, out_dir, gif=gif, plots=plots, gif_size=gif_size)

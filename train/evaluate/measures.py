@@ -40,6 +40,8 @@ METRIC_DOCS = {
     "control_effort_per_step": "the same divided by the episode length, mean over episodes",
     "unstable_episodes": "episodes truncated because a step went unstable "
     '(info["unstable"] = 1, on_unstable="truncate")',
+    "time_over_bound": "mean over successful episodes of the time to goal over its lower "
+    "bound (train.evaluate.bound), minus 1: 0 is optimal; null where no bound is defined",
     "mean_substeps": 'integration substeps per step (info["substeps"], step-size control), '
     "over all integrated steps of all episodes; null when no step was integrated",
     **{f"final_{k}": f"{k.replace('_', ' ')} at the episode's last step" for k in FINAL_KEYS},
@@ -77,9 +79,11 @@ def wilson_interval(successes: int, n: int, z: float = Z95) -> tuple[float, floa
     return max(0.0, centre - half), min(1.0, centre + half)
 
 
-def summarize(batch: EpisodeBatch) -> dict[str, Any]:
+def summarize(batch: EpisodeBatch, bound: np.ndarray | None = None) -> dict[str, Any]:
     """The JSON-ready measures of one :class:`EpisodeBatch` (see :data:`METRIC_DOCS`);
-    undefined ones are ``None``."""
+    undefined ones are ``None``. ``bound``: each episode's lower bound on the time to
+    goal (``(B,)`` seconds, :func:`~train.evaluate.bound.time_to_goal_bound`), for
+    ``time_over_bound``."""
     ok = batch.success
     lengths = batch.lengths.astype(np.float64)
     reached = lengths if batch.first_success is None else batch.first_success
@@ -101,13 +105,20 @@ def summarize(batch: EpisodeBatch) -> dict[str, Any]:
         "control_effort_per_step": _mean(batch.effort / np.maximum(lengths, 1)),
         "unstable_episodes": int(batch.unstable.sum()),
         "mean_substeps": finite(batch.substeps.sum() / integrated) if integrated else None,
+        "time_over_bound": None,
     }
+    if bound is not None:
+        positive = ok & (bound > 0)
+        out["time_over_bound"] = _mean(times[positive[ok]] / bound[positive] - 1.0)
     for k in FINAL_KEYS:
         out[f"final_{k}"] = _mean(batch.final[k])
     out["per_episode"] = {
         "return": [finite(r) for r in batch.returns],
         "success": [bool(s) for s in ok],
         "steps": [int(n) for n in batch.lengths],
+        "time_to_goal": [
+            float(t) * batch.dt if s else None for t, s in zip(reached, ok, strict=True)
+        ],
         "unstable": [bool(u) for u in batch.unstable],
     }
     return out

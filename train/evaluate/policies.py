@@ -138,18 +138,74 @@ def trained_env_record(cfg: SwarmConfig, env_id: str) -> dict[str, Any]:
     }
 
 
+#: Keys of the env config that make another task of the same observations: the start
+#: law, the success rule and the integration. (``n_agents`` is left out:
+#: evaluating a shared policy at other swarm sizes is what size transfer does.)
+TASK_KEYS = (
+    "task",
+    "dt",
+    "integrator",
+    "init_radius",
+    "init_density",
+    "init_speed",
+    "goal_distance_min",
+    "goal_distance_max",
+    "goal_distance_scale",
+    "goal_radius",
+    "success_fraction",
+    "informed_fraction",
+    "goal_in_physics",
+)
+
+#: The physics section of the env config that each dynamics reads.
+PHYSICS_SECTION = {
+    "social_potential": "physics",
+    "zone": "zone",
+    "piecewise": "piecewise",
+    "lagrangian": "lagrangian",
+}
+
+#: At most this many differences are named in one warning.
+MAX_NAMED = 8
+
+
 def trained_env_differences(record: Mapping[str, Any] | None, cfg: SwarmConfig) -> list[str]:
-    """How ``cfg`` differs from the env of ``record`` in what observations and actions
-    mean (:data:`MEANING_KEYS`), as ``"key: trained X, here Y"``; empty when it does not
-    or when there is no record."""
+    """How ``cfg`` differs from the env of ``record``, as ``"key: trained X, here Y"``:
+    first in what observations and actions mean (:data:`MEANING_KEYS`), then in the
+    physics parameters of the dynamics, the start law and the success rule
+    (:data:`TASK_KEYS`); empty when it does not or when there is no record.
+
+    >>> from swarm_envs.config import SwarmConfig
+    >>> record = trained_env_record(SwarmConfig(), "swarm_envs/SwarmNav-v0")
+    >>> trained_env_differences(record, SwarmConfig(goal_distance_max=20.0, n_agents=50))
+    ['goal_distance_max: trained 12.0, here 20.0']
+    """
     if not isinstance(record, Mapping):
         return []
     here = trained_env_record(cfg, str(record.get("env_id", "")))
-    return [
+    out = [
         f"{key}: trained {record[key]!r}, here {here[key]!r}"
         for key in MEANING_KEYS
         if key in record and record[key] != here[key]
     ]
+    trained_cfg, here_cfg = record.get("env_config"), here["env_config"]
+    if not isinstance(trained_cfg, Mapping):
+        return out
+    for key in TASK_KEYS:
+        if key in trained_cfg and trained_cfg[key] != here_cfg.get(key):
+            out.append(f"{key}: trained {trained_cfg[key]!r}, here {here_cfg.get(key)!r}")
+    section = PHYSICS_SECTION.get(cfg.dynamics)
+    if cfg.dynamics == record.get("dynamics") and section is not None:
+        old, new = trained_cfg.get(section), here_cfg.get(section)
+        if isinstance(old, Mapping) and isinstance(new, Mapping):
+            out += [
+                f"{section}.{k}: trained {old[k]!r}, here {new.get(k)!r}"
+                for k in old
+                if old[k] != new.get(k)
+            ]
+    if len(out) > MAX_NAMED:
+        out = [*out[:MAX_NAMED], f"and {len(out) - MAX_NAMED} more"]
+    return out
 
 
 def describe_trained_env(policy: Any) -> str | None:
@@ -178,7 +234,9 @@ def load_sb3_model(path: str | Path, device: str = "cpu") -> Any:
     """Load a Stable-Baselines3 model zip, detecting its algorithm.
 
     A model saved by ``swarm-train`` has the env it was trained on as its
-    :data:`TRAINED_ENV` attribute (:func:`trained_env_record`); others have none.
+    :data:`TRAINED_ENV` attribute (:func:`trained_env_record`); others have none. A
+    residual model (``TrainConfig.residual``) comes back as the policy it acts as, its
+    baseline plus its correction (:class:`train.residual.ResidualPolicy`).
     The algorithm is read from the zip's ``data`` JSON (the policy class's module and
     algorithm-specific keys), then PPO, SAC, A2C, TD3 and DQN are tried in turn.
 
@@ -201,10 +259,14 @@ def load_sb3_model(path: str | Path, device: str = "cpu") -> Any:
     first = _detect_sb3_algorithm(data)
     order = [first] + [a for a in ("PPO", "SAC", "A2C", "TD3", "DQN") if a != first]
     errors = []
+    from train.residual import as_policy
+
     for name in order:
         cls = getattr(sb3, name)
         try:
-            return cls.load(p, device=device)
+            model = cls.load(p, device=device)
         except Exception as err:  # wrong algorithm: try the next one
             errors.append(f"{name}: {type(err).__name__}: {err}")
+            continue
+        return as_policy(model)
     raise ValueError(f"could not load {p} with any SB3 algorithm: " + "; ".join(errors))

@@ -22,6 +22,7 @@ from train.evaluate.measures import METRIC_DOCS, json_safe
 __all__ = [
     "MISSING",
     "TABLE_COLUMNS",
+    "bound_line",
     "csv_cell",
     "format_cell",
     "format_table",
@@ -34,6 +35,7 @@ TABLE_COLUMNS = (
     ("success_rate", "success", "{:.0%}"),
     ("mean_return", "return (mean ± std)", "{:.2f}"),
     ("mean_time_to_goal", "time to goal (s)", "{:.1f}"),
+    ("time_over_bound", "over bound", "{:+.0%}"),
     ("collisions_per_episode", "collisions / ep.", "{:.1f}"),
     ("control_effort", "control effort", "{:.1f}"),
     ("final_centroid_distance", "final centroid dist.", "{:.2f}"),
@@ -80,13 +82,35 @@ def csv_cell(measures: Mapping[str, Any], key: str) -> Any:
     return "" if value is None else value
 
 
+def bound_line(results: Mapping[str, Any]) -> str:
+    """One sentence on the lower bound on the time to goal of ``results``' episodes
+    (:mod:`train.evaluate.bound`), and how close the best baseline comes to it."""
+    bound = results.get("time_to_goal_bound")
+    if bound is None:
+        why = results.get("bound_undefined") or "not computed"
+        return f"Lower bound on the time to goal: none defined here ({why})."
+    line = (
+        f"Lower bound on the time to goal (no policy can do better): {bound:.2f} s, "
+        "the mean over the episodes."
+    )
+    best = results.get("best_baseline")
+    over = results["policies"].get(best, {}).get("time_over_bound") if best else None
+    if over is not None:
+        near = "within 5 % of it: little left to gain" if over <= 0.05 else "room to gain"
+        line += f" The best baseline, {best}, takes {over:+.0%} more ({near})."
+    return line
+
+
 def format_table(results: Mapping[str, Any]) -> str:
-    """The policies' main measures as a markdown table (one row per policy)."""
-    header = "| policy | " + " | ".join(h for _, h, _ in TABLE_COLUMNS) + " |"
-    rule = "|---|" + "---:|" * len(TABLE_COLUMNS)
+    """The policies' main measures as a markdown table (one row per policy); the last
+    column marks the best baseline (``results["best_baseline"]``)."""
+    header = "| policy | " + " | ".join(h for _, h, _ in TABLE_COLUMNS) + " | best baseline |"
+    rule = "|---|" + "---:|" * len(TABLE_COLUMNS) + ":---:|"
     rows = []
+    best = results.get("best_baseline")
     for name, m in results["policies"].items():
         cells = [format_cell(m, key, spec) for key, _, spec in TABLE_COLUMNS]
+        cells.append("✓" if name == best else "")
         rows.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join([header, rule, *rows])
 
@@ -142,6 +166,8 @@ def _summary_markdown(results: Mapping[str, Any]) -> str:
         + ".",
         "",
         format_table(results),
+        "",
+        bound_line(results),
         "",
         "Measures (means over episodes):",
         "",

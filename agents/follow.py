@@ -1,0 +1,104 @@
+"""Informed agents steer, the others follow them: the informed task's simple baseline.
+
+In the informed task (``task="informed"``) only a minority observes the goal. The
+papers' reading (Couzin's informed individuals) lets the informed agents act and leaves
+the rest to the passive physics. A practitioner with the same observation would also
+steer the uninformed agents, from what they do see: each neighbour's offset, relative
+velocity and informed flag. :class:`InformedFollowerController` does that:
+
+- an informed agent applies the saturated PD law toward the goal
+  (:class:`~agents.SaturatedPDController`, gains ``k_p, k_d``);
+- an uninformed agent matches the velocity of its informed neighbours and closes on
+  them: ``a_i = sat((k_v ⟨v_j − v_i⟩ + k_c ⟨r_j − r_i⟩) / u_max)``, the means over the
+  informed neighbours in its observation; with none in view, over all its neighbours
+  (velocity matching and cohesion, a flock that carries the information on).
+
+All four gains are tuned on training seeds (``swarm-tune``), like the PD's.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from agents.pd import SaturatedPDController, saturate
+from swarm_envs.envs.task.observation import block_size, own_size
+from swarm_envs.physics._validation import check_real
+
+__all__ = ["InformedFollowerController"]
+
+
+class InformedFollowerController(SaturatedPDController):
+    """Informed agents: saturated PD to the goal; the others: follow the informed ones.
+
+    Args:
+        env: any swarm_envs environment (possibly wrapped) or a ``SwarmConfig`` whose
+            task is ``"informed"``.
+        k_p, k_d, saturation: the informed agents' PD law (:class:`SaturatedPDController`).
+        k_v: velocity-matching gain ``≥ 0`` of the uninformed agents.
+        k_c: cohesion gain ``≥ 0`` of the uninformed agents (toward the mean offset).
+        Every ``None`` gain is the tuned one of the env's scenario (``follow`` in
+        ``configs/baselines/tuned.yaml``), else the default.
+
+    >>> from swarm_envs.tasks import task_config
+    >>> ctrl = InformedFollowerController(task_config("informed", n_agents=3, n_neighbors=2),
+    ...                                   k_p=1.0, k_d=0.0, k_v=3.0, k_c=0.0)
+    >>> obs = np.zeros(ctrl.obs_dim, np.float32)      # uninformed: own flag 0
+    >>> obs[5:10] = [1.0, 0.0, 0.5, 0.0, 1.0]         # neighbour 1: offset, rel. velocity, mask
+    >>> obs[10] = 1.0                                  # ... informed
+    >>> [round(float(a), 3) + 0.0 for a in ctrl.predict(obs)[0]]  # 3 · (0.5·2) / 3
+    [1.0, 0.0]
+    """
+
+    acts_informed_only = False
+    DEFAULT_K_V: float = 1.0
+    DEFAULT_K_C: float = 0.5
+    _TUNED_NAME = "follow"
+
+    def __init__(
+        self,
+        env: Any,
+        k_p: float | None = None,
+        k_d: float | None = None,
+        k_v: float | None = None,
+        k_c: float | None = None,
+        saturation: str | None = None,
+    ) -> None:
+        from agents.tuned import tuned_gains
+
+        super().__init__(env, k_p=k_p, k_d=k_d, saturation=saturation)
+        owner = type(self).__name__
+        if not self.cfg.informs_agents:
+            raise ValueError(f"{owner} needs task='informed', got task={self.cfg.task!r}")
+        tuned = tuned_gains(self._TUNED_NAME, self.cfg)
+        k_v = tuned.get("k_v", self.DEFAULT_K_V) if k_v is None else k_v
+        k_c = tuned.get("k_c", self.DEFAULT_K_C) if k_c is None else k_c
+        self.k_v: float = check_real(owner, "k_v", k_v, low=0.0)
+        self.k_c: float = check_real(owner, "k_c", k_c, low=0.0)
+        self.obs_neighbor_scale: float = self.cfg.obs_neighbor_scale
+
+    def __repr__(self) -> str:
+        return (
+            f"{type(self).__name__}(k_p={self.k_p:g}, k_d={self.k_d:g}, k_v={self.k_v:g}, "
+            f"k_c={self.k_c:g}, saturation={self.saturation!r})"
+        )
+
+    def _actions(self, obs: np.ndarray, deterministic: bool) -> np.ndarray:
+        d, k = self.dim, self.cfg.n_neighbors
+        informed = obs[:, 2 * d] > 0.5
+        leaders = super()._actions(obs, deterministic)
+        blocks = obs[:, own_size(self.cfg) :].reshape(len(obs), k, block_size(self.cfg))
+        offset = blocks[..., :d] * self.obs_neighbor_scale
+        rel_velocity = blocks[..., d : 2 * d] * self.obs_velocity_scale
+        real = blocks[..., 2 * d]
+        told = blocks[..., -1] * real
+        # Informed neighbours where there are any, else every real neighbour.
+        weight = np.where(told.sum(axis=1, keepdims=True) > 0, told, real)
+        count = np.maximum(weight.sum(axis=1, keepdims=True), 1.0)
+        mean_velocity = np.einsum("nk,nkd->nd", weight, rel_velocity) / count
+        mean_offset = np.einsum("nk,nkd->nd", weight, offset) / count
+        followers = saturate(
+            (self.k_v * mean_velocity + self.k_c * mean_offset) / self.u_max, self.saturation
+        )
+        return np.where(informed[:, None], leaders, followers)

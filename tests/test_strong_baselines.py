@@ -1,0 +1,334 @@
+"""The strong baselines and what measures learned policies against them: the saturated
+PD law, the informed followers, the tuned gains and ``swarm-tune``, the lower bound on
+the time to goal, residual policies, the paired difference, and the warning for a
+policy evaluated off its training env."""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import numpy as np
+import pytest
+import yaml
+
+from agents import (
+    SIMPLE,
+    InformedFollowerController,
+    SaturatedPDController,
+    baseline_names,
+    make_controller,
+)
+from agents.pd import saturate
+from agents.tuned import load_tuned, scenario_key, tuned_gains
+from swarm_envs import swarm_nav_v0
+from swarm_envs.config import SwarmConfig
+from swarm_envs.envs import observation_size
+from swarm_envs.physics import SocialPotentialParams
+from swarm_envs.tasks import task_config
+from train.benchmark.stats import paired_difference
+from train.evaluate import evaluate_policies
+from train.evaluate.bound import bound_reason, time_to_goal_bound
+from train.evaluate.episodes import run_episodes
+from train.evaluate.policies import trained_env_differences, trained_env_record
+
+# --------------------------------------------------------------------------- PD law
+
+
+def own_obs(cfg: SwarmConfig, offset, velocity) -> np.ndarray:
+    obs = np.zeros((1, observation_size(cfg)), np.float32)
+    obs[0, : cfg.dim] = np.asarray(offset) / cfg.obs_goal_scale
+    obs[0, cfg.dim : 2 * cfg.dim] = np.asarray(velocity) / cfg.obs_velocity_scale
+    return obs
+
+
+def test_pd_is_the_saturated_pd_law():
+    cfg = SwarmConfig()
+    ctrl = SaturatedPDController(cfg, k_p=0.5, k_d=1.5, saturation="norm")
+    offset, velocity = np.array([1.0, -2.0]), np.array([0.4, 0.2])
+    action, _ = ctrl.predict(own_obs(cfg, offset, velocity))
+    raw = (0.5 * offset - 1.5 * velocity) / cfg.u_max
+    np.testing.assert_allclose(action[0], raw, rtol=1e-5)  # inside the box: unsaturated
+    far, _ = ctrl.predict(own_obs(cfg, [30.0, 40.0], [0.0, 0.0]))
+    np.testing.assert_allclose(far[0], [0.6, 0.8], rtol=1e-5)  # norm 1, toward the goal
+
+
+def test_box_saturation_keeps_the_direction_and_reaches_the_face():
+    z = np.array([[3.0, 4.0], [-8.0, 2.0], [0.1, 0.2]])
+    box = saturate(z, "box")
+    assert np.allclose(np.max(np.abs(box[:2]), axis=1), 1.0)
+    np.testing.assert_allclose(box[2], z[2])
+    cos = np.einsum("nk,nk->n", box, z) / np.linalg.norm(box, axis=1) / np.linalg.norm(z, axis=1)
+    np.testing.assert_allclose(cos, 1.0)
+    assert np.all(np.linalg.norm(saturate(z), axis=1) <= 1.0 + 1e-12)
+
+
+def test_pd_rejects_bad_gains_and_saturation():
+    with pytest.raises(ValueError, match="k_p"):
+        SaturatedPDController(SwarmConfig(), k_p=-1.0)
+    with pytest.raises(ValueError, match="saturation must be one of"):
+        SaturatedPDController(SwarmConfig(), saturation="clip")
+    with pytest.raises(TypeError):
+        SaturatedPDController(SwarmConfig(), gain=1.0)
+
+
+def test_pd_beats_the_papers_controller_on_navigation():
+    cfg = SwarmConfig()
+    results = evaluate_policies(
+        {"potential": make_controller("potential", cfg), "pd": make_controller("pd", cfg)},
+        cfg,
+        episodes=20,
+        seed=7,
+        progress=False,
+    )
+    pd, potential = results["policies"]["pd"], results["policies"]["potential"]
+    assert pd["success_rate"] == 1.0
+    assert pd["mean_return"] > potential["mean_return"] + 2.0
+    assert pd["mean_time_to_goal"] < 0.5 * potential["mean_time_to_goal"]
+    assert results["best_baseline"] == "pd"
+
+
+# --------------------------------------------------------------------- informed task
+
+
+def test_followers_match_their_informed_neighbours():
+    cfg = task_config("informed", n_agents=4, n_neighbors=3)
+    ctrl = InformedFollowerController(cfg, k_p=1.0, k_d=0.0, k_v=1.5, k_c=0.0, saturation="norm")
+    obs = np.zeros((1, ctrl.obs_dim), np.float32)  # an uninformed agent
+    own = 2 * cfg.dim + 1
+    block = (ctrl.obs_dim - own) // 3
+    # neighbour 0: uninformed, moving (+1, 0) relative; neighbour 1: informed, (0, +0.5)
+    obs[0, own : own + block] = [0, 0, 1 / cfg.obs_velocity_scale, 0, 1, 0]
+    obs[0, own + block : own + 2 * block] = [0, 0, 0, 0.5 / cfg.obs_velocity_scale, 1, 1]
+    action, _ = ctrl.predict(obs)
+    np.testing.assert_allclose(action[0], [0.0, 1.5 * 0.5 / cfg.u_max], atol=1e-6)
+    informed = obs.copy()
+    informed[0, 2 * cfg.dim] = 1.0
+    informed[0, : cfg.dim] = [0.3, 0.0]  # goal 3 ahead
+    action, _ = ctrl.predict(informed)
+    np.testing.assert_allclose(action[0], [1.0 * 3.0 / cfg.u_max, 0.0], atol=1e-6)
+
+
+def test_followers_need_the_informed_task():
+    with pytest.raises(ValueError, match="task='informed'"):
+        InformedFollowerController(SwarmConfig())
+
+
+def test_followers_beat_leaving_the_uninformed_passive():
+    cfg = task_config("informed", informed_fraction=0.3)
+    names = baseline_names(cfg)
+    assert names == ["potential", "pd", "follow"]
+    results = evaluate_policies(
+        {n: make_controller(n, cfg) for n in names}, cfg, episodes=20, seed=11, progress=False
+    )
+    follow, potential = results["policies"]["follow"], results["policies"]["potential"]
+    assert follow["mean_return"] > potential["mean_return"]
+    assert follow["success_rate"] >= potential["success_rate"]
+
+
+# ------------------------------------------------------------------------ the tuning
+
+
+def test_tuned_table_is_read_by_the_controllers():
+    cfg = SwarmConfig()
+    table = load_tuned()
+    assert set(table) <= set(sum(SIMPLE.values(), ()))
+    gains = tuned_gains("pd", cfg)
+    assert gains, "configs/baselines/tuned.yaml holds the navigation PD gains"
+    ctrl = SaturatedPDController(cfg)
+    assert (ctrl.k_p, ctrl.k_d) == (gains["k_p"], gains["k_d"])
+    assert ctrl.saturation == ("box" if gains.get("box") else "norm")
+    assert scenario_key(task_config("mill")) == "mill/social_potential"
+
+
+def test_swarm_tune_writes_the_best_point_of_its_grid(tmp_path):
+    from train.tune_baselines import main
+
+    grids = tmp_path / "grids.yaml"
+    grids.write_text(
+        yaml.safe_dump(
+            {"seed": 3, "episodes": 4, "grids": {"pd": {"k_p": [0.05, 4.0], "k_d": [0.25]}}}
+        )
+    )
+    out = tmp_path / "tuned.yaml"
+    assert (
+        main(["--grids", str(grids), "--only", "navigation/social_potential", "--out", str(out)])
+        == 0
+    )
+    record = yaml.safe_load(out.read_text())["baselines"]["pd"]["navigation/social_potential"]
+    # A weak proportional gain crawls; the strong one wins.
+    assert record["gains"] == {"k_p": 4.0, "k_d": 0.25}
+    assert record["seed"] == 3 and record["episodes"] == 4 and record["points"] == 2
+
+
+def test_swarm_tune_refuses_an_evaluation_seed(tmp_path, capsys):
+    from train.tune_baselines import main
+
+    grids = tmp_path / "grids.yaml"
+    grids.write_text(yaml.safe_dump({"seed": 2026, "grids": {"pd": {"k_p": [1.0]}}}))
+    assert main(["--grids", str(grids), "--out", str(tmp_path / "t.yaml")]) == 2
+    assert "evaluation seed" in capsys.readouterr().err
+    assert not (tmp_path / "t.yaml").exists()
+
+
+# ------------------------------------------------------------------------- the bound
+
+
+@pytest.mark.parametrize("dynamics", ["social_potential", "zone"])
+def test_no_policy_reaches_the_goal_before_the_bound(dynamics):
+    cfg = SwarmConfig(dynamics=dynamics)
+    for name in ("pd", "analytic"):
+        policy = make_controller(name, cfg)
+        batch = run_episodes(policy, cfg, 16, 5, record_episode=False)
+        bound = time_to_goal_bound(cfg, batch.start["x"], batch.start["v"], batch.start["goal"])
+        assert bound is not None and np.all(bound > 0)
+        reached = batch.first_success[batch.success] * cfg.dt
+        assert batch.success.any()
+        assert np.all(reached >= bound[batch.success] - 1e-9), name
+
+
+def test_bound_is_exact_for_one_free_agent_without_drag():
+    # Two agents on top of each other, no pair forces, no drag: full thrust along the
+    # axis covers ½ u_max t², and the diagonal gets √2 more thrust from the box.
+    params = dataclasses.replace(
+        SocialPotentialParams.navigation(), C_a=0.0, C_r=0.0, C_o=0.0, beta=0.0
+    )
+    cfg = SwarmConfig(physics=params)
+    x, v = np.zeros((2, 2, 2)), np.zeros((2, 2, 2))
+    goal = np.array([[7.5, 0.0], [7.5 / np.sqrt(2), 7.5 / np.sqrt(2)]])
+    bound = time_to_goal_bound(cfg, x, v, goal)
+    assert bound[0] == pytest.approx(2.0)  # 6 = ½ · 3 · t²
+    assert bound[1] < bound[0]
+
+
+def test_bound_is_undefined_where_it_would_not_hold():
+    assert bound_reason(SwarmConfig(dynamics="piecewise")) is not None
+    assert bound_reason(task_config("mill")) is not None
+    assert bound_reason(SwarmConfig(success_fraction=0.5)) is not None
+    assert (
+        time_to_goal_bound(
+            SwarmConfig(dynamics="lagrangian"), *[np.zeros((1, 2, 2))] * 2, np.ones((1, 2))
+        )
+        is None
+    )
+
+
+def test_evaluation_reports_the_bound_and_the_best_baseline():
+    cfg = SwarmConfig()
+    results = evaluate_policies(
+        {"pd": make_controller("pd", cfg), "zero": make_controller("zero", cfg)},
+        cfg,
+        episodes=6,
+        seed=1,
+        progress=False,
+    )
+    assert results["time_to_goal_bound"] > 0
+    assert results["best_baseline"] == "pd"
+    over = results["policies"]["pd"]["time_over_bound"]
+    assert over is not None and over >= 0.0
+
+
+# ------------------------------------------------------------------ the comparisons
+
+
+def test_paired_difference_removes_what_the_episodes_share():
+    rng = np.random.default_rng(0)
+    shared = rng.normal(0.0, 5.0, 200)  # the episodes' own difficulty
+    baseline = shared
+    learned = (shared + 0.3 + rng.normal(0.0, 0.05, 200))[None, :]
+    diff = paired_difference(learned, baseline, n_resamples=2000)
+    assert diff["ci"][0] > 0.2 and diff["ci"][1] < 0.4
+    with pytest.raises(ValueError, match="share episodes"):
+        paired_difference(learned, baseline[:10])
+
+
+def test_a_policy_off_its_training_physics_is_named():
+    record = trained_env_record(SwarmConfig(), "swarm_envs/SwarmNav-v0")
+    params = dataclasses.replace(SocialPotentialParams.navigation(), C_r=2.0)
+    diffs = trained_env_differences(record, SwarmConfig(physics=params, goal_radius=3.0))
+    assert "goal_radius: trained 1.5, here 3.0" in diffs
+    assert any(d.startswith("physics.C_r: trained") for d in diffs)
+    assert trained_env_differences(record, SwarmConfig(n_agents=40)) == []
+
+
+# ------------------------------------------------------------------------- residual
+
+
+class _Zero:
+    """A stand-in for a trained model: no correction."""
+
+    def __init__(self, cfg: SwarmConfig) -> None:
+        ctrl = make_controller("zero", cfg)
+        self.observation_space, self.action_space = ctrl.observation_space, ctrl.action_space
+
+    def predict(self, obs, state=None, episode_start=None, deterministic=True):
+        return np.zeros((*np.shape(obs)[:-1], 2), np.float32), state
+
+
+def test_residual_policy_without_correction_is_its_baseline():
+    from train.residual import ResidualPolicy
+
+    cfg = SwarmConfig()
+    pd = make_controller("pd", cfg)
+    results = evaluate_policies(
+        {"pd": pd, "residual": ResidualPolicy(_Zero(cfg), pd)}, cfg, 5, 3, progress=False
+    )
+    a, b = results["policies"]["pd"], results["policies"]["residual"]
+    assert a["per_episode"]["return"] == pytest.approx(b["per_episode"]["return"], abs=1e-4)
+
+
+def test_residual_vec_env_steps_baseline_plus_correction():
+    from train.residual import ResidualVecEnv
+
+    cfg = SwarmConfig(n_agents=5)
+    pd = make_controller("pd", cfg)
+    plain = swarm_nav_v0.vec_env(2, n_agents=5)
+    wrapped = ResidualVecEnv(swarm_nav_v0.vec_env(2, n_agents=5), pd)
+    plain.seed(4)
+    wrapped.seed(4)
+    obs_p, obs_w = plain.reset(), wrapped.reset()
+    np.testing.assert_array_equal(obs_p, obs_w)
+    correction = np.full((10, 2), 0.1, np.float32)
+    for _ in range(5):
+        base, _ = pd.predict(obs_p)
+        obs_p, r_p, _, _ = plain.step(np.clip(base + correction, -1, 1))
+        obs_w, r_w, _, _ = wrapped.step(correction)
+        np.testing.assert_allclose(obs_p, obs_w)
+        np.testing.assert_allclose(r_p, r_w)
+
+
+def test_residual_model_loads_as_the_policy_it_trained_as(tmp_path):
+    from train.config import load_train_config
+    from train.evaluate import load_sb3_model
+    from train.residual import ResidualPolicy
+    from train.train import train
+
+    tc = load_train_config(
+        "configs/train/demo.yaml",
+        {
+            "total_timesteps": 2560,
+            "n_swarms": 2,
+            "eval_freq": 0,
+            "checkpoint_freq": 0,
+            "residual": "pd",
+            "env": {"n_agents": 5},
+            "hyperparams": {"n_steps": 256, "batch_size": 640, "n_epochs": 1},
+        },
+    )
+    path = train(tc, tmp_path / "run", progress_bar=False, tensorboard=False, verbose=0)
+    policy = load_sb3_model(path)
+    assert isinstance(policy, ResidualPolicy)
+    pd = make_controller("pd", tc.swarm_config())
+    assert (policy.baseline.k_p, policy.baseline.k_d) == (pd.k_p, pd.k_d)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # its own env: no warning
+        evaluate_policies({"learned": policy}, tc.swarm_config(), 2, 9, progress=False)
+
+
+def test_residual_needs_shared_mode_and_a_known_baseline():
+    from train.config import load_train_config
+
+    with pytest.raises(ValueError, match="residual must be null or one of"):
+        load_train_config("configs/train/demo.yaml", {"residual": "magic"})
+    with pytest.raises(ValueError, match="mode 'shared'"):
+        load_train_config("configs/train/central.yaml", {"residual": "pd"})

@@ -1,0 +1,130 @@
+"""A lower bound on the time to goal: no policy can bring the swarm in sooner.
+
+Navigation succeeds when every agent is within the arrival radius ``R`` of the goal at
+once, so the swarm's centroid ``c`` is then within ``R`` too, and has advanced at least
+``D − R`` along the unit vector ``ĝ`` from its start to the goal (``D = |g − c(0)|``).
+What bounds the centroid's progress depends on the model:
+
+- **social potential** (navigation and informed tasks, linear friction ``α = 0``, no
+  passive sink): the pair forces (Morse and alignment) are equal and opposite, so they
+  cancel in the sum and the centroid obeys ``m c̈ = ⟨u_i⟩ − β ċ``. The control's
+  component along ``ĝ`` is at most ``u_max ‖ĝ‖₁`` (the action box's support: more than
+  ``u_max`` along a diagonal). Full thrust along ``ĝ`` from the centroid's initial
+  velocity is then the fastest progress: the bound is the first time it covers
+  ``D − R``, the smaller of the exact solution and the semi-implicit Euler recursion of
+  one substep per step (the integrator's own progress, which runs slightly ahead).
+- **zone model**: every agent moves at its constant ``speed``, so the centroid covers at
+  most ``speed · dt`` per step: ``⌈(D − R) / (speed · dt)⌉`` steps.
+
+Elsewhere — the piecewise model (its neighbour forces are one-way and do not cancel),
+the Lagrangian model, self-propulsion, a passive sink, the mill task, ``success_fraction
+< 1`` or perturbations that change who acts — no bound is defined (``None``). The bound
+ignores everything that slows a real swarm (keeping together, braking, turning), so a
+policy at the bound is optimal, and one within a few percent of it has little left to
+gain.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from swarm_envs.config import SwarmConfig
+
+__all__ = ["bound_reason", "time_to_goal_bound"]
+
+
+def bound_reason(cfg: SwarmConfig) -> str | None:
+    """Why no bound is defined for ``cfg`` (``None``: one is).
+
+    >>> bound_reason(SwarmConfig()) is None
+    True
+    >>> bound_reason(SwarmConfig(dynamics="piecewise"))
+    "dynamics 'piecewise': the pair forces do not cancel"
+    """
+    p = cfg.perturbations
+    if cfg.task == "mill":
+        return "the mill task"
+    if cfg.success_fraction < 1.0:
+        return "success_fraction < 1"
+    if any(
+        float(np.max(getattr(p, k))) > 0
+        for k in ("failed_fraction", "absent_fraction", "join_fraction", "action_noise")
+    ):
+        return "perturbations change who acts or how"
+    if cfg.dynamics == "zone":
+        return None
+    if cfg.dynamics != "social_potential":
+        return f"dynamics {cfg.dynamics!r}: the pair forces do not cancel"
+    if cfg.physics.alpha > 0:
+        return "self-propulsion"
+    if cfg.goal_in_physics and cfg.physics.C_g > 0:
+        return "the passive sink"
+    return None
+
+
+def time_to_goal_bound(
+    cfg: SwarmConfig, x: np.ndarray, v: np.ndarray, goal: np.ndarray
+) -> np.ndarray | None:
+    """The lower bound (simulated seconds, a multiple of ``dt``) on each swarm's time to
+    goal from its start state, ``(B,)``; ``None`` where no bound is defined
+    (:func:`bound_reason`).
+
+    Args:
+        cfg: the scenario.
+        x, v: start positions and velocities ``(B, N, d)``.
+        goal: goals ``(B, d)``.
+
+    >>> import dataclasses
+    >>> from swarm_envs.physics import SocialPotentialParams
+    >>> no_drag = dataclasses.replace(SocialPotentialParams.navigation(), beta=0.0)
+    >>> cfg = SwarmConfig(physics=no_drag)               # no drag: ½ a t² ≥ D − R
+    >>> x = np.zeros((1, 2, 2)); v = np.zeros((1, 2, 2))
+    >>> float(time_to_goal_bound(cfg, x, v, np.array([[7.5, 0.0]]))[0])  # 6 = ½·3·t²: t = 2
+    2.0
+    """
+    if bound_reason(cfg) is not None:
+        return None
+    x = np.asarray(x, np.float64)
+    v = np.asarray(v, np.float64)
+    goal = np.asarray(goal, np.float64)
+    centroid, drift = x.mean(axis=1), v.mean(axis=1)
+    offset = goal - centroid
+    dist = np.sqrt(np.einsum("bk,bk->b", offset, offset))
+    unit = offset / np.where(dist > 0, dist, 1.0)[:, None]
+    gap = np.maximum(dist - cfg.arrival_radius, 0.0)
+    if cfg.dynamics == "zone":
+        per_step = cfg.zone.speed * cfg.dt
+        return np.ceil(gap / per_step - 1e-9) * cfg.dt
+    m, beta = cfg.physics.m, cfg.physics.beta
+    accel = cfg.u_max * np.abs(unit).sum(axis=1) / m  # the box's support along ĝ
+    speed0 = np.einsum("bk,bk->b", drift, unit)
+    return np.array(
+        [
+            _steps_to_cover(g, s0, a, beta / m, cfg.dt, cfg.max_steps) * cfg.dt
+            for g, s0, a in zip(gap, speed0, accel, strict=True)
+        ]
+    )
+
+
+def _steps_to_cover(
+    gap: float, speed: float, accel: float, drag: float, dt: float, max_steps: int
+) -> int:
+    """Steps of ``dt`` until ``s ≥ gap`` under ``s̈ = accel − drag ṡ``, the fewer of the
+    exact flow's and one-substep semi-implicit Euler's (``max_steps + 1``: never)."""
+    if gap <= 0:
+        return 0
+    s_euler, v_euler = 0.0, speed
+    for n in range(1, max_steps + 1):
+        v_euler = v_euler + dt * (accel - drag * v_euler)
+        s_euler += dt * v_euler
+        t = n * dt
+        if drag > 0:
+            terminal = accel / drag
+            s_exact = terminal * t + (speed - terminal) * (1.0 - math.exp(-drag * t)) / drag
+        else:
+            s_exact = speed * t + 0.5 * accel * t * t
+        if max(s_euler, s_exact) >= gap - 1e-12:
+            return n
+    return max_steps + 1

@@ -1,0 +1,118 @@
+"""Residual policies: a learned correction on top of a simple baseline's action.
+
+A residual policy acts ``a_i = clip(b(o_i) + r_θ(o_i), −1, 1)``: the baseline ``b`` (a
+controller of :mod:`agents`, e.g. the tuned saturated PD law) plus a learned correction
+``r_θ``. SB3's PPO starts its Gaussian policy's mean near zero (the action layer is
+initialised small), so training starts at the baseline's return and only has to learn
+what the baseline misses. ``TrainConfig.residual`` names the baseline; training steps
+the env through :class:`ResidualVecEnv`, and the model records the baseline and its
+gains (:data:`RESIDUAL`, saved in the model zip), so that :func:`as_policy` rebuilds the
+same policy at evaluation, whatever the tuned table says by then.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+
+from swarm_envs.config import SwarmConfig
+
+__all__ = ["RESIDUAL", "ResidualPolicy", "ResidualVecEnv", "as_policy", "residual_record"]
+
+#: The attribute of an SB3 model that names the baseline it corrects (saved in the zip).
+RESIDUAL = "swarm_residual"
+
+#: Attributes of a controller recorded with a residual model (its gains).
+_GAIN_ATTRS = ("k_p", "k_d", "k_v", "k_c", "saturation", "approach", "spin", "omega")
+
+
+def make_baseline(name: str, cfg: SwarmConfig, gains: Mapping[str, Any] | None = None) -> Any:
+    """The controller ``name`` of :data:`agents.CONTROLLERS` for ``cfg``, with ``gains``
+    (``None``: its tuned or default gains)."""
+    from agents import CONTROLLERS, make_controller
+
+    if name not in CONTROLLERS or name in ("random",):
+        raise ValueError(
+            f"residual: unknown baseline {name!r}; use one of "
+            f"{', '.join(n for n in CONTROLLERS if n != 'random')}"
+        )
+    if gains is None:
+        return make_controller(name, cfg)
+    return CONTROLLERS[name](cfg, **dict(gains))
+
+
+def residual_record(name: str, baseline: Any) -> dict[str, Any]:
+    """What a residual model records: the baseline's name and gains."""
+    gains = {k: getattr(baseline, k) for k in _GAIN_ATTRS if hasattr(baseline, k)}
+    return {"baseline": name, "gains": gains}
+
+
+class ResidualVecEnv(VecEnvWrapper):
+    """A VecEnv whose actions are corrections: it steps the wrapped env with
+    ``clip(baseline(obs) + action, −1, 1)``, ``obs`` the observations the actions answer."""
+
+    def __init__(self, venv: VecEnv, baseline: Any) -> None:
+        super().__init__(venv)
+        self.baseline = baseline
+        self._obs: np.ndarray | None = None
+
+    def reset(self) -> Any:
+        self._obs = self.venv.reset()
+        return self._obs
+
+    def step_async(self, actions: np.ndarray) -> None:
+        if self._obs is None:
+            raise RuntimeError("ResidualVecEnv: step before reset")
+        base, _ = self.baseline.predict(self._obs)
+        total = np.clip(np.asarray(base, np.float32) + actions, -1.0, 1.0)
+        self.venv.step_async(total.astype(np.float32, copy=False))
+
+    def step_wait(self) -> Any:
+        obs, rewards, dones, infos = self.venv.step_wait()
+        self._obs = obs
+        return obs, rewards, dones, infos
+
+
+class ResidualPolicy:
+    """A residual model as one policy (SB3's ``predict``): baseline plus correction."""
+
+    def __init__(self, model: Any, baseline: Any) -> None:
+        self.model = model
+        self.baseline = baseline
+        self.observation_space = model.observation_space
+        self.action_space = model.action_space
+        from train.evaluate.policies import TRAINED_ENV
+
+        setattr(self, TRAINED_ENV, getattr(model, TRAINED_ENV, None))
+        setattr(self, RESIDUAL, getattr(model, RESIDUAL, None))
+
+    def predict(
+        self,
+        observation: Any,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, Any]:
+        correction, state = self.model.predict(
+            observation, state=state, episode_start=episode_start, deterministic=deterministic
+        )
+        base, _ = self.baseline.predict(observation)
+        total = np.clip(np.asarray(base) + np.clip(correction, -1.0, 1.0), -1.0, 1.0)
+        return total.astype(np.float32, copy=False), state
+
+
+def as_policy(model: Any) -> Any:
+    """``model`` as the policy it acts as: a :class:`ResidualPolicy` for a model that
+    records a baseline (:data:`RESIDUAL`), the model itself otherwise."""
+    record = getattr(model, RESIDUAL, None)
+    if not isinstance(record, Mapping):
+        return model
+    from swarm_envs.config import load_swarm_config
+    from train.evaluate.policies import TRAINED_ENV
+
+    trained = getattr(model, TRAINED_ENV, None) or {}
+    cfg = load_swarm_config(None, dict(trained.get("env_config") or {}))
+    return ResidualPolicy(model, make_baseline(record["baseline"], cfg, record.get("gains")))
