@@ -33,7 +33,7 @@ __all__ = ["SATURATIONS", "SaturatedPDController", "saturate"]
 
 #: How the PD law is brought into the action box (:func:`saturate`); the tuned table
 #: stores the choice as ``box`` 0 or 1.
-SATURATIONS = ("norm", "box")
+SATURATIONS = ("norm", "box", "clip")
 
 
 class SaturatedPDController(Controller):
@@ -53,9 +53,10 @@ class SaturatedPDController(Controller):
             the tuned gain of the env's task and dynamics (:mod:`agents.tuned`), else
             :data:`DEFAULT_K_P`.
         k_d: derivative gain ``≥ 0`` (per unit velocity). ``None``: as ``k_p``.
-        saturation: ``"norm"`` (the norm capped at 1) or ``"box"`` (the largest
-            component capped at 1: more thrust along the diagonals), see
-            :func:`saturate`. ``None``: as ``k_p``, else ``"norm"``.
+        saturation: ``"norm"`` (the norm capped at 1), ``"box"`` (the largest
+            component capped at 1: more thrust along the diagonals) or ``"clip"``
+            (each component on its own), see :func:`saturate`. ``None``: as ``k_p``
+            (the tuned table stores ``box`` 0, 1 or 2), else ``"norm"``.
 
     >>> from swarm_envs.config import SwarmConfig
     >>> ctrl = SaturatedPDController(SwarmConfig(), k_p=1.0, k_d=0.5)
@@ -129,13 +130,19 @@ def saturate(z: np.ndarray, saturation: str = "norm") -> np.ndarray:
     ``"norm"``: ``z / max(1, |z|)``, the Euclidean norm capped at 1 (the same thrust in
     every direction). ``"box"``: ``z / max(1, max_k |z_k|)``, the largest component
     capped at 1, so a saturated action reaches the box's face: up to ``√d`` times more
-    thrust along the diagonals than ``"norm"``.
+    thrust along the diagonals than ``"norm"``. ``"clip"``: each component clipped to
+    ``[−1, 1]`` on its own (the direction is not kept: far from the goal every axis
+    thrusts bang-bang, and each axis brakes as its own offset closes).
 
     >>> saturate(np.array([[3.0, 4.0], [0.3, 0.4]])).round(3).tolist()
     [[0.6, 0.8], [0.3, 0.4]]
     >>> saturate(np.array([[3.0, 4.0], [0.3, 0.4]]), "box").round(3).tolist()
     [[0.75, 1.0], [0.3, 0.4]]
+    >>> saturate(np.array([[3.0, 0.4]]), "clip").round(3).tolist()
+    [[1.0, 0.4]]
     """
+    if saturation == "clip":
+        return np.clip(z, -1.0, 1.0)
     if saturation == "box":
         size = np.max(np.abs(z), axis=-1, keepdims=True)
     else:

@@ -332,3 +332,33 @@ def test_residual_needs_shared_mode_and_a_known_baseline():
         load_train_config("configs/train/demo.yaml", {"residual": "magic"})
     with pytest.raises(ValueError, match="mode 'shared'"):
         load_train_config("configs/train/central.yaml", {"residual": "pd"})
+
+
+def test_benchmark_baselines_only_trains_nothing(tmp_path):
+    import json
+
+    from train.benchmark.cli import main
+
+    out = tmp_path / "bench"
+    argv = [
+        "--baselines-only",
+        "--only",
+        "navigation/social_potential",
+        "informed/zone",
+        "--episodes",
+        "4",
+        "--resamples",
+        "200",
+        "--out",
+        str(out),
+        "--no-progress",
+    ]
+    assert main(argv) == 0
+    assert not (out / "models").exists()
+    results = json.loads((out / "results.json").read_text())
+    nav, informed = results["entries"]
+    ev = nav["evaluations"][0]
+    assert set(ev["policies"]) == {"analytic", "pd"} and ev["best_baseline"] == "pd"
+    assert ev["time_to_goal_bound"] > 0
+    assert set(informed["evaluations"][0]["policies"]) == {"analytic", "pd", "follow"}
+    assert "Baselines only" in (out / "results.md").read_text()

@@ -18,6 +18,10 @@ every finished model, resumes the stopped one and trains the rest. A model folde
 holds a run of another config is refused; ``--overwrite`` retrains the selected entries
 from scratch.
 
+``--baselines-only`` trains nothing and evaluates the baselines alone (the best one
+marked, the lower bound on the time to goal): the table of what a learned policy must
+beat, in minutes.
+
 ``--quick`` is a smoke run for tests and CI: about one update of training per seed, two
 seeds, ten episodes (unless ``--seeds`` / ``--episodes`` say otherwise), into
 ``runs/benchmark_quick`` by default. Its numbers mean nothing about the policies.
@@ -108,6 +112,11 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"seed of the bootstrap (default {BOOTSTRAP_SEED})",
     )
     parser.add_argument("--no-progress", action="store_true", help="no training progress bars")
+    parser.add_argument(
+        "--baselines-only",
+        action="store_true",
+        help="train nothing: evaluate every baseline (the best marked, the time bound) only",
+    )
     return parser
 
 
@@ -143,6 +152,7 @@ def settings_from_args(args: argparse.Namespace) -> Settings:
         n_resamples=args.resamples,
         bootstrap_seed=args.bootstrap_seed,
         confidence=CONFIDENCE,
+        baselines_only=args.baselines_only,
     )
 
 
@@ -207,7 +217,7 @@ def _main(args: argparse.Namespace, argv: list[str]) -> int:
         matrix = load_matrix(args.matrix)
         entries = matrix.select(args.only)
         for entry in entries:  # every config and model folder checked before any training
-            for seed in s.seeds:
+            for seed in () if s.baselines_only else s.seeds:
                 tc = entry_train_config(entry, seed, s.quick)
                 existing_run(tc, model_folder(out, entry, seed), overwrite=s.overwrite)
     except (CliError, ValueError, OSError) as err:

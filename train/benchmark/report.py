@@ -105,6 +105,8 @@ def format_results_table(results: Mapping[str, Any]) -> str:
 def _markdown(results: Mapping[str, Any]) -> str:
     b = results["benchmark"]
     quick = " **Quick smoke run: tiny training, not a result.**" if b["quick"] else ""
+    if b.get("baselines_only"):
+        quick += " Baselines only: no policy was trained."
     lines = [
         "# Benchmark results",
         "",

@@ -75,6 +75,8 @@ class Settings:
     n_resamples: int = N_RESAMPLES
     bootstrap_seed: int = BOOTSTRAP_SEED
     confidence: float = CONFIDENCE
+    baselines_only: bool = False
+    """Evaluate the baselines only: nothing is trained, no learned policy is reported."""
 
     def to_dict(self) -> dict[str, Any]:
         out = {f.name: getattr(self, f.name) for f in fields(self)}
@@ -295,11 +297,11 @@ def evaluate_entry(
         )
         started = time.perf_counter()
         runs = [_episodes(model, cfg, s, f"learned seed {m.seed}") for m, model in loaded]
-        policies = {
-            "learned": _policy_result(
+        policies = {}
+        if runs:
+            policies["learned"] = _policy_result(
                 runs, cfg, s, kind="learned", seeds=[m.seed for m, _ in loaded], notes=notes
             )
-        }
         baseline_runs = {}
         for name in expand_baselines(entry.baselines, cfg.task):
             controller = name if name != "analytic" else analytic_name(cfg)
@@ -311,17 +313,17 @@ def evaluate_entry(
             baseline_runs,
             key=lambda n: (policies[n]["return"]["value"], policies[n]["success"]["value"]),
         )
-        learned_returns = np.stack([r["return"] for r in runs])
-        policies["learned"]["minus_best"] = {
-            "baseline": best,
-            "return": paired_difference(
-                learned_returns,
-                baseline_runs[best]["return"],
-                n_resamples=s.n_resamples,
-                seed=s.bootstrap_seed,
-                confidence=s.confidence,
-            ),
-        }
+        if runs:
+            policies["learned"]["minus_best"] = {
+                "baseline": best,
+                "return": paired_difference(
+                    np.stack([r["return"] for r in runs]),
+                    baseline_runs[best]["return"],
+                    n_resamples=s.n_resamples,
+                    seed=s.bootstrap_seed,
+                    confidence=s.confidence,
+                ),
+            }
         bound = runs[0]["bound"] if runs else baseline_runs[best]["bound"]
         results.append(
             {
@@ -370,17 +372,21 @@ def run_entry(entry: Entry, out: Path, s: Settings, log: Log = print) -> dict[st
     baselines; the entry's results (see :mod:`train.benchmark.report`)."""
     log(f"{entry.name}: task {entry.task}, dynamics {entry.dynamics}, train {entry.train}")
     configs = [entry_train_config(entry, seed, s.quick) for seed in s.seeds]
-    models = [
-        train_seed(
-            tc,
-            model_folder(out, entry, tc.seed),
-            overwrite=s.overwrite,
-            progress=s.progress,
-            tensorboard=not s.quick,
-            log=log,
-        )
-        for tc in configs
-    ]
+    models = (
+        []
+        if s.baselines_only
+        else [
+            train_seed(
+                tc,
+                model_folder(out, entry, tc.seed),
+                overwrite=s.overwrite,
+                progress=s.progress,
+                tensorboard=not s.quick,
+                log=log,
+            )
+            for tc in configs
+        ]
+    )
     train_config = configs[0].to_dict()
     train_config.pop("seed")
     return {
