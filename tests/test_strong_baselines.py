@@ -275,6 +275,7 @@ def test_residual_policy_without_correction_is_its_baseline():
     )
     a, b = results["policies"]["pd"], results["policies"]["residual"]
     assert a["per_episode"]["return"] == pytest.approx(b["per_episode"]["return"], abs=1e-4)
+    assert results["best_baseline"] == "pd"  # a trained policy is never a baseline
 
 
 def test_residual_vec_env_steps_baseline_plus_correction():

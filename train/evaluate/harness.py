@@ -7,7 +7,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from agents.base import swarm_config_of
+from agents.base import Controller, swarm_config_of
 from swarm_envs import ENV_ID
 from swarm_envs.config import SwarmConfig, as_dict
 from train.evaluate.bound import bound_reason, time_to_goal_bound
@@ -118,7 +118,7 @@ def evaluate_policies(
         extra: more top-level entries for the results (e.g. the config path).
         baselines: the names among ``policies`` that are baselines: the one with the
             highest mean return is recorded as ``"best_baseline"`` (and marked in the
-            tables). ``None``: every policy but ``"learned"``.
+            tables). ``None``: the controllers of :mod:`agents` among them.
 
     The episodes run on the backend and device that ``cfg`` names (``backend``,
     ``device``; ``auto`` picks one), recorded as ``"backend"``. A model that records
@@ -164,7 +164,12 @@ def evaluate_policies(
         "time_to_goal_bound": None if bound is None else finite(bound.mean()),
         "time_to_goal_bound_per_episode": None if bound is None else bound.tolist(),
         "bound_undefined": bound_reason(cfg),
-        "best_baseline": best_baseline(measures, baselines),
+        "best_baseline": best_baseline(
+            measures,
+            [n for n, p in policies.items() if isinstance(p, Controller)]
+            if baselines is None
+            else baselines,
+        ),
     }
     if out_dir is not None:
         write_outputs(results, batches, cfg, out_dir, gif=gif, plots=plots, gif_size=gif_size)
