@@ -84,7 +84,7 @@ TASK_ANALYTIC: dict[str, str] = {"mill": "mill"}
 SIMPLE: dict[str, tuple[str, ...]] = {
     "navigation": ("pd",),
     "informed": ("pd", "follow"),
-    "mill": (),
+    "mill": ("mill",),
 }
 
 
@@ -97,7 +97,8 @@ def baseline_names(env: Any) -> list[str]:
     ['potential', 'pd', 'follow']
     """
     cfg = swarm_config_of(env)
-    return [analytic_name(cfg), *SIMPLE[cfg.task]]
+    names = [analytic_name(cfg), *SIMPLE[cfg.task]]
+    return list(dict.fromkeys(names))  # the mill's analytic controller is its simple one
 
 
 def analytic_name(env: Any) -> str:

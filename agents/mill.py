@@ -38,9 +38,11 @@ class MillController(Controller):
             ``[0, 1]`` (default 1: full thrust).
         spin: the action's norm along the tangent inside it, in ``[0, 1]`` (default
             0.2: with the mill task's defaults the agents circle at about ``1.1 v₀``).
+        Either ``None``: the gain ``swarm-tune`` found for the scenario
+        (``configs/baselines/tuned.yaml``), else the default.
 
     >>> from swarm_envs.tasks import task_config
-    >>> ctrl = MillController(task_config("mill"))
+    >>> ctrl = MillController(task_config("mill"), approach=1.0, spin=0.2)
     >>> obs = np.zeros(ctrl.obs_dim, np.float32)
     >>> obs[:2] = [0.0, 0.05]            # the goal 0.5 above: inside the arrival radius
     >>> [round(float(a), 4) + 0.0 for a in ctrl.predict(obs)[0]]  # tangent: ẑ × (0, −1)
@@ -50,11 +52,20 @@ class MillController(Controller):
     [0.0, 1.0]
     """
 
-    def __init__(self, env: Any, approach: float = 1.0, spin: float = 0.2) -> None:
+    #: Gains used when neither the caller nor the tuned table gives one.
+    DEFAULT_APPROACH: float = 1.0
+    DEFAULT_SPIN: float = 0.2
+
+    def __init__(self, env: Any, approach: float | None = None, spin: float | None = None) -> None:
+        from agents.tuned import tuned_gains
+
         super().__init__(env)
         if self.dim != 2:
             raise ValueError(f"MillController circles in the plane: dim must be 2, got {self.dim}")
         owner = type(self).__name__
+        tuned = tuned_gains("mill", self.cfg)
+        approach = tuned.get("approach", self.DEFAULT_APPROACH) if approach is None else approach
+        spin = tuned.get("spin", self.DEFAULT_SPIN) if spin is None else spin
         self.approach = check_real(owner, "approach", approach, low=0.0, high=1.0)
         self.spin = check_real(owner, "spin", spin, low=0.0, high=1.0)
         self.radius: float = self.cfg.arrival_radius

@@ -59,7 +59,7 @@ class SaturatedPDController(Controller):
             (the tuned table stores ``box`` 0, 1 or 2), else ``"norm"``.
 
     >>> from swarm_envs.config import SwarmConfig
-    >>> ctrl = SaturatedPDController(SwarmConfig(), k_p=1.0, k_d=0.5)
+    >>> ctrl = SaturatedPDController(SwarmConfig(), k_p=1.0, k_d=0.5, saturation="norm")
     >>> obs = np.zeros(ctrl.obs_dim, np.float32)
     >>> obs[:2] = [0.3, 0.4]                    # goal offset (3, 4): distance 5
     >>> [round(float(a), 4) for a in ctrl.predict(obs)[0]]  # saturated: unit (0.6, 0.8)
