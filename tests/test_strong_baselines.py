@@ -363,3 +363,36 @@ def test_benchmark_baselines_only_trains_nothing(tmp_path):
     assert ev["time_to_goal_bound"] > 0
     assert set(informed["evaluations"][0]["policies"]) == {"analytic", "pd", "follow"}
     assert "Baselines only" in (out / "results.md").read_text()
+
+
+def test_critic_warmup_holds_the_actor_and_trains_the_critic():
+    import torch
+
+    from train.config import load_train_config
+    from train.residual import CriticWarmup
+    from train.train import build_model, make_training_env
+
+    tc = load_train_config(
+        "configs/train/demo.yaml",
+        {
+            "n_swarms": 2,
+            "residual": "pd",
+            "env": {"n_agents": 5},
+            "hyperparams": {"n_steps": 64, "batch_size": 320, "n_epochs": 2},
+        },
+    )
+    model = build_model(tc, make_training_env(tc))
+    policy = model.policy
+    actor = [p.detach().clone() for p in policy.action_net.parameters()] + [
+        policy.log_std.detach().clone()
+    ]
+    critic = [p.detach().clone() for p in policy.value_net.parameters()]
+    warmup = CriticWarmup(10**9)
+    model.learn(640, callback=warmup)
+    after = [*policy.action_net.parameters(), policy.log_std]
+    assert all(torch.equal(a, b) for a, b in zip(actor, after, strict=True))
+    assert not all(
+        torch.equal(a, b) for a, b in zip(critic, policy.value_net.parameters(), strict=True)
+    )
+    assert all(p.requires_grad for p in after)  # released at the end of training
+    model.get_env().close()

@@ -125,6 +125,9 @@ class TrainConfig(RunConfig):
     residual_log_std: float = -1.0
     """With ``residual``: the initial log standard deviation of the policy's Gaussian
     (the exploration noise around the baseline's action; SB3's default is 0)."""
+    residual_warmup: int = 0
+    """With ``residual``: timesteps at the start during which only the value function
+    learns (:class:`train.residual.CriticWarmup`); the policy stays the baseline's."""
     eval_freq: int = 0
     """Evaluate against the analytic controller every this many timesteps (0 = never)."""
     eval_episodes: int = 10
@@ -160,6 +163,7 @@ class TrainConfig(RunConfig):
             ("eval_seed", 0),
             ("checkpoint_freq", 0),
             ("checkpoint_keep", 1),
+            ("residual_warmup", 0),
         ):
             object.__setattr__(self, name, check_integer(name, getattr(self, name), low=low))
         for name in ("seed", "eval_seed"):

@@ -16,11 +16,19 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
 from swarm_envs.config import SwarmConfig
 
-__all__ = ["RESIDUAL", "ResidualPolicy", "ResidualVecEnv", "as_policy", "residual_record"]
+__all__ = [
+    "RESIDUAL",
+    "CriticWarmup",
+    "ResidualPolicy",
+    "ResidualVecEnv",
+    "as_policy",
+    "residual_record",
+]
 
 #: The attribute of an SB3 model that names the baseline it corrects (saved in the zip).
 RESIDUAL = "swarm_residual"
@@ -102,6 +110,50 @@ class ResidualPolicy:
         base, _ = self.baseline.predict(observation)
         total = np.clip(np.asarray(base) + np.clip(correction, -1.0, 1.0), -1.0, 1.0)
         return total.astype(np.float32, copy=False), state
+
+
+class CriticWarmup(BaseCallback):
+    """Hold the policy (actor) still for the first ``timesteps``: only the value function
+    learns, from rollouts of the baseline plus the initial, near-zero correction.
+
+    An actor updated against an untrained critic drifts away from the baseline before
+    the advantages mean anything; with the critic warmed up first, the first policy
+    updates already point somewhere better (the burn-in of residual policy learning).
+    The actor's parameters stop receiving gradients (``requires_grad`` off) until then.
+    """
+
+    def __init__(self, timesteps: int, verbose: int = 0) -> None:
+        super().__init__(verbose)
+        self.timesteps = int(timesteps)
+        self._frozen: list[Any] = []
+
+    def _actor_parameters(self) -> list[Any]:
+        policy = self.model.policy
+        parts = [policy.action_net, policy.mlp_extractor.policy_net]
+        params = [p for part in parts for p in part.parameters()]
+        log_std = getattr(policy, "log_std", None)
+        return [*params, log_std] if log_std is not None else params
+
+    def _on_training_start(self) -> None:
+        if self.model.num_timesteps < self.timesteps:
+            self._frozen = [p for p in self._actor_parameters() if p.requires_grad]
+            for p in self._frozen:
+                p.requires_grad_(False)
+
+    def _on_rollout_end(self) -> None:
+        if self._frozen and self.model.num_timesteps >= self.timesteps:
+            self._release()
+
+    def _on_training_end(self) -> None:
+        self._release()
+
+    def _release(self) -> None:
+        for p in self._frozen:
+            p.requires_grad_(True)
+        self._frozen = []
+
+    def _on_step(self) -> bool:
+        return True
 
 
 def as_policy(model: Any) -> Any:

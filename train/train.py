@@ -224,6 +224,10 @@ def train(
     (out / "env_config.yaml").write_text(yaml.safe_dump(as_dict(cfg), sort_keys=False))
     run = _Run(tc, out, model, float(state["train_seconds"]))
     callbacks: list[Any] = [SwarmStatsCallback(cfg)]
+    if tc.residual is not None and tc.residual_warmup > 0:
+        from train.residual import CriticWarmup
+
+        callbacks.append(CriticWarmup(tc.residual_warmup))
     if tc.eval_freq > 0:
         run.evaluator = AnalyticBaselineEvalCallback(
             cfg, tc.eval_freq, tc.eval_episodes, tc.eval_seed, out, verbose=verbose
