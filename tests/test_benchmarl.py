@@ -73,12 +73,21 @@ def test_env_passes_torchrl_check_env_specs(task: str, return_state: bool):
         assert torch.equal(state, td["next", "agents", "observation"].reshape(3, 8, -1))
 
 
-def test_env_steps_as_the_vec_env_over_the_same_core():
+FAILING = {"failed_fraction": 0.4, "failure_mode": "removed", "failure_time": [1, 8]}
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [{}, {"task": "informed"}, {"perturbations": FAILING}],
+    ids=["navigation", "informed", "removed agents"],
+)
+def test_env_steps_as_the_vec_env_over_the_same_core(kwargs: dict[str, Any]):
     """Same seed and actions: the same observations and rewards as the SB3 ``vec_env``
-    (one core, float32), the swarm's reward given to each of its agents."""
+    (one core, float32), the swarm's reward given to each of its agents. Agents that
+    stopped acting observe zeros in both; the ``vec_env`` gives their slots reward 0."""
     B, N, steps = 3, 5, 12
-    env = SwarmTorchRLEnv(B, n_agents=N, max_steps=50)
-    vec = swarm_nav_v0.vec_env(B, n_agents=N, max_steps=50, n_threads=1)
+    env = SwarmTorchRLEnv(B, n_agents=N, max_steps=50, **kwargs)
+    vec = swarm_nav_v0.vec_env(B, n_agents=N, max_steps=50, n_threads=1, **kwargs)
     assert env.backend == vec.backend
     env.set_seed(7)
     vec.seed(7)
@@ -86,14 +95,20 @@ def test_env_steps_as_the_vec_env_over_the_same_core():
     obs = vec.reset()
     np.testing.assert_array_equal(td["agents", "observation"].numpy().reshape(B * N, -1), obs)
     rng = np.random.default_rng(0)
+    stopped = 0
     for _ in range(steps):
+        status = getattr(env.core, "status", None)
+        acting = np.ones(B * N, bool) if status is None else (status == 0).reshape(-1)
         action = rng.uniform(-1, 1, (B, N, 2)).astype(np.float32)
         td["agents", "action"] = torch.from_numpy(action)
         td = env.step(td)["next"]
-        obs, rewards, dones, _ = vec.step(action.reshape(B * N, 2))
-        assert not dones.any()
+        obs, rewards, _, _ = vec.step(action.reshape(B * N, 2))
+        assert not td["done"].any()
         np.testing.assert_array_equal(td["agents", "observation"].numpy().reshape(B * N, -1), obs)
-        np.testing.assert_array_equal(td["agents", "reward"].numpy().reshape(-1), rewards)
+        reward = td["agents", "reward"].numpy().reshape(-1)
+        np.testing.assert_array_equal(reward[acting], rewards[acting])
+        stopped += int((~acting).sum())
+    assert stopped > 0 if "perturbations" in kwargs else stopped == 0
     vec.close()
 
 
