@@ -219,12 +219,19 @@ class EvaluationReturns(Callback):
         self.lengths.append([r.batch_size[0] for r in rollouts])
 
 
-def run_mappo(
-    save_folder: Path, n_agents: int, frames: int, frames_per_batch: int, evaluations: int = 1
+def run_experiment(
+    save_folder: Path,
+    frames: int,
+    frames_per_batch: int,
+    evaluations: int = 1,
+    algorithm: str = "MappoConfig",
+    task: str = "SWARM_NAV",
+    task_config: dict[str, Any] | None = None,
 ) -> tuple[Any, Any]:
-    """A MAPPO experiment on SwarmNav as docs/ecosystem.md gives it, evaluated at its
-    start and every ``frames // evaluations`` frames (the marl-eval JSON is its only log)."""
-    from benchmarl.algorithms import MappoConfig
+    """A BenchMARL experiment (MAPPO on SwarmNav, as docs/ecosystem.md gives it, unless
+    told), evaluated at its start and every ``frames // evaluations`` frames (the
+    marl-eval JSON is its only log); every parameter of the policy must have trained."""
+    from benchmarl import algorithms
     from benchmarl.experiment import Experiment, ExperimentConfig
     from benchmarl.models.mlp import MlpConfig
 
@@ -239,13 +246,19 @@ def run_mappo(
     config.on_policy_n_envs_per_worker = 16  # swarms stepped at once
     config.on_policy_n_minibatch_iters = 4
     config.on_policy_minibatch_size = 400
+    config.off_policy_collected_frames_per_batch = frames_per_batch
+    config.off_policy_n_envs_per_worker = 16
+    config.off_policy_n_optimizer_steps = 20
+    config.off_policy_memory_size = 10 * frames_per_batch
     config.lr = 3e-4
     config.evaluation_interval = frames // evaluations
     config.evaluation_episodes = 8
     returns = EvaluationReturns()
     experiment = Experiment(
-        task=SwarmTask.SWARM_NAV.get_task(config={"n_agents": n_agents, "max_steps": 50}),
-        algorithm_config=MappoConfig.get_from_yaml(),
+        task=SwarmTask[task].get_task(
+            config={"n_agents": 4, "max_steps": 50, **(task_config or {})}
+        ),
+        algorithm_config=getattr(algorithms, algorithm).get_from_yaml(),
         model_config=MlpConfig.get_from_yaml(),
         critic_model_config=MlpConfig.get_from_yaml(),
         seed=0,
@@ -260,7 +273,7 @@ def run_mappo(
 
 
 def test_mappo_experiment_on_swarm_nav(tmp_path: Path, one_torch_thread: None):
-    experiment, returns = run_mappo(tmp_path, n_agents=4, frames=1600, frames_per_batch=800)
+    experiment, returns = run_experiment(tmp_path, frames=1600, frames_per_batch=800)
     assert experiment.total_frames == 1600 and experiment.n_iters_performed == 2
     # Evaluated before training and at its end: 8 swarms at once, one episode each.
     assert len(returns.returns) == 2 and returns.lengths == [[50] * 8] * 2
@@ -268,12 +281,26 @@ def test_mappo_experiment_on_swarm_nav(tmp_path: Path, one_torch_thread: None):
     assert list(tmp_path.glob("mappo_swarm_nav*"))  # its folder, inside tmp_path
 
 
+@pytest.mark.parametrize(
+    ("algorithm", "task", "task_config"),
+    [
+        ("IppoConfig", "SWARM_INFORMED", {}),
+        ("MasacConfig", "SWARM_MILL", {"return_state": True}),
+    ],
+)
+def test_other_algorithms_and_tasks_run(
+    tmp_path: Path, one_torch_thread: None, algorithm: str, task: str, task_config: dict
+):
+    experiment, returns = run_experiment(
+        tmp_path, 1600, 800, algorithm=algorithm, task=task, task_config=task_config
+    )
+    assert experiment.total_frames == 1600 and len(returns.returns) == 2
+
+
 @pytest.mark.slow
 def test_mappo_learns_swarm_nav(tmp_path: Path, one_torch_thread: None):
     """The long form: MAPPO raises SwarmNav's evaluation return."""
-    _, returns = run_mappo(
-        tmp_path, n_agents=4, frames=96_000, frames_per_batch=4_000, evaluations=4
-    )
+    _, returns = run_experiment(tmp_path, frames=96_000, frames_per_batch=4_000, evaluations=4)
     first, last = returns.returns[0], returns.returns[-1]
     assert last.mean() > first.mean() + 2 * first.std() / np.sqrt(first.size), (first, last)
 
