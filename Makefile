@@ -25,7 +25,7 @@ $(BIN)/python:
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
 $(STAMP): $(BIN)/python pyproject.toml constraints.txt
-	$(BIN)/python -m pip install --quiet -c constraints.txt -e ".[dev,distributed,fast]"
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e ".[dev,distributed,fast,benchmarl]"
 	@touch $(STAMP)
 
 install: $(STAMP)

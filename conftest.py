@@ -2,7 +2,17 @@
 
 from __future__ import annotations
 
+import importlib.util
+
 import pytest
+
+#: ``train/benchmarl`` needs the ``benchmarl`` extra (``make install`` installs it);
+#: without it, its modules are left out of the doctest collection.
+collect_ignore = (
+    []
+    if importlib.util.find_spec("benchmarl")
+    else ["train/benchmarl/torchrl_env.py", "train/benchmarl/task.py"]
+)
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
