@@ -1,9 +1,12 @@
 """``swarm-demo`` (``make demo``): train, evaluate against the best baseline, report.
 
-1. trains ``configs/train/demo.yaml`` (shared PPO policy) into ``OUT``;
+1. trains ``configs/train/demo_informed.yaml`` into ``OUT``: a shared PPO policy that
+   corrects the informed task's strongest simple baseline (``follow``, a residual
+   policy), where only 1 to 3 of 10 agents observe the goal;
 2. evaluates the trained policy beside every baseline of the task
-   (:func:`agents.baseline_names`: ``potential``, the paper's goal-sink controller, and
-   ``pd``, the saturated PD law with the gains ``swarm-tune`` found on training seeds),
+   (:func:`agents.baseline_names`: the paper's goal-sink controller on the informed
+   agents, ``pd`` on the informed agents and ``follow``, with the gains ``swarm-tune``
+   found on training seeds),
    ``zero`` (the passive swarm) and ``random``, on ``--episodes`` episodes whose seed
    (``--seed``) training never used, writing ``results.json``, ``summary.md``,
    ``curves.png`` and one GIF per policy into ``OUT``;
@@ -36,7 +39,7 @@ from train.config import load_train_config, parse_overrides
 
 PROG = "swarm-demo"
 
-DEFAULT_CONFIG = CONFIG_ROOT / "train" / "demo.yaml"
+DEFAULT_CONFIG = CONFIG_ROOT / "train" / "demo_informed.yaml"
 LEARNED = "learned"
 
 
@@ -82,7 +85,7 @@ def write_report(results: dict[str, Any], out: Path, train_seconds: float | None
     criteria = compare(results["policies"][LEARNED], results["policies"][best])
     beaten = all(ok for _, ok, _ in criteria)
     lines = [
-        "# SwarmNav demo: learned shared policy vs the best baseline",
+        f"# {results['env']} demo: learned shared policy vs the best baseline",
         "",
         f"Evaluation: {results['episodes']} episodes, seed {results['seed']} "
         "(never used in training), deterministic actions. Baselines: "
