@@ -227,9 +227,10 @@ def _main(args: argparse.Namespace, argv: list[str]) -> int:
         "measures": MEASURE_DOCS,
         "entries": [],
     }
+    trained = "baselines only" if s.baselines_only else _count(len(s.seeds), "seed", "seeds")
     print(
-        f"{PROG}: {_count(len(entries), 'entry', 'entries')} × "
-        f"{_count(len(s.seeds), 'seed', 'seeds')}, {s.episodes} evaluation episodes each"
+        f"{PROG}: {_count(len(entries), 'entry', 'entries')} × {trained}, "
+        f"{s.episodes} evaluation episodes each"
         f"{' (quick smoke run)' if s.quick else ''}; out = {out}"
     )
     try:
