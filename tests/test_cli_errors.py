@@ -4,6 +4,7 @@ written; ``--out`` never mixes two runs."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -130,7 +131,8 @@ def test_demo_and_sweep_check_their_output_folder_first(files, capsys):
 def test_console_script_error_is_one_line(files):
     proc = subprocess.run(
         [sys.executable, "-m", "train.cli_train", "--config", str(files["bad"])],
-        cwd=ROOT,
+        cwd=files["bad"].parent,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
         capture_output=True,
         text=True,
         timeout=60,
