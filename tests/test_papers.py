@@ -116,7 +116,7 @@ def test_cli_only_subset_and_seeds(tmp_path: Path, capsys: pytest.CaptureFixture
 
 def test_cli_only_keeps_other_figures_in_summary(tmp_path: Path):
     assert main(["--quick", "--only", "fig9,fig10", "--out", str(tmp_path)]) == 0
-    assert main(["--quick", "--only", "fig9", "--out", str(tmp_path)]) == 0
+    assert main(["--quick", "--only", "fig9", "--out", str(tmp_path), "--overwrite"]) == 0
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert list(summary["figures"]) == ["fig9", "fig10"]
 
