@@ -148,8 +148,8 @@ class ProgressLines(BaseCallback):
     """One progress line at least every ``every_seconds`` of wall time, for a log file.
 
     The line gives the timesteps done of ``total``, the percentage, the time so far and
-    the throughput of this run, e.g. ``progress: 1,228,800 / 3,000,000 timesteps (41 %),
-    26 s, 47,000 timesteps/s``. It replaces the progress bar where the output is not a
+    the throughput of this run: ``progress: <done> / <total> timesteps (<percent> %),
+    <seconds> s, <rate> timesteps/s``. It replaces the progress bar where the output is not a
     terminal (``swarm-train > log``), and is checked at every vector step, so a line is
     late by at most one step (or one policy update).
     """
