@@ -278,6 +278,35 @@ def _infos_with_every_kind() -> list[Any]:
     return [first, infos]
 
 
+def test_vec_env_infos_are_dicts_that_json_takes():
+    import json
+
+    def same(a: dict, b: dict) -> bool:
+        return list(a) == list(b) and all(np.array_equal(a[k], b[k]) for k in a)
+
+    kinds = set()
+    for infos in _infos_with_every_kind():
+        for info in infos:
+            assert isinstance(info, dict)
+            kinds.add(type(info).__name__)
+            plain = {key: info[key] for key in info}
+            for other in (dict(info), {**info}, info.copy(), dict(info.items())):
+                assert type(other) is dict and same(other, plain)
+            assert same(dict(zip(info, info.values(), strict=True)), plain)
+            assert all(np.array_equal(info.get(key), plain[key]) for key in plain)
+            assert info.get("no such key", 7) == 7 and len(info) == len(plain)
+            if "terminal_observation" in info:  # an array: json needs it as a list
+                plain["terminal_observation"] = plain["terminal_observation"].tolist()
+                info = {**info, "terminal_observation": plain["terminal_observation"]}
+            assert json.loads(json.dumps(info)) == plain
+    assert kinds == {"SwarmInfo", "QuietInfo", "TerminalInfo"}
+    # Written through any dict method, an info keeps what was written.
+    swarm = _infos_with_every_kind()[0][0]
+    swarm.update(extra=1)
+    assert swarm["extra"] == 1 and json.loads(json.dumps(swarm))["extra"] == 1
+    assert swarm.setdefault("polarization", -1.0) != -1.0
+
+
 def test_vec_env_infos_copy_deepcopy_and_pickle_as_plain_dicts():
     for infos in _infos_with_every_kind():
         expected = [dict(info) for info in infos]

@@ -18,10 +18,11 @@ the ``episode`` infos without a Monitor warning. ``swarm_episode`` is the same d
 under its older name.
 
 Infos: the swarm's statistics (:data:`swarm_envs.envs.task.STAT_KEYS`) are in the info
-of the swarm's first slot (``b·N``) only, as a :class:`SwarmInfo` mapping; the slots of a
-swarm that just ended get :class:`~swarm_envs.envs.infos.TerminalInfo` mappings (with
+of the swarm's first slot (``b·N``) only, as a :class:`SwarmInfo`; the slots of a
+swarm that just ended get :class:`~swarm_envs.envs.infos.TerminalInfo` infos (with
 the statistics in the first); every other slot's info is an empty
-:class:`~swarm_envs.envs.infos.QuietInfo`. All are writable (a write to a statistics or
+:class:`~swarm_envs.envs.infos.QuietInfo`. All are ``dict`` subclasses (``json.dumps``
+takes them; their values are read from the step's arrays on access), writable (a write to a statistics or
 terminal info copies it into a dict of its own). None of them is built per step: fresh
 dicts for 32k slots would cost more than the fused step (see
 :mod:`swarm_envs.envs.infos`). Copies of them (``copy.copy``, ``copy.deepcopy``,
