@@ -22,9 +22,9 @@ of the swarm's first slot (``b·N``) only, as a :class:`SwarmInfo`; the slots of
 swarm that just ended get :class:`~swarm_envs.envs.infos.TerminalInfo` infos (with
 the statistics in the first); every other slot's info is an empty
 :class:`~swarm_envs.envs.infos.QuietInfo`. All are ``dict`` subclasses (``json.dumps``
-takes them; their values are read from the step's arrays on access), writable (a write to a statistics or
-terminal info copies it into a dict of its own). None of them is built per step: fresh
-dicts for 32k slots would cost more than the fused step (see
+takes them; their values are read from the step's arrays on access), writable (a write
+to a statistics or terminal info copies its values into the dict itself). None of them
+is built per step: fresh dicts for 32k slots would cost more than the fused step (see
 :mod:`swarm_envs.envs.infos`). Copies of them (``copy.copy``, ``copy.deepcopy``,
 pickling) are plain dicts, and the list (:class:`~swarm_envs.envs.infos.InfoList`)
 deep-copies and pickles as a plain list with a dict of its own per slot.
