@@ -449,7 +449,7 @@ def trained_run(tmp_path_factory) -> Path:
             "checkpoint_seconds": 0,
         }
     )
-    out = tmp_path_factory.mktemp("run")
+    out = tmp_path_factory.mktemp("runs") / "learned"  # the policy's label: its folder
     train(tc, out, progress_bar=False, tensorboard=False, verbose=0, handle_signals=False)
     return out
 
@@ -486,7 +486,7 @@ def test_evaluating_on_other_dynamics_warns(trained_run: Path, capsys):
     assert main([*argv, "--out", str(trained_run / "eval_zone"), "--no-progress"]) == 0
     warning = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
     assert warning == [
-        "swarm-eval: warning: policy 'model' is evaluated on another env than it was "
+        "swarm-eval: warning: policy 'learned' is evaluated on another env than it was "
         "trained on: dynamics: trained 'social_potential', here 'zone'"
     ]
 
