@@ -48,7 +48,7 @@ demo: $(STAMP)
 	$(BIN)/swarm-demo --out runs/demo --overwrite
 
 reproduce: $(STAMP)
-	$(BIN)/swarm-reproduce --out $(OUT)
+	$(BIN)/swarm-reproduce --out $(OUT) --overwrite
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/physics.py

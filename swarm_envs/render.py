@@ -9,7 +9,10 @@ this module; matplotlib (for a window, :meth:`SwarmRenderer.show`) and imageio (
 ``swarm_envs.render`` (and every environment) stays cheap and works on headless
 machines.
 
-Three-dimensional positions are drawn as their x–y projection. World coordinates have
+Three-dimensional positions are drawn as their x–y projection, and the frame says so
+("x-y projection", bottom right). :func:`annotate` writes caption lines (a policy's
+name, the time) and a scale bar into a frame, for GIFs whose camera follows the swarm
+(Pillow's text, imported there). World coordinates have
 y pointing up; a frame is a ``uint8`` array shaped ``(height, width, 3)``. A size is
 always given as ``(width, height)`` in pixels, as in PIL and pygame.
 
@@ -48,7 +51,9 @@ __all__ = [
     "GOAL_COLOR",
     "SwarmRenderer",
     "Viewport",
+    "annotate",
     "draw_swarm",
+    "scale_bar_length",
     "write_gif",
 ]
 
@@ -661,7 +666,86 @@ def draw_swarm(
         canvas.lines(goal_px - diag, goal_px + diag, max(2.0, 0.55 * radius), goal_rgb)
 
     canvas.border(FRAME_COLOR)
-    return canvas.to_uint8()
+    frame = canvas.to_uint8()
+    if x.shape[-1] == 3:
+        _text(frame, ["x-y projection"], corner="bottom right")
+    return frame
+
+
+# --------------------------------------------------------------------------- annotations
+
+#: Caption text and scale bar colour (dark grey), and the box behind them.
+TEXT_COLOR = (40, 40, 44)
+_TEXT_BOX = (255, 255, 255, 200)
+
+
+def _font(height: int) -> Any:
+    from PIL import ImageFont
+
+    return ImageFont.load_default(size=max(9, round(height / 28)))
+
+
+def _text(frame: np.ndarray, lines: Sequence[str], *, corner: str = "top left") -> None:
+    """Write ``lines`` into ``frame`` (in place) at ``corner``, on a light box."""
+    if not lines:
+        return
+    from PIL import Image, ImageDraw
+
+    h, w = frame.shape[:2]
+    font = _font(min(h, w))
+    image = Image.fromarray(frame).convert("RGBA")
+    layer = Image.new("RGBA", image.size, (0, 0, 0, 0))
+    draw = ImageDraw.Draw(layer)
+    text = "\n".join(lines)
+    left, top, right, bottom = draw.multiline_textbbox((0, 0), text, font=font, spacing=2)
+    pad = 3
+    tw, th = right - left + 2 * pad, bottom - top + 2 * pad
+    x0 = 4 if "left" in corner else w - 4 - tw
+    y0 = 4 if "top" in corner else h - 4 - th
+    draw.rectangle((x0, y0, x0 + tw, y0 + th), fill=_TEXT_BOX)
+    draw.multiline_text(
+        (x0 + pad - left, y0 + pad - top), text, font=font, fill=TEXT_COLOR, spacing=2
+    )
+    frame[...] = np.asarray(Image.alpha_composite(image, layer).convert("RGB"))
+
+
+def scale_bar_length(viewport: Viewport, fraction: float = 0.25) -> float:
+    """A round world length (1, 2 or 5 times a power of ten) near ``fraction`` of the
+    frame's width.
+
+    >>> scale_bar_length(Viewport(half_width=10.0, size=(400, 400)))
+    5.0
+    """
+    target = fraction * viewport.size[0] / viewport.scale
+    power = 10.0 ** math.floor(math.log10(target))
+    return max(m * power for m in (1.0, 2.0, 5.0) if m * power <= target)
+
+
+def annotate(frame: np.ndarray, viewport: Viewport | None, lines: Sequence[str] = ()) -> np.ndarray:
+    """``frame`` with caption ``lines`` at the top left and, given the frame's
+    ``viewport``, a scale bar at the bottom left labelled with its world length.
+
+    Returns a new array; ``frame`` is left as it was.
+
+    >>> vp = Viewport(half_width=10.0, size=(200, 200))
+    >>> out = annotate(draw_swarm(np.zeros((3, 2)), viewport=vp), vp, ["potential", "t = 1.0 s"])
+    >>> out.shape, out.dtype
+    ((200, 200, 3), dtype('uint8'))
+    """
+    out = np.array(frame, dtype=np.uint8, copy=True)
+    _text(out, list(lines), corner="top left")
+    if viewport is not None:
+        length = scale_bar_length(viewport)
+        px = max(1, round(length * viewport.scale))
+        h = out.shape[0]
+        label = f"{length:g}"
+        _text(out, [f"{label} {'unit' if length == 1 else 'units'}"], corner="bottom left")
+        row = h - 4 - round(min(out.shape[:2]) / 28) - 12
+        x0 = 8
+        out[row - 1 : row + 2, x0 : x0 + px] = TEXT_COLOR
+        out[row - 4 : row + 5, x0 : x0 + 2] = TEXT_COLOR
+        out[row - 4 : row + 5, x0 + px - 2 : x0 + px] = TEXT_COLOR
+    return out
 
 
 # --------------------------------------------------------------------------- renderer

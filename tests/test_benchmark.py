@@ -183,6 +183,25 @@ def check_results(out: Path, names: list[str], seeds: int, episodes: int) -> dic
     return results
 
 
+def _suptitles(results, path):
+    """The figure titles :func:`plot_results` draws for ``results``."""
+    from matplotlib.figure import Figure
+
+    from train.benchmark.report import plot_results
+
+    titles = []
+    save = Figure.savefig
+
+    def spy(fig, *args, **kwargs):
+        titles.append(fig.get_suptitle())
+        return save(fig, *args, **kwargs)
+
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(Figure, "savefig", spy)
+        plot_results(results, path)
+    return titles
+
+
 def test_quick_run_of_two_shipped_entries(tmp_path, capsys):
     names = ["navigation/social_potential", "navigation/piecewise"]
     out = tmp_path / "bench"
@@ -203,6 +222,10 @@ def test_quick_run_of_two_shipped_entries(tmp_path, capsys):
         assert e["train_config"]["env"]["dynamics"] == e["dynamics"]
         assert {m["action"] for m in e["models"]} == {"trained"}
     assert (model_folder(out, load_matrix().select(names)[0], 1) / "model.zip").is_file()
+    titles = _suptitles(results, tmp_path / "again.png")
+    assert titles[0].startswith("SMOKE RUN (--quick)")  # the picture says what it is
+    full = {**results, "benchmark": {**results["benchmark"], "quick": False}}
+    assert "SMOKE" not in _suptitles(full, tmp_path / "full.png")[0]
 
     capsys.readouterr()
     assert status(argv) == 0  # again: every model reused, the same numbers

@@ -4,6 +4,7 @@ written; ``--out`` never mixes two runs."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -130,7 +131,8 @@ def test_demo_and_sweep_check_their_output_folder_first(files, capsys):
 def test_console_script_error_is_one_line(files):
     proc = subprocess.run(
         [sys.executable, "-m", "train.cli_train", "--config", str(files["bad"])],
-        cwd=ROOT,
+        cwd=files["bad"].parent,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
         capture_output=True,
         text=True,
         timeout=60,
@@ -224,3 +226,41 @@ def test_hyperparameters_accept_numbers_written_as_yaml_text():
     }
     with pytest.raises(ValueError, match="n_steps × env slots must be > 1"):
         check_hyperparams("PPO", {"n_steps": 1}, 1)
+
+
+# --------------------------------------------------------------------------- --help
+
+
+def _scripts() -> dict[str, str]:
+    import tomllib
+
+    return tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+
+
+@pytest.mark.parametrize("program", sorted(_scripts()))
+def test_help_describes_the_tool_and_every_option(program, monkeypatch):
+    """Each console script's parser: a whole-sentence description, help on every
+    option, and the default named wherever an option has a number as default."""
+    import argparse
+    import importlib
+
+    module, _, func = _scripts()[program].partition(":")
+    parsers: list[argparse.ArgumentParser] = []
+
+    def capture(self, *args, **kwargs):
+        parsers.append(self)
+        raise SystemExit(0)
+
+    monkeypatch.setattr(argparse.ArgumentParser, "parse_args", capture)
+    with pytest.raises(SystemExit):
+        getattr(importlib.import_module(module), func)([])
+    (parser,) = parsers
+    description = (parser.description or "").strip()
+    assert description.endswith((".", ")")), f"{program}: description {description!r}"
+    for action in parser._actions:
+        if isinstance(action, argparse._HelpAction):
+            continue
+        assert action.help, f"{program} {action.option_strings or action.dest}: no help text"
+        numeric = isinstance(action.default, (int, float)) and not isinstance(action.default, bool)
+        if numeric and action.option_strings:
+            assert "default" in action.help, f"{program} {action.option_strings}: no default"

@@ -17,6 +17,7 @@ from gymnasium.vector import AutoresetMode
 
 from swarm_envs import ENV_ID, swarm_nav_v0
 from swarm_envs.envs.gym_vector import SwarmNavVectorEnv
+from swarm_envs.envs.vec_env import SlotEpisodesWarning
 
 SMALL: dict[str, Any] = {"n_agents": 5, "max_steps": 6}
 
@@ -218,6 +219,20 @@ def test_supersuit_multiprocess_concat_after_the_parent_ran_openmp(backend: str,
 
 
 # ---------------------------------------------------------------- SB3 evaluation
+def test_sb3_evaluation_warns_once_that_it_counts_agents():
+    from stable_baselines3.common.evaluation import evaluate_policy
+
+    class ZeroPolicy:
+        def predict(self, obs, state=None, episode_start=None, deterministic=True):
+            return np.zeros((len(obs), 2), np.float32), None
+
+    venv = swarm_nav_v0.vec_env(2, n_agents=5, max_steps=4)
+    with pytest.warns(SlotEpisodesWarning) as caught:
+        _, std = evaluate_policy(ZeroPolicy(), venv, n_eval_episodes=5)
+    assert len([w for w in caught if w.category is SlotEpisodesWarning]) == 1
+    assert std == 0.0  # five agents of one swarm episode: what the warning says
+
+
 def test_sb3_evaluate_policy_and_eval_callback_see_the_monitor_info():
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import EvalCallback
@@ -237,10 +252,12 @@ def test_sb3_evaluate_policy_and_eval_callback_see_the_monitor_info():
             return np.zeros((len(obs), 2), np.float32), None
 
     venv = swarm_nav_v0.vec_env(2, n_agents=3, max_steps=5)
-    assert venv.env_is_wrapped(Monitor) == [True] * venv.num_envs
+    with pytest.warns(SlotEpisodesWarning, match="one episode per agent") as caught:
+        assert venv.env_is_wrapped(Monitor) == [True] * venv.num_envs
+    assert "n_eval_episodes=3 is a single swarm episode" in str(caught[0].message)
     assert venv.env_is_wrapped(gym.Wrapper) == [False] * venv.num_envs
     with warnings.catch_warnings():
-        warnings.simplefilter("error")
+        warnings.simplefilter("error")  # no Monitor warning, and ours only once
         mean, _ = evaluate_policy(ZeroPolicy(), venv, n_eval_episodes=6)
         model = PPO("MlpPolicy", venv, n_steps=4, batch_size=24, n_epochs=1, seed=0)
         callback = EvalCallback(venv, n_eval_episodes=6, eval_freq=4, verbose=0)
@@ -259,6 +276,35 @@ def _infos_with_every_kind() -> list[Any]:
     assert dones.all()
     first = venv.step(zero)[3]  # statistics and quiet slots
     return [first, infos]
+
+
+def test_vec_env_infos_are_dicts_that_json_takes():
+    import json
+
+    def same(a: dict, b: dict) -> bool:
+        return list(a) == list(b) and all(np.array_equal(a[k], b[k]) for k in a)
+
+    kinds = set()
+    for infos in _infos_with_every_kind():
+        for info in infos:
+            assert isinstance(info, dict)
+            kinds.add(type(info).__name__)
+            plain = {key: info[key] for key in info}
+            for other in (dict(info), {**info}, info.copy(), dict(info.items())):
+                assert type(other) is dict and same(other, plain)
+            assert same(dict(zip(info, info.values(), strict=True)), plain)
+            assert all(np.array_equal(info.get(key), plain[key]) for key in plain)
+            assert info.get("no such key", 7) == 7 and len(info) == len(plain)
+            if "terminal_observation" in info:  # an array: json needs it as a list
+                plain["terminal_observation"] = plain["terminal_observation"].tolist()
+                info = {**info, "terminal_observation": plain["terminal_observation"]}
+            assert json.loads(json.dumps(info)) == plain
+    assert kinds == {"SwarmInfo", "QuietInfo", "TerminalInfo"}
+    # Written through any dict method, an info keeps what was written.
+    swarm = _infos_with_every_kind()[0][0]
+    swarm.update(extra=1)
+    assert swarm["extra"] == 1 and json.loads(json.dumps(swarm))["extra"] == 1
+    assert swarm.setdefault("polarization", -1.0) != -1.0
 
 
 def test_vec_env_infos_copy_deepcopy_and_pickle_as_plain_dicts():

@@ -208,7 +208,7 @@ def shared_model(tmp_path_factory) -> Path:
             "checkpoint_seconds": 0,
         }
     )
-    out = tmp_path_factory.mktemp("run")
+    out = tmp_path_factory.mktemp("runs") / "learned"  # the label: the run's folder
     train(tc, out, progress_bar=False, tensorboard=False, verbose=0, handle_signals=False)
     return out / "model.zip"
 
@@ -227,7 +227,7 @@ def test_cli_sweeps_write_table_csv_plot(shared_model: Path, tmp_path, capsys):
     assert res["sweeps"] == {"failed_fraction": [0.0, 0.5], "obs_noise": [0.0, 1.0]}
     assert res["on_unstable"] == "truncate" and res["config"]["observe_status"] is False
     assert res["perturbations"]["failure_mode"] == "removed"
-    names = ["model", "potential", "zero", "random"]
+    names = ["learned", "potential", "zero", "random"]
     for row in res["rows"]:
         assert list(row["policies"]) == names
         if row["option"] == "failed_fraction" and row["value"] > 0:
@@ -237,7 +237,7 @@ def test_cli_sweeps_write_table_csv_plot(shared_model: Path, tmp_path, capsys):
             assert m["per_episode"]["steps"] == [8, 8]  # nobody arrives in 8 steps
             assert m["final_fraction_arrived"] is not None
     # the model, trained without status flags, keeps its observations under failures
-    assert res["rows"][1]["policies"]["model"]["mode"] == "shared"
+    assert res["rows"][1]["policies"]["learned"]["mode"] == "shared"
     assert res["rows"][1]["perturbations"]["failed_fraction"] == 0.5
     rows = list(csv.DictReader((out / "robustness.csv").open()))
     assert [(r["policy"], r["perturbation"], r["value"]) for r in rows] == [
@@ -250,7 +250,7 @@ def test_cli_sweeps_write_table_csv_plot(shared_model: Path, tmp_path, capsys):
     assert all(r["mean_time_to_goal"] == "" and r["final_fraction_arrived"] for r in rows)
     assert (out / "robustness.png").read_bytes()[:8] == PNG
     summary = (out / "summary.md").read_text()
-    assert "| model | failed_fraction | 0.5 |" in summary and "failure_mode = removed" in summary
+    assert "| learned | failed_fraction | 0.5 |" in summary and "failure_mode = removed" in summary
     assert not list(out.glob("*.gif")) and not (out / "curves.png").exists()
     # --overwrite clears a robustness run's files
     assert main([*argv, "--out", str(out), "--overwrite", "--no-plots"]) == 0

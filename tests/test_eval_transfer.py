@@ -198,7 +198,7 @@ def shared_model(tmp_path_factory) -> Path:
             "checkpoint_seconds": 0,
         }
     )
-    out = tmp_path_factory.mktemp("run")
+    out = tmp_path_factory.mktemp("runs") / "learned"  # the label: the run's folder
     train(tc, out, progress_bar=False, tensorboard=False, verbose=0, handle_signals=False)
     return out / "model.zip"
 
@@ -214,15 +214,15 @@ def test_cli_size_transfer_writes_table_csv_plot(shared_model: Path, tmp_path, c
     assert res["n_agents"] == [3, 5] and res["on_unstable"] == "truncate"
     assert res["config"]["on_unstable"] == "truncate" and res["overrides"] == {"n_neighbors": 2}
     for size in res["sizes"]:
-        assert list(size["policies"]) == ["model", "potential", "zero"]
-        assert size["policies"]["model"]["mode"] == "shared"
-        assert size["policies"]["model"]["per_episode"]["steps"] == [8, 8]
+        assert list(size["policies"]) == ["learned", "potential", "zero"]
+        assert size["policies"]["learned"]["mode"] == "shared"
+        assert size["policies"]["learned"]["per_episode"]["steps"] == [8, 8]
     rows = list(csv.DictReader((out / "transfer.csv").open()))
     assert [(r["policy"], r["n_agents"]) for r in rows] == [
-        (p, n) for p in ("model", "potential", "zero") for n in ("3", "5")
+        (p, n) for p in ("learned", "potential", "zero") for n in ("3", "5")
     ]
     assert (out / "transfer.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert "| model | 5 |" in (out / "summary.md").read_text()
+    assert "| learned | 5 |" in (out / "summary.md").read_text()
     assert not list(out.glob("*.gif")) and not (out / "curves.png").exists()
     # --overwrite clears a size-transfer run's files
     assert main([*argv, "--out", str(out), "--no-progress", "--overwrite", "--no-plots"]) == 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from dataclasses import replace
@@ -342,16 +343,51 @@ def test_sb3_algorithm_detection():
     assert _detect_sb3_algorithm(td3) == "TD3"
 
 
-def test_console_script_exits_nonzero_on_a_bad_policy():
+def test_console_script_exits_nonzero_on_a_bad_policy(tmp_path):
+    # An occupied default --out (runs/eval, as the README's evaluation leaves it): the
+    # policy is reported first, and nothing in the folder is touched.
+    (tmp_path / "runs" / "eval").mkdir(parents=True)
+    (tmp_path / "runs" / "eval" / "results.json").write_text("{}")
     proc = subprocess.run(
         [sys.executable, "-m", "train.cli_eval", "--policies", "nope"],
-        cwd=ROOT,
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
         capture_output=True,
         text=True,
         timeout=60,
     )
     assert proc.returncode == 2
     assert "unknown policy 'nope'" in proc.stderr
+    assert (tmp_path / "runs" / "eval" / "results.json").read_text() == "{}"
+
+
+def test_policies_are_labelled_by_the_user_or_by_their_run_folder(tmp_path, capsys):
+    from stable_baselines3 import PPO
+
+    model = PPO("MlpPolicy", swarm_nav_v0.vec_env(1, **QUICK), n_steps=16, batch_size=16)
+    for run in ("robust", "demo"):
+        (tmp_path / "runs" / run).mkdir(parents=True)
+        model.save(tmp_path / "runs" / run / "model.zip")
+    robust, demo = (str(tmp_path / "runs" / r / "model.zip") for r in ("robust", "demo"))
+    common = [*QUICK_ARGS, "--episodes", "1", "--no-progress", "--no-gif", "--no-plots"]
+
+    def labels(policies: list[str], out: str) -> list[str]:
+        assert main(["--policies", *policies, *common, "--out", str(tmp_path / out)]) == 0
+        return list(json.loads((tmp_path / out / "results.json").read_text())["policies"])
+
+    assert labels([robust, demo, "analytic"], "default") == ["robust", "demo", "potential"]
+    named = labels([f"mine={robust}", f"theirs={demo}", "base=analytic"], "named")
+    assert named == ["mine", "theirs", "base"]
+    assert labels([robust, robust], "twice") == ["robust", "robust_2"]
+    capsys.readouterr()
+    for bad, message in (
+        ([f"a={robust}", f"a={demo}"], "the label 'a' is given twice"),
+        ([f"no label={robust}"], "LABEL=POLICY"),
+        ([f"={robust}"], "LABEL=POLICY"),
+    ):
+        assert main(["--policies", *bad, *common, "--out", str(tmp_path / "bad")]) == 2
+        assert message in capsys.readouterr().err
+        assert not (tmp_path / "bad").exists()
 
 
 def _native_available(cfg: SwarmConfig) -> bool:
@@ -414,7 +450,7 @@ def trained_run(tmp_path_factory) -> Path:
             "checkpoint_seconds": 0,
         }
     )
-    out = tmp_path_factory.mktemp("run")
+    out = tmp_path_factory.mktemp("runs") / "learned"  # the policy's label: its folder
     train(tc, out, progress_bar=False, tensorboard=False, verbose=0, handle_signals=False)
     return out
 
@@ -451,7 +487,7 @@ def test_evaluating_on_other_dynamics_warns(trained_run: Path, capsys):
     assert main([*argv, "--out", str(trained_run / "eval_zone"), "--no-progress"]) == 0
     warning = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
     assert warning == [
-        "swarm-eval: warning: policy 'model' is evaluated on another env than it was "
+        "swarm-eval: warning: policy 'learned' is evaluated on another env than it was "
         "trained on: dynamics: trained 'social_potential', here 'zone'"
     ]
 

@@ -32,3 +32,14 @@ def test_only_selects_mabrouk_figures_alone(tmp_path: Path):
     assert cli.main(["--out", str(tmp_path), "--quick", "--only", "fig9"]) == 0
     assert (tmp_path / "fig9.json").is_file()
     assert not (tmp_path / "naterop_zone").exists()
+
+
+def test_an_occupied_out_needs_overwrite(tmp_path: Path, capsys):
+    (tmp_path / "fig9.json").write_text("{}")
+    with pytest.raises(SystemExit) as info:
+        cli.main(["--out", str(tmp_path), "--quick", "--only", "fig9"])
+    assert info.value.code == 2
+    assert "already holds files" in capsys.readouterr().err
+    assert (tmp_path / "fig9.json").read_text() == "{}"
+    assert cli.main(["--out", str(tmp_path), "--quick", "--only", "fig9", "--overwrite"]) == 0
+    assert (tmp_path / "fig9.json").read_text() != "{}"

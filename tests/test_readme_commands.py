@@ -40,7 +40,7 @@ NOT_RUN: dict[str, str] = {
     "pip install -e .[dev]": "installs packages (network)",
     "pip install -e .[dev,distributed]": "installs packages (network)",
     "pip install -e .[dev,fast]": "installs packages (network)",
-    "tensorboard --logdir runs/demo/tensorboard": "a web server that runs until stopped; "
+    "tensorboard --logdir runs/ppo/tensorboard": "a web server that runs until stopped; "
     "the tiny run checks that the folder it reads exists",
     "make benchmark": "trains every entry of configs/benchmark/results.yaml with 3 seeds "
     "(hours); tests/test_benchmark.py runs swarm-benchmark --quick end to end",
@@ -49,7 +49,7 @@ NOT_RUN: dict[str, str] = {
 }
 
 #: Folders a listed command reads, checked to exist when its turn comes in the tiny run.
-READS = {"tensorboard --logdir runs/demo/tensorboard": "runs/demo/tensorboard"}
+READS = {"tensorboard --logdir runs/ppo/tensorboard": "runs/ppo/tensorboard"}
 
 
 def _train_tiny(argv: list[str]) -> list[str]:
@@ -158,6 +158,40 @@ def test_every_readme_command_is_run_or_listed():
     )
     stale = [k for k in NOT_RUN if k not in keys]
     assert not stale, f"NOT_RUN lists commands the README no longer has: {stale}"
+
+
+#: The output folders of the listed commands a reader runs before the others.
+NOT_RUN_OUT = {"make demo": "runs/demo", "make reproduce": "reproductions"}
+#: The output folder of a program when its command names none.
+DEFAULT_OUT = {
+    "swarm-eval": lambda words: "runs/eval",
+    "swarm-train": lambda words: f"runs/{Path(words[words.index('--config') + 1]).stem}",
+    "swarm-reproduce": lambda words: "reproductions",
+    "swarm-demo": lambda words: "runs/demo",
+}
+
+
+def _out(words: list[str]) -> str | None:
+    key = _key(words)
+    if key in NOT_RUN_OUT:
+        return NOT_RUN_OUT[key]
+    if "--out" in words:
+        return words[words.index("--out") + 1]
+    if words[0] in DEFAULT_OUT and "--resume" not in words:
+        return DEFAULT_OUT[words[0]](words)
+    return None
+
+
+def test_no_two_readme_commands_write_one_folder():
+    """Run in README order, every command gets a folder of its own: none is refused
+    because an earlier one filled it (``--overwrite`` says a command means to)."""
+    seen: dict[str, str] = {}
+    for words in COMMANDS:
+        out = _out(words)
+        if out is None or "--overwrite" in words:
+            continue
+        assert out not in seen, f"{_key(words)!r} writes {out}, as {seen[out]!r} did before"
+        seen[out] = _key(words)
 
 
 def test_readme_commands_run_in_tiny_variants(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):

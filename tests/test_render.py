@@ -20,7 +20,9 @@ from swarm_envs.render import (
     GOAL_COLOR,
     SwarmRenderer,
     Viewport,
+    annotate,
     draw_swarm,
+    scale_bar_length,
     write_gif,
 )
 
@@ -371,3 +373,30 @@ def test_write_gif_subsamples(tmp_path):
 def test_write_gif_bad_input(tmp_path, frames, kwargs):
     with pytest.raises(ValueError):
         write_gif(frames, tmp_path / "bad.gif", **kwargs)
+
+
+def _ink(frame: np.ndarray, rows: slice, cols: slice) -> int:
+    """Dark pixels (text, bars) in a region of ``frame``."""
+    return int((frame[rows, cols].max(axis=-1) < 120).sum())
+
+
+def test_annotate_writes_the_caption_and_a_scale_bar_of_a_round_length():
+    vp = Viewport(half_width=10.0, size=(300, 300))
+    frame = draw_swarm(np.array([[5.0, 5.0]]), viewport=vp)
+    out = annotate(frame, vp, ["robust", "t = 1.0 s of 40.0 s"])
+    assert out.shape == frame.shape and not np.shares_memory(out, frame)
+    top_left, bottom_left = (slice(0, 40), slice(0, 120)), (slice(240, 300), slice(0, 120))
+    assert _ink(frame, *top_left) == 0 and _ink(out, *top_left) > 50
+    assert _ink(frame, *bottom_left) == 0 and _ink(out, *bottom_left) > 50
+    assert scale_bar_length(vp) == 5.0  # a quarter of 20 units is 5
+    assert scale_bar_length(Viewport(half_width=0.3, size=(300, 300))) == 0.1
+    assert scale_bar_length(Viewport(half_width=300.0, size=(300, 300))) == 100.0
+    # No viewport: the caption alone.
+    assert _ink(annotate(frame, None, ["x"]), *bottom_left) == 0
+
+
+def test_three_dimensional_frames_say_they_are_the_x_y_projection():
+    corner = (slice(360, 400), slice(260, 400))
+    flat = draw_swarm(np.zeros((3, 2)), viewport=Viewport(half_width=10.0))
+    solid = draw_swarm(np.zeros((3, 3)), viewport=Viewport(half_width=10.0))
+    assert _ink(flat, *corner) == 0 and _ink(solid, *corner) > 50

@@ -226,6 +226,20 @@ def test_swarm_eval_loads_the_rllib_checkpoint_beside_the_controller(trained_run
     assert policies["smoke_rllib"]["mode"] == "shared"
 
 
+def test_swarm_eval_loads_the_checkpoint_by_a_relative_path(
+    trained_run: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+):
+    # As docs/distributed.md writes it: runs/<name>/checkpoint, from the folder above runs/.
+    monkeypatch.chdir(trained_run.parent)
+    relative = f"{trained_run.name}/checkpoint"
+    out = tmp_path / "eval"
+    argv = ["--config", f"{trained_run.name}/env_config.yaml", "--policies", relative]
+    argv += ["--episodes", "2", "--out", str(out), "--no-gif", "--no-plots", "--no-progress"]
+    assert cli_eval.main(argv) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert set(results["policies"]) == {"smoke_rllib"}
+
+
 def test_rllib_policy_predicts_like_the_controllers(trained_run: Path):
     from train.rllib.policy import load_rllib_policy
 

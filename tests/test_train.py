@@ -4,6 +4,7 @@ the CLIs, and (slow) the full demo."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -435,3 +436,28 @@ def test_smoke_training_on_every_dynamics_with_its_baseline_logged(tmp_path: Pat
     meta = json.loads((tmp_path / "meta.json").read_text())
     assert meta["evaluations"] and np.isfinite(meta["evaluations"][-1]["learned"]["mean_return"])
     assert load_train_config(tmp_path / "train_config.yaml").swarm_config().dynamics == dynamics
+
+
+def test_progress_is_a_line_per_interval_without_a_terminal(tmp_path: Path, monkeypatch, capsys):
+    import train.train as trainer
+
+    monkeypatch.setattr(trainer, "PROGRESS_LINE_SECONDS", 0.0)  # every step
+    hyper = {"n_steps": 32, "batch_size": 64, "n_epochs": 1}
+    tc = smoke_config(hyperparams=hyper, total_timesteps=256)
+    train(tc, tmp_path, progress_bar=True, tensorboard=False, verbose=0)
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("progress: ")]
+    assert len(lines) >= 3
+    done = [
+        int(re.match(r"progress: ([\d,]+) / 256 timesteps", ln)[1].replace(",", "")) for ln in lines
+    ]
+    assert done == sorted(done) and done[-1] >= 256  # the last line: the run's end
+    assert all("timesteps/s" in ln for ln in lines)
+
+
+def test_no_progress_prints_no_progress_lines(tmp_path: Path, monkeypatch, capsys):
+    import train.train as trainer
+
+    monkeypatch.setattr(trainer, "PROGRESS_LINE_SECONDS", 0.0)
+    tc = smoke_config(hyperparams={"n_steps": 32, "batch_size": 64}, total_timesteps=64)
+    train(tc, tmp_path, progress_bar=False, tensorboard=False, verbose=0)
+    assert "progress: " not in capsys.readouterr().out

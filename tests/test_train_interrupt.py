@@ -226,7 +226,7 @@ def test_signal_saves_the_run_and_resume_continues_it(tmp_path, signum, status):
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen(
         [*cmd, "--config", str(config), "--out", str(out)],
-        cwd=ROOT,
+        cwd=tmp_path,
         env=env,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -248,7 +248,7 @@ def test_signal_saves_the_run_and_resume_continues_it(tmp_path, signum, status):
     total = meta["timesteps"] + 1000
     resumed = subprocess.run(
         [*cmd, "--resume", str(out), f"total_timesteps={total}"],
-        cwd=ROOT,
+        cwd=tmp_path,
         env=env,
         capture_output=True,
         text=True,

@@ -1,10 +1,11 @@
 """SB3 callbacks: swarm statistics in TensorBoard, periodic evaluation against the analytic
-controller (with the best model kept), and the run guard that checkpoints between updates
-and stops on request."""
+controller (with the best model kept), progress lines for logs (no terminal), and the run
+guard that checkpoints between updates and stops on request."""
 
 from __future__ import annotations
 
 import math
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -142,6 +143,58 @@ class AnalyticBaselineEvalCallback(BaseCallback):
         best = state["best_return"]
         self.best_return = -np.inf if best is None else float(best)
         self._next_eval = int(state["next_eval"])
+
+
+class ProgressLines(BaseCallback):
+    """One progress line at least every ``every_seconds`` of wall time, for a log file.
+
+    The line gives the timesteps done of ``total``, the percentage, the time so far and
+    the throughput of this run: ``progress: <done> / <total> timesteps (<percent> %),
+    <seconds> s, <rate> timesteps/s``. It replaces the progress bar where the output is not a
+    terminal (``swarm-train > log``), and is checked at every vector step, so a line is
+    late by at most one step (or one policy update).
+    """
+
+    def __init__(self, total: int, every_seconds: float = 30.0, file: Any = None) -> None:
+        super().__init__()
+        self.total = int(total)
+        self.every_seconds = every_seconds
+        self.file = file
+        self._start = (0.0, 0)
+        self._last = 0.0
+
+    def _on_training_start(self) -> None:
+        now = time.monotonic()
+        self._start, self._last = (now, self.model.num_timesteps), now
+
+    def _line(self, now: float) -> str:
+        clock, steps = self._start
+        elapsed = now - clock
+        done = self.model.num_timesteps
+        rate = (done - steps) / elapsed if elapsed > 0 else 0.0
+        percent = 100.0 * done / self.total if self.total > 0 else 100.0
+        return (
+            f"progress: {done:,} / {self.total:,} timesteps ({percent:.0f} %), "
+            f"{elapsed:.0f} s, {rate:,.0f} timesteps/s"
+        )
+
+    def _emit(self, now: float) -> None:
+        self._last = now
+        print(self._line(now), file=self.file or sys.stdout, flush=True)
+
+    def _on_step(self) -> bool:
+        now = time.monotonic()
+        if now - self._last >= self.every_seconds:
+            self._emit(now)
+        return True
+
+    def _on_rollout_end(self) -> None:  # a long update follows: report before it
+        now = time.monotonic()
+        if now - self._last >= self.every_seconds:
+            self._emit(now)
+
+    def _on_training_end(self) -> None:
+        self._emit(time.monotonic())
 
 
 class RunGuard(BaseCallback):

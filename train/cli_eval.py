@@ -136,7 +136,8 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="POLICY",
         help="built-in names (analytic = the baseline of the config's dynamics, potential, "
         "informed, goal_force, lyapunov, zero, random), SB3 model .zip paths and/or RLlib "
-        "checkpoint folders",
+        "checkpoint folders; LABEL=POLICY names a policy in the tables, plots and GIFs "
+        "(default: the controller's name, or the run folder's name for a model)",
     )
     p.add_argument("--episodes", type=int, default=20, help="episodes per policy (default 20)")
     p.add_argument("--seed", type=int, default=0, help="seed of the episodes (default 0)")
@@ -272,39 +273,55 @@ def _load_policies(
     to be shared per-agent policies (a central one is refused)."""
     from agents import CONTROLLERS, analytic_name, make_controller
     from train.evaluate import CentralPolicyError, SpaceMismatchError, load_sb3_model, policy_mode
-    from train.evaluate.policies import config_for_policy, describe_trained_env
+    from train.evaluate.policies import (
+        config_for_policy,
+        describe_trained_env,
+        policy_label,
+        split_label,
+    )
     from train.evaluate.transfer import check_transferable
 
     policies: dict[str, Any] = {}
-    for spec in specs:
+
+    def add(label: str | None, default: str, policy: Any) -> str:
+        if label is not None and label in policies:
+            raise CliError(f"--policies: the label {label!r} is given twice")
+        name = label if label is not None else _unique(default, set(policies))
+        policies[name] = policy
+        return name
+
+    for entry in specs:
+        try:
+            label, spec = split_label(entry)
+        except ValueError as err:
+            raise CliError(str(err)) from None
         if spec == "analytic":
             spec = analytic_name(cfg)
         if spec in CONTROLLERS:
-            policies[_unique(spec, set(policies))] = make_controller(spec, cfg, seed=seed)
+            add(label, spec, make_controller(spec, cfg, seed=seed))
             continue
         path = Path(spec)
         looks_like_path = path.suffix == ".zip" or "/" in spec or "\\" in spec
         if path.is_dir():
             rllib_policy = _load_rllib(path, seed)
-            name = _unique(rllib_policy.name, set(policies))
             try:
                 policy_mode(rllib_policy, config_for_policy(rllib_policy, cfg))
             except SpaceMismatchError as err:
                 raise CliError(f"checkpoint {spec} does not fit the env: {err}") from None
-            policies[name] = rllib_policy
+            rllib_policy.name = add(label, policy_label(path), rllib_policy)
             continue
         if not path.is_file():
             if looks_like_path:
                 raise CliError(f"model file not found: {spec}")
             raise CliError(
                 f"unknown policy {spec!r}; use one of analytic, {', '.join(CONTROLLERS)} or a "
-                "path to a Stable-Baselines3 model .zip"
+                "path to a Stable-Baselines3 model .zip (LABEL=POLICY names it)"
             )
         try:
             model = load_sb3_model(path, device=device)
         except (ValueError, OSError) as err:
             raise CliError(str(err)) from None
-        name = _unique(path.stem, set(policies))
+        name = label if label is not None else policy_label(path)
         if transfer:
             try:
                 check_transferable(name, model, cfg)
@@ -318,7 +335,7 @@ def _load_policies(
             trained = describe_trained_env(model)
             extra = f"; it was {trained}" if trained else ""
             raise CliError(f"model {spec} does not fit the env: {err}{extra}") from None
-        policies[name] = model
+        add(label, policy_label(path), model)
     return policies
 
 
@@ -363,7 +380,6 @@ def _main(args: Any) -> int:
         check_device("--device", args.device)
         if args.torch_threads < 0:
             raise CliError(f"--torch-threads must be >= 0, got {args.torch_threads}")
-        check_out_dir(out, overwrite=args.overwrite)
         overrides = _parse_overrides(args.overrides, args.max_steps)
         sweeps = robustness_sweeps(args)
         if args.n_agents is not None and "n_agents" in overrides:
@@ -384,6 +400,7 @@ def _main(args: Any) -> int:
             check_backend(cfg, args.episodes)
         transfer = args.n_agents is not None
         policies = _load_policies(args.policies, cfg, args.seed, args.device, transfer=transfer)
+        check_out_dir(out, overwrite=args.overwrite)  # after every argument is checked
         patterns = tuple(dict.fromkeys(EVAL_FILES + TRANSFER_FILES + ROBUSTNESS_FILES))
         prepare_out_dir(out, overwrite=args.overwrite, patterns=patterns, prog=PROG)
     except (CliError, OutDirError) as err:

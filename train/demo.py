@@ -117,9 +117,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--overwrite", action="store_true", help="OUT may hold an earlier run: remove it first"
     )
-    parser.add_argument("--episodes", type=int, default=100, help="evaluation episodes")
-    parser.add_argument("--seed", type=int, default=2026, help="evaluation seed")
-    parser.add_argument("--no-progress", action="store_true")
+    parser.add_argument(
+        "--episodes", type=int, default=100, help="evaluation episodes (default %(default)s)"
+    )
+    parser.add_argument(
+        "--seed", type=int, default=2026, help="evaluation seed (default %(default)s)"
+    )
+    parser.add_argument(
+        "--no-progress", action="store_true", help="no progress bar or progress lines"
+    )
     parser.add_argument("overrides", nargs="*", help="key=value overrides of the train config")
     args = parser.parse_args(argv)
     try:

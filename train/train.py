@@ -53,6 +53,7 @@ import contextlib
 import functools
 import json
 import platform
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -62,7 +63,12 @@ import yaml
 
 import swarm_envs
 from swarm_envs.config import as_dict
-from train.callbacks import AnalyticBaselineEvalCallback, RunGuard, SwarmStatsCallback
+from train.callbacks import (
+    AnalyticBaselineEvalCallback,
+    ProgressLines,
+    RunGuard,
+    SwarmStatsCallback,
+)
 from train.checkpoints import (
     CHECKPOINTS,
     checkpoint_timesteps,
@@ -76,6 +82,9 @@ from train.config import TrainConfig, algorithm_class
 from train.evaluate.policies import TRAINED_ENV, trained_env_record
 from train.interrupt import StopRequest, TrainingInterrupted, stop_on_signals
 from train.outdir import RUN_FILES, check_out_dir, prepare_out_dir
+
+#: Where the output is not a terminal, ``progress_bar`` prints a line this often instead.
+PROGRESS_LINE_SECONDS = 30.0
 
 
 class TrainSetupError(ValueError):
@@ -190,6 +199,9 @@ def train(
     Returns the path of the final ``model.zip``.
 
     Args:
+        progress_bar: show progress: SB3's bar on a terminal, else (a log file, no
+            ``tqdm``/``rich``) a line every :data:`PROGRESS_LINE_SECONDS`
+            (:class:`train.callbacks.ProgressLines`).
         overwrite: ``out_dir`` may hold an earlier run: its files are removed first
             (:func:`train.outdir.prepare_out_dir`). Without it a non-empty ``out_dir``
             raises :class:`train.outdir.OutDirError`.
@@ -235,6 +247,9 @@ def train(
         if state["evaluator"] is not None:
             run.evaluator.load_state(state["evaluator"])
         callbacks.append(run.evaluator)
+    bar = progress_bar and _has_progress_bar() and sys.stdout.isatty()
+    if progress_bar and not bar:  # a log, not a terminal: a line every 30 s
+        callbacks.append(ProgressLines(tc.total_timesteps, PROGRESS_LINE_SECONDS))
     guard = RunGuard(
         run.checkpoint,
         lambda: stop.requested,
@@ -256,7 +271,7 @@ def train(
         model.learn(
             total_timesteps=tc.total_timesteps - start_steps,
             callback=guard,
-            progress_bar=progress_bar and _has_progress_bar(),
+            progress_bar=bar,
             tb_log_name=tc.algo,
             reset_num_timesteps=not resume,
         )

@@ -19,17 +19,21 @@ step reuses a set of objects that nothing outside the pool still references, so 
 kept by the caller keeps its own step's values. A write to either copies the info into a
 dict of its own first (the step's arrays are never written).
 
-Copies are plain dicts: ``dict(info)``, ``info.copy()``, ``copy.copy`` and
-``copy.deepcopy`` of an info give a ``dict``, and an info pickles as one. The step's list
-of infos is an :class:`InfoList`, a ``list`` whose ``copy.deepcopy`` and pickle give a
-plain list with a dict of its own per slot.
+Every info is a ``dict`` (a subclass): ``isinstance(info, dict)`` holds and
+``json.dumps`` takes it. A statistics or terminal info holds its keys as a dict does and
+reads each value from the step's arrays on access (``info[key]``, ``get``, ``items``,
+``values``, iteration and ``dict(info)`` all see the values; the keys never change
+within a VecEnv). Copies are plain dicts: ``dict(info)``, ``info.copy()``, ``copy.copy``
+and ``copy.deepcopy`` of an info give a ``dict``, and an info pickles as one. The step's
+list of infos is an :class:`InfoList`, a ``list`` whose ``copy.deepcopy`` and pickle give
+a plain list with a dict of its own per slot.
 """
 
 from __future__ import annotations
 
 import copy
 import sys
-from collections.abc import Callable, Iterable, Iterator, Mapping, MutableMapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -63,27 +67,125 @@ def _free_list_refcount() -> int:
 _FREE_LIST_REFCOUNT = _free_list_refcount()
 
 
-class _PlainCopies:
-    """Copies of an info mapping are plain dicts: ``copy``, ``copy.copy``,
-    ``copy.deepcopy`` and pickling (which never carries the step's arrays or pools)."""
+class _ReadOnAccess(dict):
+    """A ``dict`` whose keys are stored and whose values are read on access by
+    :meth:`_read`, until something is written: then the values are copied in and it is
+    a dict of its own (:attr:`_own`) until its pool reuses it (:meth:`_reuse`).
 
-    __slots__ = ()
+    Every read goes through :meth:`__getitem__` (``get``, ``items``, ``values``,
+    ``copy``, ``==``, ``dict(info)``, ``{**info}``, ``json.dumps``: overriding
+    ``__iter__`` sends CPython's dict merge through ``keys()`` and ``__getitem__``), and
+    every write through :meth:`_mine` first."""
+
+    __slots__ = ("_own",)
+
+    def _read(self, key: str) -> Any:  # pragma: no cover - every subclass has one
+        raise NotImplementedError
+
+    def _written(self) -> None:
+        """Note that this object holds values of its own (its pool resets it)."""
+
+    def _mine(self) -> None:
+        if not self._own:
+            dict.update(self, [(key, self._read(key)) for key in dict.__iter__(self)])
+            self._own = True
+            self._written()
+
+    def _reuse(self, keys: Iterable[str]) -> None:
+        """Back to reading on access, with ``keys``."""
+        dict.clear(self)
+        dict.update(self, dict.fromkeys(keys))
+        self._own = False
+
+    # reads
+    def __getitem__(self, key: str) -> Any:
+        if self._own:
+            return dict.__getitem__(self, key)
+        if not dict.__contains__(self, key):
+            raise KeyError(key)
+        return self._read(key)
+
+    def get(self, key: str, default: Any = None) -> Any:
+        try:
+            return self[key]
+        except KeyError:
+            return default
+
+    def __iter__(self) -> Iterator[str]:
+        return dict.__iter__(self)
+
+    def values(self) -> list[Any]:  # type: ignore[override]
+        return [self[key] for key in dict.__iter__(self)]
+
+    def items(self) -> list[tuple[str, Any]]:  # type: ignore[override]
+        return [(key, self[key]) for key in dict.__iter__(self)]
 
     def copy(self) -> dict[str, Any]:
-        return dict(self)  # type: ignore[call-overload]
+        return {key: self[key] for key in dict.__iter__(self)}
 
     def __copy__(self) -> dict[str, Any]:
-        return dict(self)  # type: ignore[call-overload]
+        return self.copy()
 
     def __deepcopy__(self, memo: dict[int, Any]) -> dict[str, Any]:
-        return copy.deepcopy(dict(self), memo)  # type: ignore[call-overload]
+        return copy.deepcopy(self.copy(), memo)
 
     def __reduce__(self) -> tuple[type, tuple[dict[str, Any]]]:
-        return dict, (dict(self),)  # type: ignore[call-overload]
+        return dict, (self.copy(),)
+
+    def __eq__(self, other: object) -> bool:
+        return self.copy() == other if isinstance(other, Mapping) else NotImplemented
+
+    def __ne__(self, other: object) -> bool:
+        return self.copy() != other if isinstance(other, Mapping) else NotImplemented
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        return repr(self.copy())
+
+    def __or__(self, other: Any) -> dict[str, Any]:
+        return self.copy() | other
+
+    def __ror__(self, other: Any) -> dict[str, Any]:
+        return dict(other) | self.copy()
+
+    # writes
+    def __setitem__(self, key: str, value: Any) -> None:
+        self._mine()
+        dict.__setitem__(self, key, value)
+
+    def __delitem__(self, key: str) -> None:
+        self._mine()
+        dict.__delitem__(self, key)
+
+    def __ior__(self, other: Any) -> _ReadOnAccess:
+        self._mine()
+        dict.update(self, other)
+        return self
+
+    def update(self, *args: Any, **kwargs: Any) -> None:
+        self._mine()
+        dict.update(self, *args, **kwargs)
+
+    def setdefault(self, key: str, default: Any = None) -> Any:
+        self._mine()
+        return dict.setdefault(self, key, default)
+
+    def pop(self, key: str, *default: Any) -> Any:
+        self._mine()
+        return dict.pop(self, key, *default)
+
+    def popitem(self) -> tuple[str, Any]:
+        self._mine()
+        return dict.popitem(self)
+
+    def clear(self) -> None:
+        self._mine()
+        dict.clear(self)
 
 
-class QuietInfo(_PlainCopies, MutableMapping[str, Any]):
-    """The info of a slot with nothing to report: an empty mapping, writable.
+class QuietInfo(_ReadOnAccess):
+    """The info of a slot with nothing to report: an empty ``dict``, writable.
 
     One object per slot is made once and reused by every step in which its slot has
     nothing to report, until something is written to it; from the next step on, that
@@ -91,36 +193,18 @@ class QuietInfo(_PlainCopies, MutableMapping[str, Any]):
     was written, in the lists that hold it.
     """
 
-    __slots__ = ("_data", "_owner", "_slot")
+    __slots__ = ("_owner", "_slot")
 
     def __init__(self, owner: QuietInfos, slot: int) -> None:
-        self._data: dict[str, Any] | None = None
+        super().__init__()
+        self._own = False
         self._owner, self._slot = owner, slot
 
-    def __getitem__(self, key: str) -> Any:
-        if self._data is None:
-            raise KeyError(key)
-        return self._data[key]
+    def _read(self, key: str) -> Any:  # pragma: no cover - it holds no keys to read
+        raise KeyError(key)
 
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._data) if self._data is not None else iter(())
-
-    def __len__(self) -> int:
-        return len(self._data) if self._data is not None else 0
-
-    def __setitem__(self, key: str, value: Any) -> None:
-        if self._data is None:
-            self._data = {}
-            self._owner.written(self._slot)
-        self._data[key] = value
-
-    def __delitem__(self, key: str) -> None:
-        if self._data is None:
-            raise KeyError(key)
-        del self._data[key]
-
-    def __repr__(self) -> str:
-        return repr(self._data or {})
+    def _written(self) -> None:
+        self._owner.written(self._slot)
 
 
 class QuietInfos:
@@ -241,49 +325,33 @@ for _name in (
     setattr(InfoList, _name, _retiring(_name))
 
 
-class SwarmInfo(_PlainCopies, MutableMapping[str, Any]):
-    """The statistics of swarm ``b`` as a mapping ``{key: float}``.
+class SwarmInfo(_ReadOnAccess):
+    """The statistics of swarm ``b`` as a ``dict`` ``{key: float}``.
 
     The info of each swarm's first slot: values are read from one step's ``(B,)``
     arrays on access (``holder[0]``, the step's statistics), so a step builds no dicts.
-    Writing or deleting a key first copies the info into a dict of its own;
+    Writing or deleting a key first copies the values into the dict itself;
     ``dict(info)``, :meth:`copy` and (deep) copies give a plain dict. The VecEnv reuses
     these objects from step to step while nothing outside it holds them
     (:class:`SwarmInfoPool`).
     """
 
-    __slots__ = ("_b", "_holder", "_own")
+    __slots__ = ("_b", "_holder")
 
     def __init__(self, holder: list[Any], b: int) -> None:
+        super().__init__(dict.fromkeys(holder[0]))
+        self._own = False
         self._holder = holder  # [the step's statistics, dirty list of the set]
         self._b = b
-        self._own: dict[str, Any] | None = None
 
-    def __getitem__(self, key: str) -> Any:
-        if self._own is not None:
-            return self._own[key]
+    def _read(self, key: str) -> Any:
         return float(self._holder[0][key][self._b])
 
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._own if self._own is not None else self._holder[0])
-
-    def __len__(self) -> int:
-        return len(self._own if self._own is not None else self._holder[0])
-
-    def _mine(self) -> dict[str, Any]:
-        if self._own is None:
-            self._own = {key: self[key] for key in self._holder[0]}
-            self._holder[1].append(self._b)  # back to reading the arrays when reused
-        return self._own
-
-    def __setitem__(self, key: str, value: Any) -> None:
-        self._mine()[key] = value
-
-    def __delitem__(self, key: str) -> None:
-        del self._mine()[key]
+    def _written(self) -> None:
+        self._holder[1].append(self._b)  # back to reading the arrays when reused
 
     def __repr__(self) -> str:
-        return f"SwarmInfo({dict(self)!r})"
+        return f"SwarmInfo({self.copy()!r})"
 
 
 class SwarmInfoPool:
@@ -314,7 +382,7 @@ class SwarmInfoPool:
         for n, (holder, objects) in enumerate(self._sets):
             if max(map(sys.getrefcount, objects)) <= _FREE_REFCOUNT:  # the pool's list only
                 for b in holder[1]:  # written to since: back to reading the arrays
-                    objects[b]._own = None
+                    objects[b]._reuse(stats)
                 holder[:] = [stats, []]
                 self._sets.append(self._sets.pop(n))  # now the newest
                 return objects
@@ -347,28 +415,33 @@ class TerminalRecord:
     episodes: dict[int, dict[str, float]]
 
 
-class TerminalInfo(_PlainCopies, MutableMapping[str, Any]):
+class TerminalInfo(_ReadOnAccess):
     """The info of slot ``i`` (agent i) of swarm ``b`` at the step the swarm's episode ended.
 
     Keys: the swarm's statistics (first slot, ``i == 0``, only), then
     ``terminal_observation`` (the agent's last observation of the episode),
     ``TimeLimit.truncated``, ``episode`` and ``swarm_episode`` (one dict per swarm),
     read on access from the step's :class:`TerminalRecord`. Writing or deleting a key
-    first copies the info into a dict of its own (as ``VecNormalize`` does to
+    first copies the values into the dict itself (as ``VecNormalize`` does to
     ``terminal_observation``); :meth:`copy` and (deep) copies give a plain dict.
     """
 
-    __slots__ = ("_b", "_holder", "_i", "_own")
+    __slots__ = ("_b", "_holder", "_i")
 
     def __init__(self, holder: list[Any], b: int, i: int) -> None:
+        super().__init__()
+        self._own = False
         self._holder = holder  # [TerminalRecord, dirty list of the set]
         self._b = b
         self._i = i
-        self._own: dict[str, Any] | None = None
+        self._reuse(self.keys_of(holder[0]))
 
-    def __getitem__(self, key: str) -> Any:
-        if self._own is not None:
-            return self._own[key]
+    def keys_of(self, record: TerminalRecord | None) -> list[str]:
+        """The keys of this slot's info for ``record`` (``None``: before any record)."""
+        stats = list(record.stats) if self._i == 0 and record is not None else []
+        return [*stats, *TERMINAL_KEYS]
+
+    def _read(self, key: str) -> Any:
         record: TerminalRecord = self._holder[0]
         b = self._b
         if key == "terminal_observation":
@@ -377,34 +450,10 @@ class TerminalInfo(_PlainCopies, MutableMapping[str, Any]):
             return bool(record.time_limit[b])
         if key == "episode" or key == "swarm_episode":
             return record.episodes[b]
-        if self._i == 0 and key in record.stats:
-            return float(record.stats[key][b])
-        raise KeyError(key)
+        return float(record.stats[key][b])
 
-    def _keys(self) -> Iterator[str]:
-        if self._i == 0:
-            yield from self._holder[0].stats
-        yield from TERMINAL_KEYS
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._own) if self._own is not None else self._keys()
-
-    def __len__(self) -> int:
-        if self._own is not None:
-            return len(self._own)
-        return len(TERMINAL_KEYS) + (len(self._holder[0].stats) if self._i == 0 else 0)
-
-    def _mine(self) -> dict[str, Any]:
-        if self._own is None:
-            self._own = {key: self[key] for key in self._keys()}
-            self._holder[1].append((self._b, self._i))  # reset when the set is reused
-        return self._own
-
-    def __setitem__(self, key: str, value: Any) -> None:
-        self._mine()[key] = value
-
-    def __delitem__(self, key: str) -> None:
-        del self._mine()[key]
+    def _written(self) -> None:
+        self._holder[1].append((self._b, self._i))  # reset when the set is reused
 
     def __repr__(self) -> str:
         return f"TerminalInfo(swarm={self._b}, agent={self._i}, keys={list(self)!r})"
@@ -450,12 +499,25 @@ class TerminalInfoPool:
             # Only the objects handed out last time can be held outside.
             if all(max(map(sys.getrefcount, by_swarm[b])) <= _FREE_REFCOUNT for b in given):
                 for b, i in holder[1]:  # written to since: back to reading the record
-                    by_swarm[b][i]._own = None
+                    by_swarm[b][i]._reuse(by_swarm[b][i].keys_of(record))
                 holder[:] = [record, []]
                 given[:] = ended
+                _with_statistics(by_swarm, ended, record)
                 self._sets.append(self._sets.pop(n))  # now the newest
                 return by_swarm
         new = self._new_set(record, ended)
         if len(self._sets) < _MAX_INFO_SETS:
             self._sets.append(new)
         return new[1]
+
+
+def _with_statistics(
+    by_swarm: list[list[TerminalInfo]], ended: list[int], record: TerminalRecord
+) -> None:
+    """Give the first slot of each swarm ``ended`` the statistics' keys of ``record``
+    (a set made before the first record has none yet; the keys never change after)."""
+    size = len(record.stats) + len(TERMINAL_KEYS)
+    for b in ended:
+        first = by_swarm[b][0]
+        if len(first) != size and not first._own:
+            first._reuse(first.keys_of(record))

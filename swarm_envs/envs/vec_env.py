@@ -18,12 +18,13 @@ the ``episode`` infos without a Monitor warning. ``swarm_episode`` is the same d
 under its older name.
 
 Infos: the swarm's statistics (:data:`swarm_envs.envs.task.STAT_KEYS`) are in the info
-of the swarm's first slot (``b·N``) only, as a :class:`SwarmInfo` mapping; the slots of a
-swarm that just ended get :class:`~swarm_envs.envs.infos.TerminalInfo` mappings (with
+of the swarm's first slot (``b·N``) only, as a :class:`SwarmInfo`; the slots of a
+swarm that just ended get :class:`~swarm_envs.envs.infos.TerminalInfo` infos (with
 the statistics in the first); every other slot's info is an empty
-:class:`~swarm_envs.envs.infos.QuietInfo`. All are writable (a write to a statistics or
-terminal info copies it into a dict of its own). None of them is built per step: fresh
-dicts for 32k slots would cost more than the fused step (see
+:class:`~swarm_envs.envs.infos.QuietInfo`. All are ``dict`` subclasses (``json.dumps``
+takes them; their values are read from the step's arrays on access), writable (a write
+to a statistics or terminal info copies its values into the dict itself). None of them
+is built per step: fresh dicts for 32k slots would cost more than the fused step (see
 :mod:`swarm_envs.envs.infos`). Copies of them (``copy.copy``, ``copy.deepcopy``,
 pickling) are plain dicts, and the list (:class:`~swarm_envs.envs.infos.InfoList`)
 deep-copies and pickles as a plain list with a dict of its own per slot.
@@ -56,6 +57,7 @@ import dataclasses
 import itertools
 import os
 import time
+import warnings
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
@@ -81,6 +83,20 @@ from swarm_envs.envs.protocol import Core as SwarmNavCore
 from swarm_envs.envs.swarm_nav import make_config
 from swarm_envs.envs.task import OBS_BOUND
 from swarm_envs.envs.task.agent_status import ACTIVE
+
+
+class SlotEpisodesWarning(UserWarning):
+    """SB3's episode helpers count agents, not swarms, on :class:`SwarmNavVecEnv`."""
+
+    def __init__(self, n_agents: int) -> None:
+        super().__init__(
+            f"SwarmNavVecEnv: every slot is one agent, so SB3's evaluate_policy, "
+            f"EvalCallback and VecMonitor count one episode per agent: n_eval_episodes="
+            f"{n_agents} is a single swarm episode of {n_agents} agents, which share "
+            "its return (its std is then 0). Ask for n_swarms x n_agents x K episodes for "
+            "K per swarm, or evaluate per swarm with swarm-eval (train.evaluate."
+            "evaluate_policies)"
+        )
 
 
 class SwarmNavVecEnv(VecEnv):
@@ -111,6 +127,7 @@ class SwarmNavVecEnv(VecEnv):
         )
         self.n_swarms = int(n_swarms)
         self.n_agents = self.cfg.n_agents
+        self._warned_slot_episodes = False  # SlotEpisodesWarning given
         check_dtype(dtype)
         self.backend = resolve_backend(self.cfg, self.n_swarms)
         if self.backend in ("torch", "native"):  # one step for every swarm, threaded inside
@@ -414,6 +431,13 @@ class SwarmNavVecEnv(VecEnv):
         """Whether each slot is wrapped in ``wrapper_class``: true for SB3's ``Monitor``
         alone, whose ``episode`` info every slot reports (``{"r", "l", "t"}`` at the end
         of its episode, as ``Monitor`` would), so that SB3's ``evaluate_policy`` and
-        ``EvalCallback`` read it instead of warning; false for any other wrapper."""
+        ``EvalCallback`` read it instead of warning; false for any other wrapper.
+
+        SB3's helpers ask this before they count episodes, and they count one per slot
+        that ends, i.e. per agent: the first time ``Monitor`` is asked about, a
+        :class:`SlotEpisodesWarning` says so (once per VecEnv)."""
         wrapped = wrapper_class is Monitor
+        if wrapped and not getattr(self, "_warned_slot_episodes", False):
+            self._warned_slot_episodes = True
+            warnings.warn(SlotEpisodesWarning(self.n_agents), stacklevel=2)
         return [wrapped for _ in self._indices(indices)]

@@ -2,8 +2,8 @@
 
 Usage::
 
-    swarm-reproduce [--out DIR] [--seeds K] [--quick] [--papers P,...] [--only PART,...]
-                    [--docs-img [DIR]]
+    swarm-reproduce [--out DIR] [--overwrite] [--seeds K] [--quick] [--papers P,...]
+                    [--only PART,...] [--docs-img [DIR]]
 
 Runs every paper of :data:`swarm_envs.papers.PAPERS` (``--papers``: a subset) through
 its ``run`` (:mod:`swarm_envs.papers.result`), each into its registry folder under
@@ -14,8 +14,10 @@ entries of an earlier summary made with the same setup). Prints the verdict and 
 claims of every part and the elapsed times. ``--only`` names parts (figures or tables,
 as their files are named: ``fig9``, ``zone_table3``, ``vs_fig5`` …) and runs only the
 papers that have them. ``--docs-img`` also copies the PNGs and GIFs into
-``docs/img`` (or the given folder). Exit status 2 for bad arguments (an unknown paper
-or part name, ``--seeds 0``).
+``docs/img`` (or the given folder). As every tool of the project, it refuses a ``DIR``
+that already holds files unless ``--overwrite`` is given; then the run writes over the
+earlier files (a ``--only`` run into an earlier reproduction needs it). Exit status 2
+for bad arguments (an unknown paper or part name, ``--seeds 0``, an occupied ``DIR``).
 """
 
 from __future__ import annotations
@@ -164,6 +166,11 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         help="random initial conditions averaged over (default: each paper's own)",
     )
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="--out may hold an earlier reproduction: write over its files",
+    )
     parser.add_argument("--quick", action="store_true", help="tiny sizes, for tests (seconds)")
     parser.add_argument(
         "--only",
@@ -188,6 +195,17 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _check_out(out: Path, *, overwrite: bool) -> None:
+    """Refuse an ``--out`` that is a file, or a folder with files unless ``overwrite``."""
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out} is a file; give a folder")
+    if not overwrite and out.is_dir() and any(out.iterdir()):
+        raise ValueError(
+            f"--out {out} already holds files; choose a new folder, or add --overwrite to "
+            "write over the earlier reproduction there"
+        )
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Console entry point; returns the exit status (0, or 2 for bad arguments)."""
     parser = _parser()
@@ -196,6 +214,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         papers = parse_papers(args.papers)
         only = None if args.only is None else parse_only(args.only, all_parts(papers))
+        _check_out(Path(args.out), overwrite=args.overwrite)
     except ValueError as err:
         parser.error(str(err))  # exits with status 2
     run(

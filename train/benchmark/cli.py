@@ -63,7 +63,8 @@ QUICK_EPISODES = 10
 
 def build_parser() -> argparse.ArgumentParser:
     """The command-line parser of ``swarm-benchmark``."""
-    parser = OneLineParser(prog=PROG, description=__doc__.splitlines()[0])
+    summary = __doc__.split("\n\n")[0].replace("\n", " ")  # the first sentence, whole
+    parser = OneLineParser(prog=PROG, description=summary)
     parser.add_argument("--matrix", default=DEFAULT_MATRIX, help="the benchmark matrix (YAML)")
     parser.add_argument(
         "--out", default=None, help=f"output folder (default {DEFAULT_OUT}; --quick: {QUICK_OUT})"

@@ -199,10 +199,12 @@ def plot_results(results: Mapping[str, Any], path: Path) -> Path:
     axes[0].legend(fontsize=8)
     axes[-1].set_xticks(range(len(groups)), [g for g, _ in groups], rotation=20, fontsize=8)
     b = results["benchmark"]
+    smoke = "SMOKE RUN (--quick): tiny training, not a result\n" if b["quick"] else ""
     fig.suptitle(
-        f"{b['confidence']:.0%} bootstrap intervals; learned: {len(b['seeds'])} seeds × "
+        f"{smoke}{b['confidence']:.0%} bootstrap intervals; learned: {len(b['seeds'])} seeds × "
         f"{b['episodes']} episodes, baselines: {b['episodes']} episodes",
         fontsize=10,
+        color="C3" if smoke else "black",
     )
     fig.savefig(path)
     return path

@@ -17,8 +17,10 @@ from swarm_envs.config import SwarmConfig
 from train.evaluate.episodes import CURVE_KEYS, EpisodeBatch
 
 __all__ = [
+    "NON_NEGATIVE",
     "ROBUSTNESS_PANELS",
     "TRANSFER_PANELS",
+    "informative",
     "plot_curves",
     "plot_robustness",
     "plot_transfer",
@@ -27,7 +29,9 @@ __all__ = [
 
 
 def plot_curves(batches: Mapping[str, EpisodeBatch], cfg: SwarmConfig, path: Path) -> Path:
-    """Four panels (centroid distance, expanse, polarization, angular momentum) vs time."""
+    """Four panels (centroid distance, expanse, polarization, angular momentum) vs time;
+    the ± std bands stop at 0, below which none of them goes."""
+    import numpy as np
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -45,7 +49,8 @@ def plot_curves(batches: Mapping[str, EpisodeBatch], cfg: SwarmConfig, path: Pat
             c = b.curves[key]
             mean, std = c.mean(axis=1), c.std(axis=1)
             (line,) = ax.plot(b.times, mean, label=name, lw=1.6)
-            ax.fill_between(b.times, mean - std, mean + std, color=line.get_color(), alpha=0.15)
+            low = np.maximum(mean - std, 0.0)  # every curve is a distance or a norm: >= 0
+            ax.fill_between(b.times, low, mean + std, color=line.get_color(), alpha=0.15)
         if key == "centroid_distance":
             ax.axhline(cfg.goal_radius, color="0.5", ls="--", lw=1, label="goal radius")
         ax.set_title(titles[key], fontsize=10)
@@ -63,20 +68,28 @@ def plot_curves(batches: Mapping[str, EpisodeBatch], cfg: SwarmConfig, path: Pat
     return path
 
 
-def write_episode_gif(batch: EpisodeBatch, cfg: SwarmConfig, path: Path, size: int) -> Path:
-    """GIF of episode 0: at most ~100 frames of ``size``², trail of recent positions."""
-    from swarm_envs.render import SwarmRenderer, write_gif
+def write_episode_gif(
+    batch: EpisodeBatch, cfg: SwarmConfig, path: Path, size: int, title: str = ""
+) -> Path:
+    """GIF of episode 0: at most ~100 frames of ``size``², trail of recent positions.
+
+    Every frame carries ``title`` (the policy's name), the simulated time and a scale
+    bar (the camera follows the swarm, so the scale changes during the episode).
+    """
+    from swarm_envs.render import SwarmRenderer, annotate, write_gif
 
     xs, vs, goal = batch.trajectory["x"], batch.trajectory["v"], batch.trajectory["goal"]
     every = max(1, math.ceil(len(xs) / 100))
     renderer = SwarmRenderer(size=(size, size), trail_length=4 * every)
+    end = (len(xs) - 1) * cfg.dt
     frames = []
     for t in range(len(xs)):
         renderer.record(xs[t])
         if t % every == 0 or t == len(xs) - 1:
-            frames.append(
-                renderer.frame(xs[t], goal=goal, goal_radius=cfg.goal_radius, velocities=vs[t])
-            )
+            frame = renderer.frame(xs[t], goal=goal, goal_radius=cfg.goal_radius, velocities=vs[t])
+            caption = [title] if title else []
+            caption.append(f"t = {t * cfg.dt:.1f} s of {end:.1f} s")
+            frames.append(annotate(frame, renderer.viewport, caption))
     renderer.close()
     fps = min(25.0, 4.0 / (cfg.dt * every))  # about four times real time
     write_gif(frames, path, fps=fps, max_frames=None)
@@ -127,6 +140,8 @@ def _draw_panel(
         else:
             std = np.array([value(m.get(spread)) for m in ms])
             low, high = mean - std, mean + std
+            if key in NON_NEGATIVE:
+                low = np.maximum(low, 0.0)
         ax.fill_between(xs, low, high, color=line.get_color(), alpha=0.15)
     if not defined:
         ax.text(
@@ -139,6 +154,32 @@ def _draw_panel(
             color="0.4",
         )
     ax.grid(alpha=0.3)
+
+
+#: Measures that cannot be negative: their ± std bands stop at 0.
+NON_NEGATIVE = frozenset(
+    {"success_rate", "mean_time_to_goal", "collisions_per_episode", "final_fraction_arrived"}
+)
+
+
+def informative(entries: Sequence[Mapping[str, Any]], key: str, spread: str | None) -> bool:
+    """Whether a panel of ``key`` says anything: some policy has a defined value other
+    than 0 (or a spread other than 0) at some x. A panel of zeros alone, such as
+    collisions that never happen, is left out of the figure (and named in its title)."""
+    for e in entries:
+        for m in e["policies"].values():
+            for k in (key, spread):
+                v = m.get(k) if k else None
+                if isinstance(v, (list, tuple)):
+                    if any(x not in (None, 0) for x in v):
+                        return True
+                elif v not in (None, 0):
+                    return True
+    return False
+
+
+def _dropped_note(dropped: Sequence[str]) -> str:
+    return f"\nleft out, 0 everywhere: {', '.join(dropped)}" if dropped else ""
 
 
 def _policy_names(entries: Sequence[Mapping[str, Any]]) -> list[str]:
@@ -160,23 +201,29 @@ def plot_transfer(results: Mapping[str, Any], path: Path) -> Path:
     sizes = results["sizes"]
     ns = np.array([s["n_agents"] for s in sizes], dtype=float)
     names = _policy_names(sizes)
+    panels = [p for p in TRANSFER_PANELS if informative(sizes, p[0], p[1])]
+    dropped = [p[2] for p in TRANSFER_PANELS if p not in panels]
     fig = Figure(figsize=(9.0, 6.5), dpi=100, layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(2, 2, sharex=True).ravel()
-    for ax, (key, spread, title) in zip(axes, TRANSFER_PANELS, strict=True):
+    for ax in axes[len(panels) :]:
+        ax.set_visible(False)
+    for ax, (key, spread, title) in zip(axes, panels, strict=False):
         _draw_panel(ax, ns, sizes, names, key, spread, "N")
         ax.set_title(title, fontsize=10)
         if ns.size and ns.max() >= 10 * ns.min():
             ax.set_xscale("log")
         ax.set_xticks(ns, [str(int(n)) for n in ns])
         ax.minorticks_off()
-    for ax in axes[2:]:
+    for ax in axes[max(len(panels) - 2, 0) : len(panels)]:
         ax.set_xlabel("swarm size N")
-    axes[0].set_ylim(-0.05, 1.05)
+        ax.xaxis.set_tick_params(labelbottom=True)
+    if panels and panels[0][0] == "success_rate":
+        axes[0].set_ylim(-0.05, 1.05)
     axes[0].legend(fontsize=8)
     fig.suptitle(
         f"size transfer: {results['episodes']} episodes per policy and N, "
-        f"on_unstable={results['on_unstable']}",
+        f"on_unstable={results['on_unstable']}{_dropped_note(dropped)}",
         fontsize=10,
     )
     fig.savefig(path)
@@ -204,14 +251,16 @@ def plot_robustness(results: Mapping[str, Any], path: Path) -> Path:
 
     options = list(results["sweeps"])
     names = _policy_names(results["rows"])
-    cols = len(ROBUSTNESS_PANELS)
+    panels = [p for p in ROBUSTNESS_PANELS if informative(results["rows"], p[0], p[1])]
+    dropped = [p[2] for p in ROBUSTNESS_PANELS if p not in panels]
+    cols = max(len(panels), 1)
     fig = Figure(figsize=(3.0 * cols, 0.6 + 2.6 * len(options)), dpi=100, layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(len(options), cols, squeeze=False)
     for r, option in enumerate(options):
         entries = [row for row in results["rows"] if row["option"] == option]
         xs = np.array([row["value"] for row in entries], dtype=float)
-        for ax, (key, spread, title) in zip(axes[r], ROBUSTNESS_PANELS, strict=True):
+        for ax, (key, spread, title) in zip(axes[r], panels, strict=False):
             _draw_panel(ax, xs, entries, names, key, spread, "value")
             ax.set_title(title, fontsize=9)
             ax.set_xticks(xs, [f"{x:g}" for x in xs])
@@ -222,7 +271,7 @@ def plot_robustness(results: Mapping[str, Any], path: Path) -> Path:
     fig.suptitle(
         f"robustness: {results['episodes']} episodes per policy and value, seed "
         f"{results['seed']}, the same episodes at every value; on_unstable="
-        f"{results['on_unstable']}",
+        f"{results['on_unstable']}{_dropped_note(dropped)}",
         fontsize=10,
     )
     fig.savefig(path)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -24,7 +25,9 @@ __all__ = [
     "SpaceMismatchError",
     "describe_trained_env",
     "load_sb3_model",
+    "policy_label",
     "policy_mode",
+    "split_label",
     "trained_env_differences",
     "trained_env_record",
 ]
@@ -270,3 +273,68 @@ def load_sb3_model(path: str | Path, device: str = "cpu") -> Any:
             continue
         return as_policy(model)
     raise ValueError(f"could not load {p} with any SB3 algorithm: " + "; ".join(errors))
+
+
+#: What a user-given policy label may hold: it names table rows and files
+#: (``episode0_<label>.gif``).
+LABEL = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]*")
+#: File and folder names that say nothing about which run a policy comes from.
+_GENERIC = ("model", "checkpoint")
+#: Other names a run writes, kept after its folder's name.
+_RUN_FILES = ("best_model",)
+
+
+def split_label(spec: str) -> tuple[str | None, str]:
+    """``"robust=runs/robust/model.zip"`` -> ``("robust", "runs/robust/model.zip")``.
+
+    A spec without ``=`` has no label (``None``). Raises :class:`ValueError` for an
+    empty label or one outside :data:`LABEL` (letters, digits, ``_.+-``).
+
+    >>> split_label("robust=runs/robust/model.zip")
+    ('robust', 'runs/robust/model.zip')
+    >>> split_label("analytic")
+    (None, 'analytic')
+    """
+    label, sep, target = spec.partition("=")
+    if not sep:
+        return None, spec
+    if not LABEL.fullmatch(label) or not target:
+        raise ValueError(
+            f"policy {spec!r}: give LABEL=POLICY with a label of letters, digits and _.+- "
+            "(e.g. robust=runs/robust/model.zip)"
+        )
+    return label, target
+
+
+def policy_label(path: str | Path) -> str:
+    """The default label of a model file or checkpoint: the name of its run's folder.
+
+    ``model.zip`` and ``checkpoint`` stand for their run's folder, ``best_model.zip``
+    adds its name to the folder's, a periodic checkpoint (``<run>/checkpoints/<step>``)
+    is ``<run>_<step>``, and any other file keeps its own name.
+
+    >>> policy_label("runs/robust/model.zip")
+    'robust'
+    >>> policy_label("runs/robust/best_model.zip")
+    'robust_best_model'
+    >>> policy_label("runs/demo_rllib/checkpoint")
+    'demo_rllib'
+    >>> policy_label("runs/demo/checkpoints/step_000000512000/model.zip")
+    'demo_step_000000512000'
+    >>> policy_label("runs/demo_rllib/checkpoints/iter_000010")
+    'demo_rllib_iter_000010'
+    >>> policy_label("downloads/ppo_nav.zip")
+    'ppo_nav'
+    >>> policy_label("model.zip")
+    'model'
+    """
+    parts = [p for p in Path(path).with_suffix("").parts if p not in ("", ".", "/")]
+    if not parts:
+        return "model"
+    if len(parts) >= 2 and parts[-1] in _GENERIC:
+        parts = parts[:-1]
+    elif len(parts) >= 2 and parts[-1] in _RUN_FILES:
+        return f"{parts[-2]}_{parts[-1]}"
+    if len(parts) >= 3 and parts[-2] == "checkpoints":
+        return f"{parts[-3]}_{parts[-1]}"
+    return parts[-1]

@@ -203,6 +203,6 @@ def write_outputs(
             if b.trajectory:
                 key = f"gif_{name}"
                 paths[key] = write_episode_gif(
-                    b, cfg, out / f"episode0_{_safe_name(name)}.gif", gif_size
+                    b, cfg, out / f"episode0_{_safe_name(name)}.gif", gif_size, title=name
                 )
     return paths

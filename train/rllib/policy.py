@@ -54,13 +54,15 @@ def find_module_dir(path: str | Path, module_id: str = POLICY_ID) -> Path:
 
     ``path`` may be an algorithm checkpoint (``<out>/checkpoint``), a training run's
     output folder (its ``checkpoint/`` is used), the ``rl_module`` folder of a
-    checkpoint, or the module's own folder.
+    checkpoint, or the module's own folder. A relative ``path`` is taken from the
+    current folder; the folder returned is absolute (Ray's loaders read URIs, and a
+    relative path is not one).
 
     Raises:
         FileNotFoundError: nothing at ``path``.
         ValueError: ``path`` holds no RLlib module ``module_id``.
     """
-    p = Path(path)
+    p = Path(path).expanduser().resolve()
     if not p.exists():
         raise FileNotFoundError(f"RLlib checkpoint not found: {p}")
     for root in (p, p / "checkpoint"):
@@ -195,22 +197,17 @@ class RLlibPolicy:
 
 
 def rllib_policy_name(path: str | Path) -> str:
-    """A short label for a checkpoint: its run folder's name for ``<run>/checkpoint``.
+    """A short label for a checkpoint: its run folder's name for ``<run>/checkpoint``
+    (:func:`train.evaluate.policies.policy_label`, the rule of every policy file).
 
     >>> rllib_policy_name("runs/demo_rllib/checkpoint")
     'demo_rllib'
     >>> rllib_policy_name("runs/demo_rllib/checkpoints/iter_000010")
     'demo_rllib_iter_000010'
     """
-    p = Path(path)
-    parts = [q for q in p.parts if q not in ("", ".")]
-    if not parts:
-        return "rllib"
-    if parts[-1] == "checkpoint" and len(parts) >= 2:
-        return parts[-2]
-    if len(parts) >= 3 and parts[-2] == "checkpoints":
-        return f"{parts[-3]}_{parts[-1]}"
-    return parts[-1]
+    from train.evaluate.policies import policy_label
+
+    return policy_label(path)
 
 
 def load_rllib_policy(
