@@ -67,7 +67,7 @@ def test_pd_rejects_bad_gains_and_saturation():
     with pytest.raises(ValueError, match="k_p"):
         SaturatedPDController(SwarmConfig(), k_p=-1.0)
     with pytest.raises(ValueError, match="saturation must be one of"):
-        SaturatedPDController(SwarmConfig(), saturation="clip")
+        SaturatedPDController(SwarmConfig(), saturation="bang")
     with pytest.raises(TypeError):
         SaturatedPDController(SwarmConfig(), gain=1.0)
 
@@ -396,3 +396,17 @@ def test_critic_warmup_holds_the_actor_and_trains_the_critic():
     )
     assert all(p.requires_grad for p in after)  # released at the end of training
     model.get_env().close()
+
+
+def test_swarm_eval_compares_every_baseline_by_default(tmp_path):
+    import json
+
+    from train.cli_eval import main
+
+    out = tmp_path / "eval"
+    argv = ["--config", "configs/env/informed.yaml", "--episodes", "3", "--out", str(out)]
+    assert main(argv) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert list(results["policies"]) == ["potential", "pd", "follow", "zero", "random"]
+    assert results["best_baseline"] in ("potential", "pd", "follow", "zero", "random")
+    assert "Lower bound on the time to goal" in (out / "summary.md").read_text()

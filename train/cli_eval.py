@@ -12,8 +12,10 @@ Usage::
         --episodes 20 --out runs/eval_robustness
 
 Policies are built-in names (``potential``, ``informed``, ``goal_force``,
-``lyapunov``, ``zero``, ``random``, see :data:`agents.CONTROLLERS`; and ``analytic``,
-the baseline of the config's dynamics, reported under its own name), paths to
+``lyapunov``, ``mill``, ``pd``, ``follow``, ``zero``, ``random``, see
+:data:`agents.CONTROLLERS`; ``analytic``, the paper's controller of the config's
+dynamics, reported under its own name; and ``baselines``, every baseline of the config's
+task, :func:`agents.baseline_names`, the default with ``zero`` and ``random``), paths to
 Stable-Baselines3 model zips (algorithm detected from the zip), or RLlib checkpoint
 folders written by ``swarm-train --engine rllib`` (the shared module, through
 :class:`train.rllib.policy.RLlibPolicy`; needs the ``distributed`` extra). Every
@@ -132,12 +134,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--policies",
         nargs="+",
-        default=["analytic", "zero", "random"],
+        default=["baselines", "zero", "random"],
         metavar="POLICY",
-        help="built-in names (analytic = the baseline of the config's dynamics, potential, "
-        "informed, goal_force, lyapunov, zero, random), SB3 model .zip paths and/or RLlib "
-        "checkpoint folders; LABEL=POLICY names a policy in the tables, plots and GIFs "
-        "(default: the controller's name, or the run folder's name for a model)",
+        help="built-in names (baselines = every baseline of the config's task: the paper's "
+        "controller and the tuned simple ones; analytic = the paper's controller of the "
+        "config's dynamics; potential, informed, goal_force, lyapunov, mill, pd, follow, "
+        "zero, random), SB3 model .zip paths and/or RLlib checkpoint folders; LABEL=POLICY "
+        "names a policy in the tables, plots and GIFs (default: the controller's name, or "
+        "the run folder's name for a model). Default: baselines zero random",
     )
     p.add_argument("--episodes", type=int, default=20, help="episodes per policy (default 20)")
     p.add_argument("--seed", type=int, default=0, help="seed of the episodes (default 0)")
@@ -271,7 +275,7 @@ def _load_policies(
 ) -> dict[str, Any]:
     """The policies of ``--policies``, each checked to fit ``cfg``; with ``transfer``,
     to be shared per-agent policies (a central one is refused)."""
-    from agents import CONTROLLERS, analytic_name, make_controller
+    from agents import CONTROLLERS, analytic_name, baseline_names, make_controller
     from train.evaluate import CentralPolicyError, SpaceMismatchError, load_sb3_model, policy_mode
     from train.evaluate.policies import (
         config_for_policy,
@@ -295,6 +299,13 @@ def _load_policies(
             label, spec = split_label(entry)
         except ValueError as err:
             raise CliError(str(err)) from None
+        if spec == "baselines":
+            if label is not None:
+                raise CliError("--policies: 'baselines' names several policies; it takes no label")
+            for name in baseline_names(cfg):
+                if name not in policies:
+                    add(None, name, make_controller(name, cfg, seed=seed))
+            continue
         if spec == "analytic":
             spec = analytic_name(cfg)
         if spec in CONTROLLERS:
@@ -314,7 +325,8 @@ def _load_policies(
             if looks_like_path:
                 raise CliError(f"model file not found: {spec}")
             raise CliError(
-                f"unknown policy {spec!r}; use one of analytic, {', '.join(CONTROLLERS)} or a "
+                f"unknown policy {spec!r}; use one of baselines, analytic, "
+                f"{', '.join(CONTROLLERS)} or a "
                 "path to a Stable-Baselines3 model .zip (LABEL=POLICY names it)"
             )
         try:
