@@ -72,6 +72,24 @@ def compare(learned: dict[str, Any], baseline: dict[str, Any]) -> list[tuple[str
     ]
 
 
+def paired_line(results: dict[str, Any], best: str) -> str:
+    """The learned policy's mean paired difference of return with ``best``, with its
+    95 % bootstrap interval over the episodes (each learned episode against the
+    baseline's run from the same start)."""
+    import numpy as np
+
+    from train.benchmark.stats import paired_difference
+
+    learned = results["policies"][LEARNED]["per_episode"]["return"]
+    baseline = results["policies"][best]["per_episode"]["return"]
+    diff = paired_difference(np.array([learned], float), np.array(baseline, float))
+    low, high = diff["ci"]
+    return (
+        f"Learned − `{best}`, return: {diff['value']:+.2f} [{low:+.2f}, {high:+.2f}] "
+        "(mean paired difference over the episodes, 95 % bootstrap interval)."
+    )
+
+
 def _seconds(value: float | None) -> str:
     return "never" if value is None else f"{value:.1f} s"
 
@@ -96,6 +114,7 @@ def write_report(results: dict[str, Any], out: Path, train_seconds: float | None
         lines.append(f"Training time: {train_seconds:.0f} s.")
     lines += ["", format_table(results), "", bound_line(results), "", "## Verdict", ""]
     lines += [f"- {'✅' if ok else '❌'} {name}: {detail}" for name, ok, detail in criteria]
+    lines += ["", paired_line(results, best)]
     lines += [
         "",
         f"**The learned policy beats the best baseline, `{best}`.**"

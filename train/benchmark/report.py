@@ -200,9 +200,14 @@ def plot_results(results: Mapping[str, Any], path: Path) -> Path:
     axes[-1].set_xticks(range(len(groups)), [g for g, _ in groups], rotation=20, fontsize=8)
     b = results["benchmark"]
     smoke = "SMOKE RUN (--quick): tiny training, not a result\n" if b["quick"] else ""
+    learned = (
+        "baselines only (nothing trained)"
+        if b.get("baselines_only")
+        else f"learned: {len(b['seeds'])} seeds × {b['episodes']} episodes"
+    )
     fig.suptitle(
-        f"{smoke}{b['confidence']:.0%} bootstrap intervals; learned: {len(b['seeds'])} seeds × "
-        f"{b['episodes']} episodes, baselines: {b['episodes']} episodes",
+        f"{smoke}{b['confidence']:.0%} bootstrap intervals; {learned}, "
+        f"baselines: {b['episodes']} episodes",
         fontsize=10,
         color="C3" if smoke else "black",
     )

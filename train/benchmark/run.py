@@ -303,7 +303,7 @@ def evaluate_entry(
                 runs, cfg, s, kind="learned", seeds=[m.seed for m, _ in loaded], notes=notes
             )
         baseline_runs = {}
-        for name in expand_baselines(entry.baselines, cfg.task):
+        for name in expand_baselines(entry.baselines, cfg):
             controller = name if name != "analytic" else analytic_name(cfg)
             policy = make_controller(controller, cfg, seed=s.eval_seed)
             run = _episodes(policy, cfg, s, name)
@@ -345,19 +345,26 @@ def evaluate_entry(
     return results
 
 
-def expand_baselines(names: Sequence[str], task: str) -> list[str]:
+def expand_baselines(names: Sequence[str], cfg: SwarmConfig) -> list[str]:
     """The baselines of an entry: ``names`` with ``"simple"`` replaced by the task's
-    simple controllers (:data:`agents.SIMPLE`), each once, in order.
+    simple controllers (:data:`agents.SIMPLE`), each controller once, in order
+    (``"analytic"`` stands for the controller it names: the mill's is its simple one).
 
-    >>> expand_baselines(["analytic", "simple"], "informed")
+    >>> from swarm_envs.tasks import task_config
+    >>> expand_baselines(["analytic", "simple"], task_config("informed"))
     ['analytic', 'pd', 'follow']
+    >>> expand_baselines(["analytic", "simple", "zero"], task_config("mill"))
+    ['analytic', 'zero']
     """
-    from agents import SIMPLE
+    from agents import SIMPLE, analytic_name
 
     out: list[str] = []
+    controllers: set[str] = set()
     for name in names:
-        for item in SIMPLE[task] if name == "simple" else (name,):
-            if item not in out:
+        for item in SIMPLE[cfg.task] if name == "simple" else (name,):
+            controller = analytic_name(cfg) if item == "analytic" else item
+            if controller not in controllers:
+                controllers.add(controller)
                 out.append(item)
     return out
 
