@@ -40,6 +40,11 @@ NOT_RUN: dict[str, str] = {
     "pip install -e .[dev]": "installs packages (network)",
     "pip install -e .[dev,distributed]": "installs packages (network)",
     "pip install -e .[dev,fast]": "installs packages (network)",
+    "pip install -e .[dev,benchmarl]": "installs packages (network)",
+    "swarm-tune": "rewrites the shipped configs/baselines/tuned.yaml (minutes); "
+    "tests/test_strong_baselines.py runs it on a tiny grid into a temporary file",
+    "swarm-benchmark --baselines-only": "every baseline of the matrix on 100 episodes "
+    "(minutes); tests/test_strong_baselines.py runs it on two entries",
     "tensorboard --logdir runs/ppo/tensorboard": "a web server that runs until stopped; "
     "the tiny run checks that the folder it reads exists",
     "make benchmark": "trains every entry of configs/benchmark/results.yaml with 3 seeds "
