@@ -410,3 +410,19 @@ def test_swarm_eval_compares_every_baseline_by_default(tmp_path):
     assert list(results["policies"]) == ["potential", "pd", "follow", "zero", "random"]
     assert results["best_baseline"] in ("potential", "pd", "follow", "zero", "random")
     assert "Lower bound on the time to goal" in (out / "summary.md").read_text()
+
+
+def test_free_agent_time_bounds_a_swarm_without_pair_forces():
+    # Without pair forces every agent is on its own: the estimate becomes a bound, and
+    # it is tighter than the centroid's.
+    from train.evaluate.bound import free_agent_time
+
+    params = dataclasses.replace(SocialPotentialParams.navigation(), C_a=0.0, C_r=0.0, C_o=0.0)
+    cfg = SwarmConfig(physics=params)
+    batch = run_episodes(make_controller("pd", cfg), cfg, 12, 3, record_episode=False)
+    start = (batch.start["x"], batch.start["v"], batch.start["goal"])
+    alone, bound = free_agent_time(cfg, *start), time_to_goal_bound(cfg, *start)
+    assert np.all(alone >= bound)
+    reached = batch.first_success[batch.success] * cfg.dt
+    assert batch.success.all() and np.all(reached >= alone - 1e-9)
+    assert free_agent_time(SwarmConfig(dynamics="zone"), *start) is None

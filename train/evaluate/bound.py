@@ -32,7 +32,7 @@ import numpy as np
 
 from swarm_envs.config import SwarmConfig
 
-__all__ = ["bound_reason", "time_to_goal_bound"]
+__all__ = ["bound_reason", "free_agent_time", "time_to_goal_bound"]
 
 
 def bound_reason(cfg: SwarmConfig) -> str | None:
@@ -128,3 +128,38 @@ def _steps_to_cover(
         if max(s_euler, s_exact) >= gap - 1e-12:
             return n
     return max_steps + 1
+
+
+def free_agent_time(
+    cfg: SwarmConfig, x: np.ndarray, v: np.ndarray, goal: np.ndarray
+) -> np.ndarray | None:
+    """An estimate, not a bound: the time (seconds, ``(B,)``) the slowest agent of each
+    swarm would need to reach the arrival radius alone, at full thrust along its own line
+    to the goal against the drag, from its start (``None`` where :func:`bound_reason`
+    gives no bound, or for the zone model, whose bound is already per agent).
+
+    It ignores the pair forces, which a coordinated swarm can use (cohesion pulls the
+    rear forward), so a policy may beat it; a policy close to it has little left to gain
+    without such coordination.
+    """
+    if bound_reason(cfg) is not None or cfg.dynamics == "zone":
+        return None
+    x = np.asarray(x, np.float64)
+    v = np.asarray(v, np.float64)
+    offset = np.asarray(goal, np.float64)[:, None, :] - x
+    dist = np.sqrt(np.einsum("bnk,bnk->bn", offset, offset))
+    unit = offset / np.where(dist > 0, dist, 1.0)[..., None]
+    gap = np.maximum(dist - cfg.arrival_radius, 0.0)
+    accel = cfg.u_max * np.abs(unit).sum(axis=-1) / cfg.physics.m
+    speed0 = np.einsum("bnk,bnk->bn", v, unit)
+    drag = cfg.physics.beta / cfg.physics.m
+    steps = np.array(
+        [
+            max(
+                _steps_to_cover(g, s0, a, drag, cfg.dt, cfg.max_steps)
+                for g, s0, a in zip(gaps, speeds, accels, strict=True)
+            )
+            for gaps, speeds, accels in zip(gap, speed0, accel, strict=True)
+        ]
+    )
+    return steps * cfg.dt

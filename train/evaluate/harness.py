@@ -10,7 +10,7 @@ from typing import Any
 from agents.base import Controller, swarm_config_of
 from swarm_envs import ENV_ID
 from swarm_envs.config import SwarmConfig, as_dict
-from train.evaluate.bound import bound_reason, time_to_goal_bound
+from train.evaluate.bound import bound_reason, free_agent_time, time_to_goal_bound
 from train.evaluate.episodes import run_episodes
 from train.evaluate.measures import METRIC_DOCS, finite, summarize
 from train.evaluate.policies import (
@@ -150,7 +150,9 @@ def evaluate_policies(
         for name, policy in policies.items()
     }
     first = next(iter(batches.values()))
-    bound = time_to_goal_bound(cfg, first.start["x"], first.start["v"], first.start["goal"])
+    start = (first.start["x"], first.start["v"], first.start["goal"])
+    bound = time_to_goal_bound(cfg, *start)
+    alone = free_agent_time(cfg, *start)
     measures = {name: summarize(b, bound) for name, b in batches.items()}
     results: dict[str, Any] = {
         "env": env_id,
@@ -164,6 +166,7 @@ def evaluate_policies(
         "time_to_goal_bound": None if bound is None else finite(bound.mean()),
         "time_to_goal_bound_per_episode": None if bound is None else bound.tolist(),
         "bound_undefined": bound_reason(cfg),
+        "free_agent_time": None if alone is None else finite(alone.mean()),
         "best_baseline": best_baseline(
             measures,
             [n for n, p in policies.items() if isinstance(p, Controller)]

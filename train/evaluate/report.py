@@ -98,6 +98,12 @@ def bound_line(results: Mapping[str, Any]) -> str:
     if over is not None:
         near = "within 5 % of it: little left to gain" if over <= 0.05 else "room to gain"
         line += f" The best baseline, {best}, takes {over:+.0%} more ({near})."
+    alone = results.get("free_agent_time")
+    if alone is not None:
+        line += (
+            f" Each agent alone at full thrust, pair forces ignored (an estimate, not a "
+            f"bound): {alone:.2f} s."
+        )
     return line
 
 
