@@ -39,6 +39,7 @@ from swarm_envs.envs.common import (
     wide_dtypes,
 )
 from swarm_envs.envs.dynamics import make_dynamics
+from swarm_envs.envs.stiffness import StiffnessWatch
 from swarm_envs.envs.task import (
     OBS_BOUND,
     STAT_KEYS,
@@ -98,6 +99,7 @@ class SwarmNavCore:
         self.goal = np.zeros((B, d), self.dtype)
         self.t = np.zeros(B, np.int64)
         self.dynamics = make_dynamics(cfg, self.batch, self.dtype)
+        self._stiffness = StiffnessWatch(cfg, self.batch)
         self._wide = wide_dtypes(self.dtype)
         self._stats = self._empty_stats()
         self._prev = self._empty_stats()  # the previous step's statistics
@@ -172,6 +174,7 @@ class SwarmNavCore:
         terminated, truncated = episode_end(self.cfg, stats["success"], self.t)
         if bad.any():
             r[bad], terminated[bad], truncated[bad] = 0.0, False, True
+        self._stiffness.observe(stats)
         return r, terminated, truncated, self.stats()
 
     def _unstable(self, bad: np.ndarray, before: tuple[np.ndarray, np.ndarray]) -> None:

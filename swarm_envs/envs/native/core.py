@@ -51,6 +51,7 @@ from swarm_envs.envs.common import (
 )
 from swarm_envs.envs.native.build import NATIVE_ENV, Library, load_library, resolve_native
 from swarm_envs.envs.native.contract import PACKED_COLUMNS, UNSOUND, step_params, unsupported
+from swarm_envs.envs.stiffness import StiffnessWatch
 from swarm_envs.envs.task import (
     STAT_KEYS,
     STATISTICS,
@@ -150,6 +151,7 @@ class NativeSwarmNavCore:
         B, N, d = self.batch, cfg.n_agents, cfg.dim
         self.obs_dim = observation_size(cfg)
         self.t = np.zeros(B, np.int64)
+        self._stiffness = StiffnessWatch(cfg, self.batch)
         self._wide = wide_dtypes(self.dtype)
         self._columns = StatisticColumns(self.dtype)
         self._x = np.zeros((d, B, N), self.dtype)
@@ -429,6 +431,7 @@ class NativeSwarmNavCore:
         terminated, truncated = episode_end(self.cfg, stats["success"], self.t)
         if bad is not None:
             r[bad], terminated[bad], truncated[bad] = 0.0, False, True
+        self._stiffness.observe(stats)
         return r, terminated, truncated, stats
 
     def _unstable(self, bad: np.ndarray) -> None:
