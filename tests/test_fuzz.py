@@ -300,3 +300,21 @@ def test_absent_and_joining_agents_10000_steps_on_the_torch_core(compiled, monke
         np.testing.assert_array_equal(core.status, ref_core.status)
         np.testing.assert_allclose(reward, ref_reward, rtol=1e-4, atol=1e-4)
     assert joined > 1000
+
+
+@pytest.mark.parametrize("backend", ["numpy", "sparse"])
+def test_a_diverging_integration_is_stopped_by_the_energy_bound(backend, monkeypatch):
+    # Verlet given Euler's step-size edge (twice its stable damping) diverges while its
+    # state stays finite and its observation clipped: the guard's energy bound stops it.
+    from swarm_envs.physics import integrators
+
+    monkeypatch.setitem(integrators._DAMPING_WEIGHT, "velocity_verlet", 1.0)
+    cfg = SwarmConfig(integrator="velocity_verlet", dt=5.0, n_agents=10)
+    core = _make(cfg, backend, np.float64)
+    core.reset(np.random.default_rng(0))
+    actions = np.random.default_rng(1)
+    with pytest.raises(SwarmUnstableError, match="left its bound"):
+        for _ in range(40):
+            reward = core.step(actions.uniform(-1, 1, (BATCH, 10, 2)))[0]
+            assert np.isfinite(reward.astype(np.float32)).all()
+    assert core.t.max() < 15  # within a few steps of leaving the terminal speed

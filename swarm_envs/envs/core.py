@@ -34,6 +34,7 @@ from swarm_envs.envs.common import (
     check_dtype,
     check_start,
     draw_starts,
+    energy_bound,
     unstable_message,
     unstable_swarms,
     wide_dtypes,
@@ -100,6 +101,7 @@ class SwarmNavCore:
         self.t = np.zeros(B, np.int64)
         self.dynamics = make_dynamics(cfg, self.batch, self.dtype)
         self._stiffness = StiffnessWatch(cfg, self.batch)
+        self._energy_bound = energy_bound(cfg)  # the unstable guard's (common.energy_bound)
         self._wide = wide_dtypes(self.dtype)
         self._stats = self._empty_stats()
         self._prev = self._empty_stats()  # the previous step's statistics
@@ -163,7 +165,7 @@ class SwarmNavCore:
             self._advance(cfg.u_max * a if a.any() else None)
             self.t += 1
             self._measure(substeps=self.dynamics.substeps)
-        bad = unstable_swarms(self._stats, self.dynamics.over_cap)
+        bad = unstable_swarms(self._stats, self.dynamics.over_cap, self._energy_bound)
         if bad.any():
             self._unstable(bad, before)
         stats = self._stats

@@ -64,6 +64,7 @@ from swarm_envs.envs.common import (
     check_actions,
     check_batch,
     check_dtype,
+    energy_bound,
 )
 from swarm_envs.envs.stiffness import StiffnessWatch
 from swarm_envs.envs.task import observation_size
@@ -157,6 +158,7 @@ class TorchSwarmNavCore(SubstepControl, StatusControl, ResetControl):
         self.t = np.zeros(B, np.int64)
         self._columns = StatisticColumns(self.dtype)
         self._stiffness = StiffnessWatch(cfg, self.batch)
+        self._energy_bound = energy_bound(cfg)  # the unstable guard's (common.energy_bound)
         zeros = self._zeros
         # State component first, (d, B, N): the layout the fused step vectorises.
         self._x, self._v, self._f = zeros(d, B, N), zeros(d, B, N), zeros(d, B, N)

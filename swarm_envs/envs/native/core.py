@@ -40,11 +40,13 @@ from swarm_envs.envs.common import (
     NON_FINITE_ACTIONS,
     StatisticColumns,
     SwarmUnstableError,
+    beyond_bound,
     check_action_shape,
     check_batch,
     check_dtype,
     check_start,
     draw_starts,
+    energy_bound,
     unstable_message,
     unstable_swarms,
     wide_dtypes,
@@ -152,6 +154,7 @@ class NativeSwarmNavCore:
         self.obs_dim = observation_size(cfg)
         self.t = np.zeros(B, np.int64)
         self._stiffness = StiffnessWatch(cfg, self.batch)
+        self._energy_bound = energy_bound(cfg)  # the unstable guard's (common.energy_bound)
         self._wide = wide_dtypes(self.dtype)
         self._columns = StatisticColumns(self.dtype)
         self._x = np.zeros((d, B, N), self.dtype)
@@ -407,8 +410,8 @@ class NativeSwarmNavCore:
         self.t += 1
         self._stats = self._unpack()
         bad = None
-        if unsound:  # else every swarm is sound: nothing to check
-            bad = unstable_swarms(self._stats, self._packed[:, _OVER_CAP] > 0)
+        if unsound or beyond_bound(self._stats, self._energy_bound):
+            bad = unstable_swarms(self._stats, self._packed[:, _OVER_CAP] > 0, self._energy_bound)
             if bad.any():
                 self._unstable(bad)
             else:
