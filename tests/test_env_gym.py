@@ -287,7 +287,7 @@ def test_zero_action_reproduces_passive_simulate(integrator: str, goal_in_physic
 
 @pytest.mark.parametrize("integrator", ["semi_implicit_euler", "velocity_verlet"])
 def test_constant_action_is_a_force_u_max_times_a(integrator: str):
-    env = SwarmNavEnv(integrator=integrator, u_max=2.0)
+    env = SwarmNavEnv(integrator=integrator, u_max=2.0, dt=0.05)  # one substep a step
     env.reset(seed=7)
     core, cfg = env.core, env.cfg
     N, d = cfg.n_agents, cfg.dim
@@ -296,6 +296,7 @@ def test_constant_action_is_a_force_u_max_times_a(integrator: str):
     K = 30
     for _ in range(K):
         env.step(a.reshape(-1))
+        assert core.stats()["substeps"][0] == 1.0  # as simulate() steps
     ref_x, _ = simulate(
         cfg.physics, x0, v0, dt=cfg.dt, steps=K, control=cfg.u_max * a, integrator=integrator
     )
