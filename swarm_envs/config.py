@@ -107,7 +107,8 @@ def _warn_empty_slots(owner: str, n_agents: int, n_neighbors: int) -> None:
     empty = n_neighbors - max(n_agents - 1, 0)
     warnings.warn(
         f"{owner}.n_neighbors={n_neighbors} with n_agents={n_agents}: each agent has "
-        f"{n_agents - 1} others, so {empty} of its {n_neighbors} neighbour slots are always "
+        f"{n_agents - 1} other{'s' if n_agents != 2 else ''}, so {empty} of its {n_neighbors} "
+        "neighbour slots are always "
         f"empty (zero, mask 0). Set n_neighbors <= {max(n_agents - 1, 0)} for a compact "
         "observation, or keep it to share one observation layout with larger swarms",
         UserWarning,
