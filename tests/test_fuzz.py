@@ -37,7 +37,8 @@ from swarm_envs.envs.core import SwarmNavCore
 from swarm_envs.envs.task.observation import OBS_BOUND
 from swarm_envs.perturbations import Perturbations
 
-LONG = int(os.environ.get("SWARM_ENVS_FUZZ_EXAMPLES", "200"))
+#: Examples per long-form property (``SWARM_ENVS_FUZZ_EXAMPLES`` overrides).
+LONG = int(os.environ.get("SWARM_ENVS_FUZZ_EXAMPLES", "50"))
 
 
 def _settings(examples: int) -> settings:
