@@ -20,6 +20,7 @@ ValueError: unknown config key 'n_agent'; allowed keys: ...
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -86,6 +87,35 @@ def _check_int(owner: str, name: str, value: Any, *, low: int, high: int | None 
     return int(value)
 
 
+#: The default ``n_neighbors``: padding up to this many slots is quiet (see
+#: :func:`_warn_empty_slots`).
+DEFAULT_N_NEIGHBORS = 6
+_WARNED_SLOTS: set[tuple[int, int]] = set()
+
+
+def _warn_empty_slots(owner: str, n_agents: int, n_neighbors: int) -> None:
+    """Warn once per ``(n_agents, n_neighbors)`` where the observation holds more
+    neighbour slots than there are other agents and than the default's: those slots
+    are always empty. Padding itself is accepted (one layout for every swarm size, as
+    a policy trained on one ``N`` and evaluated on another needs); the default's 6
+    slots with a smaller swarm say nothing."""
+    if n_neighbors <= max(n_agents - 1, DEFAULT_N_NEIGHBORS):
+        return
+    if (n_agents, n_neighbors) in _WARNED_SLOTS:
+        return
+    _WARNED_SLOTS.add((n_agents, n_neighbors))
+    empty = n_neighbors - max(n_agents - 1, 0)
+    warnings.warn(
+        f"{owner}.n_neighbors={n_neighbors} with n_agents={n_agents}: each agent has "
+        f"{n_agents - 1} other{'s' if n_agents != 2 else ''}, so {empty} of its {n_neighbors} "
+        "neighbour slots are always "
+        f"empty (zero, mask 0). Set n_neighbors <= {max(n_agents - 1, 0)} for a compact "
+        "observation, or keep it to share one observation layout with larger swarms",
+        UserWarning,
+        stacklevel=4,
+    )
+
+
 @dataclass(frozen=True)
 class RewardWeights:
     """Weights of the cooperative navigation reward, one per documented term.
@@ -127,7 +157,9 @@ class SwarmConfig:
     """
 
     n_agents: int = 10
-    """Number of agents N, ``≥ 1``."""
+    """Number of agents N, ``≥ 1``. ``N = 1`` is single-agent navigation: no pairs, so no
+    pair forces, collisions or neighbours (every neighbour slot is padding and the
+    nearest-neighbour distance is 0)."""
     dynamics: str = "social_potential"
     """The passive physics, one of :data:`DYNAMICS`: the social potential (Mabrouk &
     McInnes), Couzin's zone model or Viscido's piecewise force model (both as in
@@ -198,8 +230,11 @@ class SwarmConfig:
     so the analytic controller is never clipped."""
     goal_in_physics: bool = False
     """If true the sink also acts passively (paper eq. 21) and actions are residuals."""
-    n_neighbors: int = 6
-    """k nearest neighbours in each agent's observation (padded and masked if N − 1 < k)."""
+    n_neighbors: int = DEFAULT_N_NEIGHBORS
+    """k nearest neighbours in each agent's observation, ``≥ 0``. With fewer others
+    (``N − 1 < k``) the slots past them are padding (all zero, mask 0), so that one
+    observation layout fits swarms of every size; more padding than the default's
+    (``k > max(N − 1, 6)``) warns once (:func:`_warn_empty_slots`)."""
     collision_radius: float = 0.1
     """Two agents closer than this collide (counted, penalised)."""
     obs_goal_scale: float = 10.0
@@ -340,6 +375,7 @@ class SwarmConfig:
             )
         _check_int(owner, "max_steps", self.max_steps, low=1)
         _check_int(owner, "n_neighbors", self.n_neighbors, low=0)
+        _warn_empty_slots(owner, self.n_agents, self.n_neighbors)
         if self.dynamics == "lagrangian" and self.n_agents > 1:
             low = lagrangian_min_init_radius(self.lagrangian, self.n_agents, self.dim)
             if not self.init_radius > low:

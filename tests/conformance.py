@@ -32,9 +32,9 @@ from swarm_envs.envs import backends
 from swarm_envs.envs.core import SwarmNavCore
 from swarm_envs.envs.perturbed import PerturbedCore
 from swarm_envs.envs.task import STAT_KEYS, ranked_neighbors
-from swarm_envs.envs.task.agent_status import masks
+from swarm_envs.envs.task.agent_status import ABSENT, ACTIVE, FAILED, FROZEN, masks
 from swarm_envs.envs.task.observation import observation_size
-from swarm_envs.perturbations import FAILURE_MODES
+from swarm_envs.perturbations import FAILURE_MODES, Perturbations
 from swarm_envs.tasks import TASKS
 
 #: Tolerances against the float64 reference, per state dtype (float64: round-off).
@@ -439,3 +439,130 @@ def _stats_mismatch(stats: dict, ref: dict, tol: dict, step: int) -> list[str]:
         elif not np.allclose(stats[key], ref[key], rtol=tol["rtol"], atol=tol["atol"] * scale):
             out.append(f"step {step}: statistic {key} {stats[key]} != {ref[key]}")
     return out
+
+
+# --------------------------------------------------------------------------- statuses
+
+#: The config of the status-sequence property: agents leave and join the physics and
+#: the observation shows their statuses (the core takes any status sequence).
+STATUS_CONFIG = SwarmConfig(
+    n_agents=10,
+    n_neighbors=4,
+    max_steps=9,
+    observe_status=True,
+    on_unstable="truncate",
+    perturbations=Perturbations(absent_fraction=0.1, join_fraction=0.1, failure_mode="removed"),
+)
+STATUS_STEPS = 16
+
+
+@dataclasses.dataclass(frozen=True)
+class StatusEvent:
+    """After step ``step``, agent ``agent`` of swarm ``swarm`` takes ``status``: it
+    joins (from ``ABSENT``, placed at its start, at rest), fails (``FAILED``,
+    ``FROZEN``), leaves (``ABSENT``) or comes back to ``ACTIVE``."""
+
+    step: int
+    swarm: int
+    agent: int
+    status: int
+
+
+@st.composite
+def status_sequences(draw: Any, batch: int = BATCH, cfg: SwarmConfig = STATUS_CONFIG) -> tuple:
+    """``(start statuses (B, N) int8, events)``: each agent's status at the start, then
+    status changes at random steps. Agent 0 of every swarm stays active (a config always
+    leaves some agent that never fails), so that a swarm always has members."""
+    n = cfg.n_agents
+    status = st.sampled_from((ACTIVE, FAILED, FROZEN, ABSENT))
+    start = np.array(
+        draw(st.lists(st.lists(status, min_size=n, max_size=n), min_size=batch, max_size=batch)),
+        dtype=np.int8,
+    )
+    start[:, 0] = ACTIVE
+    events = draw(
+        st.lists(
+            st.builds(
+                StatusEvent,
+                st.integers(0, STATUS_STEPS - 1),
+                st.integers(0, batch - 1),
+                st.integers(1, n - 1),
+                status,
+            ),
+            max_size=4 * STATUS_STEPS,
+        )
+    )
+    return start, sorted(events, key=lambda e: e.step)
+
+
+def compare_statuses(
+    ours_core: Any,
+    ref_core: Any,
+    start: np.ndarray,
+    events: list,
+    seed: int,
+    tol: dict,
+    margin: float,
+) -> list[str]:
+    """Step both cores (without :class:`PerturbedCore`: the statuses are given) through
+    the same status sequence, with the same random actions, and name what differs.
+
+    The statuses at the start apply after every reset (an ended swarm starts again with
+    them); an event changes a swarm's statuses after its step, placing joining agents at
+    their episode's start position (as perturbations place them). Agents that do not act
+    get zero actions, as :func:`~swarm_envs.envs.task.agent_status.perturb_actions`
+    gives them. Stops at the first step the reference cannot decide (:func:`compare`)."""
+    cfg = ref_core.cfg
+    rng, ref_rng = np.random.default_rng(seed), np.random.default_rng(seed)
+    ours_core.reset(rng)
+    ref_core.reset(ref_rng)
+    B = ref_core.batch
+    every = np.ones(B, dtype=bool)
+    status = start.copy()
+    starts = ref_core.x.copy()
+    for core in (ours_core, ref_core):
+        core.set_status(status, rows=every, start=True)
+    actions = np.random.default_rng(seed + 1)
+    shape = (B, cfg.n_agents, cfg.dim)
+    problems: list[str] = []
+    queue = list(events)
+    for step in range(STATUS_STEPS + 1):
+        if _undecidable(ref_core, margin) is not None:
+            break
+        problems += _obs_mismatch(ours_core.observe(), ref_core.observe(), cfg, tol, step)
+        problems += _stats_mismatch(ours_core.stats(), ref_core.stats(), tol, step)
+        if problems or step == STATUS_STEPS:
+            break
+        a = actions.uniform(-1.2, 1.2, shape) * (status == ACTIVE)[..., None]
+        ours = ours_core.step(a.astype(ours_core.dtype))
+        ref = ref_core.step(a)
+        if _undecidable(ref_core, margin) is not None:
+            break
+        if not np.allclose(ours[0], ref[0], **tol):
+            problems.append(f"step {step}: reward {ours[0]} != {ref[0]}")
+        for name, i in (("terminated", 1), ("truncated", 2)):
+            if not np.array_equal(ours[i], ref[i]):
+                problems.append(f"step {step}: {name} {ours[i]} != {ref[i]}")
+        problems += _stats_mismatch(ours[3], ref[3], tol, step)
+        if problems:
+            break
+        ended = ref[1] | ref[2]
+        if ended.any():
+            ours_core.reset(rng, which=ended)
+            ref_core.reset(ref_rng, which=ended)
+            status[ended] = start[ended]
+            starts[ended] = ref_core.x[ended]
+            for core in (ours_core, ref_core):
+                core.set_status(status, rows=ended, start=True)
+        new = status.copy()
+        while queue and queue[0].step == step:
+            e = queue.pop(0)
+            if not ended[e.swarm]:
+                new[e.swarm, e.agent] = e.status
+        if (new != status).any():
+            place = (status == ABSENT) & (new != ABSENT)
+            for core in (ours_core, ref_core):
+                at = starts.astype(core.dtype)
+                core.set_status(new, place if place.any() else None, at)
+            status = new
+    return problems

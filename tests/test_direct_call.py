@@ -110,3 +110,31 @@ def test_a_replaced_reward_reaches_the_next_compiled_core(monkeypatch):
     np.testing.assert_allclose(first_reward(), right - cfg.reward.time, rtol=1e-5, atol=1e-6)
     monkeypatch.undo()
     np.testing.assert_array_equal(first_reward(), right)
+
+
+def test_a_tensor_at_other_strides_is_read_in_the_traced_layout():
+    # A permuted view of the same values (the layout torch.where keeps from an input):
+    # the graph, traced for contiguous tensors, must still read the right elements.
+    fn = MaybeCompiled(_swapped, compile=True, name="test.strides", direct=True)
+    fn.warmup(torch.rand(2, 3), torch.rand(2, 3), torch.rand(2, 1))
+    assert fn.direct
+    a = torch.rand(3, 2).t()  # (2, 3) at strides (1, 2)
+    b, scale = torch.rand(2, 3), torch.rand(2, 1)
+    with pytest.warns(UserWarning, match="laid out otherwise than it was traced for"):
+        got = fn(a, b, scale)
+    for mine, theirs in zip(_values(got), _values(_swapped(a, b, scale)), strict=True):
+        torch.testing.assert_close(mine, theirs)
+    assert fn._direct.relaid == 1 and fn._direct.guarded == 0
+    fn(a.contiguous(), b, scale)  # the traced layout: no copy
+    assert fn._direct.relaid == 1
+
+
+def test_a_tensor_of_another_shape_goes_through_the_guards():
+    fn = MaybeCompiled(_swapped, compile=True, name="test.shape", direct=True)
+    fn.warmup(torch.rand(2, 3), torch.rand(2, 3), torch.rand(2, 1))
+    a, b, scale = torch.rand(4, 3), torch.rand(4, 3), torch.rand(4, 1)
+    with pytest.warns(UserWarning, match="calling it through TorchDynamo's guards"):
+        got = fn(a, b, scale)
+    for mine, theirs in zip(_values(got), _values(_swapped(a, b, scale)), strict=True):
+        torch.testing.assert_close(mine, theirs)
+    assert fn._direct.guarded == 1

@@ -253,7 +253,11 @@ def test_pickle_round_trip_reproduces_rollout(module: Any):
 @pytest.mark.parametrize("goal_in_physics", [False, True])
 @pytest.mark.parametrize("integrator", ["semi_implicit_euler", "velocity_verlet"])
 def test_zero_action_reproduces_passive_simulate(integrator: str, goal_in_physics: bool):
-    env = gym.make(ENV_ID, integrator=integrator, goal_in_physics=goal_in_physics).unwrapped
+    # dt small enough that every step is one substep of either integrator's rule
+    # (velocity Verlet's is stable to half Euler's damping), as simulate() steps
+    env = gym.make(
+        ENV_ID, integrator=integrator, goal_in_physics=goal_in_physics, dt=0.05
+    ).unwrapped
     env.reset(seed=6)
     core, cfg = env.core, env.cfg
     x0, v0, goal = core.x[0].copy(), core.v[0].copy(), core.goal[0].copy()
@@ -262,6 +266,7 @@ def test_zero_action_reproduces_passive_simulate(integrator: str, goal_in_physic
     zero = np.zeros(env.action_space.shape, np.float32)
     for _ in range(K):
         env.step(zero)
+        assert core.stats()["substeps"][0] == 1.0
         xs.append(core.x[0].copy())
         vs.append(core.v[0].copy())
     ref_x, ref_v = simulate(
@@ -282,7 +287,7 @@ def test_zero_action_reproduces_passive_simulate(integrator: str, goal_in_physic
 
 @pytest.mark.parametrize("integrator", ["semi_implicit_euler", "velocity_verlet"])
 def test_constant_action_is_a_force_u_max_times_a(integrator: str):
-    env = SwarmNavEnv(integrator=integrator, u_max=2.0)
+    env = SwarmNavEnv(integrator=integrator, u_max=2.0, dt=0.05)  # one substep a step
     env.reset(seed=7)
     core, cfg = env.core, env.cfg
     N, d = cfg.n_agents, cfg.dim
@@ -291,6 +296,7 @@ def test_constant_action_is_a_force_u_max_times_a(integrator: str):
     K = 30
     for _ in range(K):
         env.step(a.reshape(-1))
+        assert core.stats()["substeps"][0] == 1.0  # as simulate() steps
     ref_x, _ = simulate(
         cfg.physics, x0, v0, dt=cfg.dt, steps=K, control=cfg.u_max * a, integrator=integrator
     )

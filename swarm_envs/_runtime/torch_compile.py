@@ -266,7 +266,7 @@ class MaybeCompiled:
         seconds = time.perf_counter() - start
         if self._direct_wanted and self.compiled and not kwargs:
             self._direct, why = DirectCall.of(
-                getattr(NOTED, "last", None), self.fn, self._call, args, out
+                getattr(NOTED, "last", None), self.fn, self._call, args, out, self.name
             )
             if self._direct is None:
                 warn_not_direct(self.name, why)

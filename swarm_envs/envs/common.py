@@ -7,6 +7,7 @@ seed gives the same starts on every backend.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -29,12 +30,67 @@ class SwarmUnstableError(RuntimeError):
 FINITE_KEYS = ("energy", "expanse", "mean_goal_distance")
 
 
-def unstable_swarms(stats: dict[str, np.ndarray], over_cap: np.ndarray) -> np.ndarray:
+#: The guard's margin on the derived speed bound (:func:`energy_bound`): the bound holds
+#: for the exact dynamics, the margin covers the integration's error.
+SPEED_MARGIN = 2.0
+
+
+def speed_bound(cfg: Any) -> float:
+    """A bound on every agent's speed in the social potential model: ``inf`` where none
+    is derived (other models, or no dissipation at all).
+
+    For the fastest agent the alignment only slows it (it averages velocities), the pair
+    forces are at most ``(N − 1)(C_r/l_r + C_a/l_a)``, the sink's ``C_g/l_g`` (where it
+    acts) and the control ``u_max √d``; with linear friction ``m d|v|/dt ≤ D − β|v|``
+    for that sum ``D``, so no speed passes ``max(init_speed, D/β)``; with the Rayleigh
+    term ``(α − β|v|²)|v|`` replaces ``−β|v|`` and the terminal speed is at most
+    ``max(√(2α/β), (2D/β)^{1/3})``. Joining and frozen agents are at rest.
+    """
+    if cfg.dynamics != "social_potential":
+        return math.inf
+    p = cfg.physics
+    drive = (cfg.n_agents - 1) * (p.C_r / p.l_r + p.C_a / p.l_a) + cfg.u_max * math.sqrt(cfg.dim)
+    if cfg.goal_in_physics:
+        drive += p.C_g / p.l_g
+    if p.alpha > 0:
+        terminal = max(math.sqrt(2.0 * p.alpha / p.beta), (2.0 * drive / p.beta) ** (1.0 / 3.0))
+    elif p.beta > 0:
+        terminal = drive / p.beta
+    else:
+        return math.inf
+    return max(cfg.init_speed, terminal)
+
+
+def energy_bound(cfg: Any) -> float:
+    """The bound the guard holds the ``energy`` statistic to: ``|φ| ≤ ½ m N (2S)² +
+    N(N − 1)/2 (C_r + C_a) + N C_g`` for the speed bound ``S`` (:func:`speed_bound`,
+    with :data:`SPEED_MARGIN`), each pair's potential at most ``C_r + C_a`` and each
+    agent's sink potential at most ``C_g``; ``inf`` where no speed bound is derived."""
+    speed = speed_bound(cfg)
+    if not math.isfinite(speed):
+        return math.inf
+    p, n = cfg.physics, cfg.n_agents
+    kinetic = 0.5 * p.m * n * (SPEED_MARGIN * speed) ** 2
+    return kinetic + 0.5 * n * (n - 1) * (p.C_r + p.C_a) + n * p.C_g
+
+
+def beyond_bound(stats: dict[str, np.ndarray], bound: float) -> bool:
+    """Whether some swarm's ``energy`` statistic is not within ``±bound`` (NaN
+    included); ``False`` at once where ``bound`` is ``inf``."""
+    return bound < math.inf and not bool((np.abs(stats["energy"]) <= bound).all())
+
+
+def unstable_swarms(
+    stats: dict[str, np.ndarray], over_cap: np.ndarray, bound: float = math.inf
+) -> np.ndarray:
     """Where a step went unstable, ``(B,)`` bool: a non-finite state (seen in
-    :data:`FINITE_KEYS`) or more substeps needed than the cap (``over_cap``)."""
+    :data:`FINITE_KEYS`), an energy beyond ``bound`` (:func:`energy_bound`), or more
+    substeps needed than the cap (``over_cap``)."""
     bad = np.array(over_cap, dtype=bool, copy=True)
     for key in FINITE_KEYS:
         bad |= ~np.isfinite(stats[key])
+    if bound < math.inf:
+        bad |= ~(np.abs(stats["energy"]) <= bound)
     return bad
 
 
@@ -59,7 +115,14 @@ def unstable_message(
     b = int(np.flatnonzero(bad)[0])
     finite = all(np.isfinite(stats[key][b]) for key in FINITE_KEYS)
     where = f"swarm {b} of {bad.size}, step {int(step[b])}"
-    if finite:
+    bound = energy_bound(cfg)
+    if finite and not abs(float(stats["energy"][b])) <= bound:
+        cause = (
+            f"the energy {float(stats['energy'][b]):.3g} left its bound ±{bound:.3g} (speeds "
+            f"beyond the terminal speed {speed_bound(cfg):.3g} of the forces, control and "
+            f"dissipation: the integration diverges)"
+        )
+    elif finite:
         cause = (
             f"the state needs at least {int(needed[b])} substeps of dt={cfg.dt:g} for a stable "
             f"integration, more than max_substeps={cfg.max_substeps}"

@@ -34,11 +34,13 @@ from swarm_envs.envs.common import (
     check_dtype,
     check_start,
     draw_starts,
+    energy_bound,
     unstable_message,
     unstable_swarms,
     wide_dtypes,
 )
 from swarm_envs.envs.dynamics import make_dynamics
+from swarm_envs.envs.stiffness import StiffnessWatch
 from swarm_envs.envs.task import (
     OBS_BOUND,
     STAT_KEYS,
@@ -98,6 +100,8 @@ class SwarmNavCore:
         self.goal = np.zeros((B, d), self.dtype)
         self.t = np.zeros(B, np.int64)
         self.dynamics = make_dynamics(cfg, self.batch, self.dtype)
+        self._stiffness = StiffnessWatch(cfg, self.batch)
+        self._energy_bound = energy_bound(cfg)  # the unstable guard's (common.energy_bound)
         self._wide = wide_dtypes(self.dtype)
         self._stats = self._empty_stats()
         self._prev = self._empty_stats()  # the previous step's statistics
@@ -161,7 +165,7 @@ class SwarmNavCore:
             self._advance(cfg.u_max * a if a.any() else None)
             self.t += 1
             self._measure(substeps=self.dynamics.substeps)
-        bad = unstable_swarms(self._stats, self.dynamics.over_cap)
+        bad = unstable_swarms(self._stats, self.dynamics.over_cap, self._energy_bound)
         if bad.any():
             self._unstable(bad, before)
         stats = self._stats
@@ -172,6 +176,7 @@ class SwarmNavCore:
         terminated, truncated = episode_end(self.cfg, stats["success"], self.t)
         if bad.any():
             r[bad], terminated[bad], truncated[bad] = 0.0, False, True
+        self._stiffness.observe(stats)
         return r, terminated, truncated, self.stats()
 
     def _unstable(self, bad: np.ndarray, before: tuple[np.ndarray, np.ndarray]) -> None:

@@ -152,8 +152,9 @@ class SocialPotentialDynamics(Dynamics):
     extrapolated velocity (:func:`~swarm_envs.physics.integrators.verlet_step`).
 
     Step-size control: the stable substep ``h*`` of the current state (its Gershgorin
-    rates, :func:`~swarm_envs.physics.social_potential.pair_rates`) is carried like the
-    force. A step of ``dt`` takes ``⌈τ/h*⌉`` equal substeps of the time ``τ`` left,
+    rates, :func:`~swarm_envs.physics.social_potential.pair_rates`, at the edge of the
+    integrator's stability, :func:`~swarm_envs.physics.integrators.stable_substep`) is
+    carried like the force. A step of ``dt`` takes ``⌈τ/h*⌉`` equal substeps of the time ``τ`` left,
     re-planned after each (:func:`~swarm_envs.physics.integrators.substep_plan`); every
     swarm plans its own, and only the swarms with time left are evaluated.
     """
@@ -194,7 +195,7 @@ class SocialPotentialDynamics(Dynamics):
 
     def _rates(self, geometry: PairGeometry, v: np.ndarray) -> np.ndarray:
         omega2, gamma = pair_rates(geometry, self.cfg.physics, sink=self._sink, v=v)
-        return stable_substep(omega2, gamma)
+        return stable_substep(omega2, gamma, integrator=self.cfg.integrator)
 
     def _passive(self, x, v, goal, geometry) -> np.ndarray:
         """The passive force at ``(x, v)`` (semi-implicit Euler's carried force)."""

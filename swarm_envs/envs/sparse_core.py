@@ -349,7 +349,13 @@ class SparseSwarmNavCore(SparseStatuses, SparseNeighbors, SwarmNavCore):
         )
         pair_damping = gamma * p.m - dissipation_rate(components(velocity), p)
         return _Pass(
-            force, stable_substep(omega2, gamma), potential, collisions, ok, omega2, pair_damping
+            force,
+            stable_substep(omega2, gamma, integrator=cfg.integrator),
+            potential,
+            collisions,
+            ok,
+            omega2,
+            pair_damping,
         )
 
     def _rates_at(self, res: _Pass, v: np.ndarray) -> _Pass:
@@ -360,7 +366,8 @@ class SparseSwarmNavCore(SparseStatuses, SparseNeighbors, SwarmNavCore):
         if p.alpha <= 0 or res.omega2 is None or res.pair_damping is None:
             return res
         gamma = (dissipation_rate(components(v), p) + res.pair_damping) / p.m
-        h = np.where(res.finite, stable_substep(res.omega2, gamma), res.h_stable)
+        h = stable_substep(res.omega2, gamma, integrator=self.cfg.integrator)
+        h = np.where(res.finite, h, res.h_stable)
         return res._replace(h_stable=h)
 
     def _keep(self, rows: np.ndarray | None, res: _Pass) -> None:

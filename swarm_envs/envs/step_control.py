@@ -71,7 +71,7 @@ def start_substeps(cfg: SwarmConfig) -> int:
     # self-propelled agents cruise at v₀, where the Rayleigh rate 3β v₀² − α is 2α
     rate = 2.0 * p.alpha if p.alpha > 0 else p.beta
     gamma = (rate + 2.0 * n * p.C_o * ball_mean_decay(R, p.l_o, d)) / p.m
-    h = stable_substep(np.float64(omega2), np.float64(gamma))
+    h = stable_substep(np.float64(omega2), np.float64(gamma), integrator=cfg.integrator)
     needed, _ = substep_plan(np.float64(cfg.dt), h)
     return int(needed) if math.isfinite(needed) else 2**62
 

@@ -64,7 +64,9 @@ from swarm_envs.envs.common import (
     check_actions,
     check_batch,
     check_dtype,
+    energy_bound,
 )
+from swarm_envs.envs.stiffness import StiffnessWatch
 from swarm_envs.envs.task import observation_size
 from swarm_envs.envs.task.episode import episode_end
 from swarm_envs.envs.torch_resets import PARTIAL_RESET_MIN_BATCH, ResetControl, partial_reset_batch
@@ -155,6 +157,8 @@ class TorchSwarmNavCore(SubstepControl, StatusControl, ResetControl):
         self.obs_dim = observation_size(cfg)
         self.t = np.zeros(B, np.int64)
         self._columns = StatisticColumns(self.dtype)
+        self._stiffness = StiffnessWatch(cfg, self.batch)
+        self._energy_bound = energy_bound(cfg)  # the unstable guard's (common.energy_bound)
         zeros = self._zeros
         # State component first, (d, B, N): the layout the fused step vectorises.
         self._x, self._v, self._f = zeros(d, B, N), zeros(d, B, N), zeros(d, B, N)
@@ -369,6 +373,7 @@ class TorchSwarmNavCore(SubstepControl, StatusControl, ResetControl):
         terminated, truncated = episode_end(self.cfg, stats["success"], self.t)
         if bad is not None:
             reward[bad], terminated[bad], truncated[bad] = 0.0, False, True
+        self._stiffness.observe(stats)
         return reward, terminated, truncated, stats
 
     # ------------------------------------------------------------------ views

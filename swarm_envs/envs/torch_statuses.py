@@ -97,8 +97,11 @@ class StatusControl:
         if place is not None:
             still = still | place
             where = torch.as_tensor(place, device=self.device)
-            at_t = torch.from_numpy(np.ascontiguousarray(at, dtype=self.dtype)).to(self.device)
-            self._x = torch.where(where, at_t.permute(2, 0, 1), self._x)  # a new tensor
+            # (d, B, N) stored contiguous, as every state tensor the compiled functions
+            # read: torch.where lays its result out as its inputs are, and a permuted view
+            # would hand them another layout than they were traced for.
+            at_t = torch.from_numpy(np.ascontiguousarray(np.moveaxis(at, -1, 0), dtype=self.dtype))
+            self._x = torch.where(where, at_t.to(self.device), self._x)  # a new tensor
         self.status = status
         self._status = torch.as_tensor(status, device=self.device).clone()
         if still.any():

@@ -31,7 +31,12 @@ from typing import Any
 import numpy as np
 import torch
 
-from swarm_envs.envs.common import SwarmUnstableError, unstable_message, unstable_swarms
+from swarm_envs.envs.common import (
+    SwarmUnstableError,
+    beyond_bound,
+    unstable_message,
+    unstable_swarms,
+)
 from swarm_envs.envs.task import STAT_KEYS
 from swarm_envs.envs.torch_step import PACKED_KEYS
 
@@ -67,6 +72,7 @@ class SubstepControl:
     _counted: torch.Tensor
     _flagged: np.ndarray | None
     _calm: bool
+    _energy_bound: float
     _wide_start: tuple[torch.Tensor, ...]
 
     def _host_packed(self, whole: bool = True) -> None:
@@ -109,9 +115,11 @@ class SubstepControl:
     ) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
         """The unstable guard after a step: ``(stats, bad)``, the statistics (re-measured
         when swarms were truncated) and the unstable swarms (``None``: none)."""
-        if over is None and self._calm:  # every state finite, none over the cap
-            return stats, None
-        bad = unstable_swarms(stats, np.zeros(self.batch, dtype=bool) if over is None else over)
+        bound = self._energy_bound
+        if over is None and self._calm and not beyond_bound(stats, bound):
+            return stats, None  # every state finite and within the bound, none over the cap
+        no_swarm = np.zeros(self.batch, dtype=bool)
+        bad = unstable_swarms(stats, no_swarm if over is None else over, bound)
         if not bad.any():
             return stats, None
         return self._unstable(a, bad, before, stats, needed), bad

@@ -27,8 +27,16 @@ determinant ``1 − hγ``; it is stable (Jury's conditions) exactly when
 
     ``h²ω² + 2hγ < 4``,  i.e.  ``h < 4 / (γ + √(γ² + 4ω²))``
 
-(``γ = 0`` gives the familiar ``hω < 2``, ``ω = 0`` gives ``hγ < 2``). The rule takes
-``h* = 0.9`` of that edge (:func:`stable_substep`, :data:`STEP_SAFETY`), with ``ω²`` and
+(``γ = 0`` gives the familiar ``hω < 2``, ``ω = 0`` gives ``hγ < 2``). Velocity Verlet
+evaluates the damping at the extrapolated velocity and carries the force into the next
+step, so a mode is a map of ``(q, v, f)`` whose characteristic polynomial is
+``λ³ + (h²ω² + 3hγ/2 − 2) λ² + (1 − 2hγ) λ + hγ/2``; it leaves the unit disc through
+``λ = −1``, exactly at ``h²ω² + 4hγ = 4``, so Verlet is stable when
+
+    ``h²ω² + 4hγ < 4``,  i.e.  ``h < 4 / (2γ + √(4γ² + 4ω²))``
+
+(the same ``hω < 2``, but half the damping rate: ``hγ < 1``). The rule takes
+``h* = 0.9`` of the integrator's edge (:func:`stable_substep`, :data:`STEP_SAFETY`), with ``ω²`` and
 ``γ`` bounds on the largest eigenvalues of ``K`` and ``D``
 (``swarm_envs.physics.social_potential.pair_rates``; they overestimate by at most a
 factor 2, a further margin against the state changing within a substep). An environment
@@ -69,11 +77,19 @@ def _check_integrator(integrator: str) -> None:
 #: and round-off may tip it over.
 STEP_SAFETY = 0.9
 
+#: The weight ``c`` of the damping rate in each integrator's stability edge
+#: ``h²ω² + 2c·hγ < 4`` (module docstring).
+_DAMPING_WEIGHT = {"semi_implicit_euler": 1.0, "velocity_verlet": 2.0}
 
-def stable_substep(omega2: Any, gamma: Any, xp: Any = np) -> Any:
-    """``h* = σ · 4 / (γ + √(γ² + 4ω²))``, ``σ = STEP_SAFETY``: the substep the rule
+
+def stable_substep(
+    omega2: Any, gamma: Any, xp: Any = np, integrator: str = "semi_implicit_euler"
+) -> Any:
+    """``h* = σ · 4 / (cγ + √(c²γ² + 4ω²))``, ``σ = STEP_SAFETY``: the substep the rule
     takes for the stiffness ``ω² ≥ 0`` and damping rate ``γ ≥ 0``, a fraction of the
-    longest stable semi-implicit Euler step (see the module docstring).
+    longest stable step of ``integrator`` (see the module docstring): ``c = 1`` for
+    semi-implicit Euler, ``c = 2`` for velocity Verlet, whose explicit damping is stable
+    only up to ``hγ < 1``.
 
     Elementwise on numpy arrays or torch tensors (``xp``: ``np`` or ``torch``). ``inf``
     where both rates are 0 (any step is stable) and, so that a non-finite state takes
@@ -84,8 +100,14 @@ def stable_substep(omega2: Any, gamma: Any, xp: Any = np) -> Any:
     0.18
     >>> round(float(stable_substep(np.float64(0.0), np.float64(4.0))), 6)  # h·γ < 2
     0.45
+    >>> verlet = stable_substep(np.float64(0.0), np.float64(4.0), integrator="velocity_verlet")
+    >>> round(float(verlet), 6)  # h·γ < 1
+    0.225
     """
-    den = gamma + xp.sqrt(gamma * gamma + 4.0 * omega2)
+    _check_integrator(integrator)
+    c = _DAMPING_WEIGHT[integrator]
+    cg = gamma if c == 1.0 else c * gamma
+    den = cg + xp.sqrt(cg * cg + 4.0 * omega2)
     ok = den > 0
     return xp.where(ok, (4.0 * STEP_SAFETY) / xp.where(ok, den, 1.0), math.inf)
 

@@ -40,17 +40,20 @@ from swarm_envs.envs.common import (
     NON_FINITE_ACTIONS,
     StatisticColumns,
     SwarmUnstableError,
+    beyond_bound,
     check_action_shape,
     check_batch,
     check_dtype,
     check_start,
     draw_starts,
+    energy_bound,
     unstable_message,
     unstable_swarms,
     wide_dtypes,
 )
 from swarm_envs.envs.native.build import NATIVE_ENV, Library, load_library, resolve_native
 from swarm_envs.envs.native.contract import PACKED_COLUMNS, UNSOUND, step_params, unsupported
+from swarm_envs.envs.stiffness import StiffnessWatch
 from swarm_envs.envs.task import (
     STAT_KEYS,
     STATISTICS,
@@ -150,6 +153,8 @@ class NativeSwarmNavCore:
         B, N, d = self.batch, cfg.n_agents, cfg.dim
         self.obs_dim = observation_size(cfg)
         self.t = np.zeros(B, np.int64)
+        self._stiffness = StiffnessWatch(cfg, self.batch)
+        self._energy_bound = energy_bound(cfg)  # the unstable guard's (common.energy_bound)
         self._wide = wide_dtypes(self.dtype)
         self._columns = StatisticColumns(self.dtype)
         self._x = np.zeros((d, B, N), self.dtype)
@@ -405,8 +410,8 @@ class NativeSwarmNavCore:
         self.t += 1
         self._stats = self._unpack()
         bad = None
-        if unsound:  # else every swarm is sound: nothing to check
-            bad = unstable_swarms(self._stats, self._packed[:, _OVER_CAP] > 0)
+        if unsound or beyond_bound(self._stats, self._energy_bound):
+            bad = unstable_swarms(self._stats, self._packed[:, _OVER_CAP] > 0, self._energy_bound)
             if bad.any():
                 self._unstable(bad)
             else:
@@ -429,6 +434,7 @@ class NativeSwarmNavCore:
         terminated, truncated = episode_end(self.cfg, stats["success"], self.t)
         if bad is not None:
             r[bad], terminated[bad], truncated[bad] = 0.0, False, True
+        self._stiffness.observe(stats)
         return r, terminated, truncated, stats
 
     def _unstable(self, bad: np.ndarray) -> None:
