@@ -382,12 +382,7 @@ def compare(ours_core: Any, ref_core: Any, seed: int, tol: dict, margin: float) 
             problems.append(f"step {step}: reward dtype/shape {ours[0].dtype} {ours[0].shape}")
         if _undecidable(ref_core, margin) is not None:
             break
-        if not np.allclose(ours[0], ref[0], **tol):
-            problems.append(f"step {step}: reward {ours[0]} != {ref[0]}")
-        for name, i in (("terminated", 1), ("truncated", 2)):
-            if not np.array_equal(ours[i], ref[i]):
-                problems.append(f"step {step}: {name} {ours[i]} != {ref[i]}")
-        problems += _stats_mismatch(ours[3], ref[3], tol, step)
+        problems += _step_mismatch(ours, ref, tol, step)
         if problems:
             break
         ended = ref[1] | ref[2]
@@ -422,6 +417,18 @@ def _obs_mismatch(obs: np.ndarray, ref: np.ndarray, cfg: SwarmConfig, tol: dict,
     bad = ~np.isclose(obs, ref, **tol).all(axis=(0, 1))
     names = observation_features(cfg)
     return [f"step {step}: observation {names[i]}" for i in np.flatnonzero(bad)]
+
+
+def _step_mismatch(ours: tuple, ref: tuple, tol: dict, step: int) -> list[str]:
+    """Where one step's ``(reward, terminated, truncated, stats)`` differ from the
+    reference's."""
+    problems = []
+    if not np.allclose(ours[0], ref[0], **tol):
+        problems.append(f"step {step}: reward {ours[0]} != {ref[0]}")
+    for name, i in (("terminated", 1), ("truncated", 2)):
+        if not np.array_equal(ours[i], ref[i]):
+            problems.append(f"step {step}: {name} {ours[i]} != {ref[i]}")
+    return problems + _stats_mismatch(ours[3], ref[3], tol, step)
 
 
 def _stats_mismatch(stats: dict, ref: dict, tol: dict, step: int) -> list[str]:
@@ -538,12 +545,7 @@ def compare_statuses(
         ref = ref_core.step(a)
         if _undecidable(ref_core, margin) is not None:
             break
-        if not np.allclose(ours[0], ref[0], **tol):
-            problems.append(f"step {step}: reward {ours[0]} != {ref[0]}")
-        for name, i in (("terminated", 1), ("truncated", 2)):
-            if not np.array_equal(ours[i], ref[i]):
-                problems.append(f"step {step}: {name} {ours[i]} != {ref[i]}")
-        problems += _stats_mismatch(ours[3], ref[3], tol, step)
+        problems += _step_mismatch(ours, ref, tol, step)
         if problems:
             break
         ended = ref[1] | ref[2]

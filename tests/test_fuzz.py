@@ -319,3 +319,17 @@ def test_a_diverging_integration_is_stopped_by_the_energy_bound(backend, monkeyp
             reward = core.step(actions.uniform(-1, 1, (BATCH, 10, 2)))[0]
             assert np.isfinite(reward.astype(np.float32)).all()
     assert core.t.max() < 15  # within a few steps of leaving the terminal speed
+
+
+def test_a_speed_bound_past_float_range_leaves_the_guard_off():
+    # Found by the fuzz module: a vanishing friction (β = 3.6e-300) makes the terminal
+    # speed finite but its square overflow; the energy bound is then infinite, not an error.
+    import dataclasses
+    import math
+
+    from swarm_envs.config import SwarmConfig
+    from swarm_envs.envs.common import energy_bound
+    from swarm_envs.physics import SocialPotentialParams
+
+    params = dataclasses.replace(SocialPotentialParams.navigation(), beta=3.64e-300)
+    assert energy_bound(SwarmConfig(physics=params)) == math.inf

@@ -70,8 +70,10 @@ def energy_bound(cfg: Any) -> float:
     if not math.isfinite(speed):
         return math.inf
     p, n = cfg.physics, cfg.n_agents
-    kinetic = 0.5 * p.m * n * (SPEED_MARGIN * speed) ** 2
-    return kinetic + 0.5 * n * (n - 1) * (p.C_r + p.C_a) + n * p.C_g
+    top = SPEED_MARGIN * speed
+    kinetic = 0.5 * p.m * n * top * top  # a product: ``inf``, not an error, past float range
+    bound = kinetic + 0.5 * n * (n - 1) * (p.C_r + p.C_a) + n * p.C_g
+    return bound if math.isfinite(bound) else math.inf
 
 
 def beyond_bound(stats: dict[str, np.ndarray], bound: float) -> bool:
