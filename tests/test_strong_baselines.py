@@ -426,3 +426,26 @@ def test_free_agent_time_bounds_a_swarm_without_pair_forces():
     reached = batch.first_success[batch.success] * cfg.dt
     assert batch.success.all() and np.all(reached >= alone - 1e-9)
     assert free_agent_time(SwarmConfig(dynamics="zone"), *start) is None
+
+
+def test_robustness_and_transfer_mark_each_rows_best_baseline():
+    from train.evaluate import (
+        evaluate_robustness,
+        evaluate_transfer,
+        format_robustness_table,
+        format_transfer_table,
+    )
+
+    cfg = SwarmConfig(n_agents=6)
+    policies = {"potential": make_controller("potential", cfg), "pd": make_controller("pd", cfg)}
+    policies["zero"] = make_controller("zero", cfg)
+    robust = evaluate_robustness(
+        policies, cfg, {"failed_fraction": [0.0, 0.5]}, 4, 1, progress=False, plots=False
+    )
+    for row in robust["rows"]:
+        returns = {n: m["mean_return"] for n, m in row["policies"].items()}
+        assert returns[row["best_baseline"]] == max(returns.values())
+    assert format_robustness_table(robust).count("✓") == 2
+    sizes = evaluate_transfer(policies, cfg, [4, 8], 3, 1, progress=False, plots=False)
+    assert [s["best_baseline"] for s in sizes["sizes"]] == ["pd", "pd"]
+    assert format_transfer_table(sizes).count("✓") == 2

@@ -23,10 +23,22 @@ from train.evaluate.policies import (
 )
 from train.evaluate.report import write_outputs
 
-__all__ = ["TrainedEnvWarning", "best_baseline", "check_policies", "evaluate_policies"]
+__all__ = [
+    "TrainedEnvWarning",
+    "best_baseline",
+    "check_policies",
+    "controller_names",
+    "evaluate_policies",
+]
 
 #: The name of the trained policy in the demo's and the benchmark's evaluations.
 LEARNED = "learned"
+
+
+def controller_names(policies: Mapping[str, Any]) -> list[str]:
+    """The names of the :mod:`agents` controllers among ``policies``: the baselines of
+    an evaluation (a trained model never is one)."""
+    return [name for name, policy in policies.items() if isinstance(policy, Controller)]
 
 
 def best_baseline(
@@ -168,10 +180,7 @@ def evaluate_policies(
         "bound_undefined": bound_reason(cfg),
         "free_agent_time": None if alone is None else finite(alone.mean()),
         "best_baseline": best_baseline(
-            measures,
-            [n for n, p in policies.items() if isinstance(p, Controller)]
-            if baselines is None
-            else baselines,
+            measures, controller_names(policies) if baselines is None else baselines
         ),
     }
     if out_dir is not None:

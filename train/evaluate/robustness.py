@@ -50,7 +50,7 @@ from swarm_envs import ENV_ID
 from swarm_envs.config import SwarmConfig, as_dict
 from swarm_envs.perturbations import Perturbations
 from train.evaluate.episodes import run_episodes
-from train.evaluate.harness import check_policies
+from train.evaluate.harness import best_baseline, check_policies, controller_names
 from train.evaluate.measures import METRIC_DOCS, summarize
 from train.evaluate.report import csv_cell, format_cell, measure_legend, write_sweep_outputs
 
@@ -271,6 +271,7 @@ def evaluate_robustness(
                 "value": row.value,
                 "perturbations": as_dict(row.cfg.perturbations),
                 "backend": ", ".join(dict.fromkeys(backends)),
+                "best_baseline": best_baseline(measures, controller_names(policies)),
                 "policies": measures,
             }
         )
@@ -320,16 +321,18 @@ def _value(value: float) -> str:
 
 def format_robustness_table(results: Mapping[str, Any]) -> str:
     """The robustness measures as a markdown table, one row per option, policy and value
-    (:data:`ROBUSTNESS_COLUMNS`); an undefined measure shows as ``—``."""
+    (:data:`ROBUSTNESS_COLUMNS`); an undefined measure shows as ``—``, and the last
+    column marks each row's best baseline."""
     headers = ["policy", "perturbation", "value", "backend"]
     headers += [h for _, h, _ in ROBUSTNESS_COLUMNS]
     lines = [
-        "| " + " | ".join(headers) + " |",
-        "|---|---|---:|---|" + "---:|" * len(ROBUSTNESS_COLUMNS),
+        "| " + " | ".join([*headers, "best baseline"]) + " |",
+        "|---|---|---:|---|" + "---:|" * len(ROBUSTNESS_COLUMNS) + ":---:|",
     ]
     for name, row, m in _rows(results):
         cells = [name, row["option"], _value(row["value"]), row["backend"]]
         cells += [format_cell(m, key, spec) for key, _, spec in ROBUSTNESS_COLUMNS]
+        cells.append("✓" if row.get("best_baseline") == name else "")
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

@@ -34,7 +34,7 @@ from swarm_envs.config import SwarmConfig, as_dict
 from swarm_envs.envs.core import observation_size
 from swarm_envs.envs.step_control import check_step_control
 from train.evaluate.episodes import run_episodes
-from train.evaluate.harness import check_policies
+from train.evaluate.harness import best_baseline, check_policies, controller_names
 from train.evaluate.measures import METRIC_DOCS, summarize
 from train.evaluate.policies import SpaceMismatchError, describe_trained_env, policy_mode
 from train.evaluate.report import csv_cell, format_cell, measure_legend, write_sweep_outputs
@@ -232,7 +232,14 @@ def evaluate_transfer(
             )
             backend = batch.backend
             measures[name] = summarize(batch)
-        sizes.append({"n_agents": c.n_agents, "backend": backend, "policies": measures})
+        sizes.append(
+            {
+                "n_agents": c.n_agents,
+                "backend": backend,
+                "best_baseline": best_baseline(measures, controller_names(policies)),
+                "policies": measures,
+            }
+        )
     results: dict[str, Any] = {
         "env": env_id,
         **dict(extra or {}),
@@ -264,15 +271,17 @@ def _rows(results: Mapping[str, Any]) -> list[tuple[str, Mapping[str, Any], Mapp
 
 def format_transfer_table(results: Mapping[str, Any]) -> str:
     """The size-transfer measures as a markdown table, one row per policy and size
-    (:data:`TRANSFER_COLUMNS`); an undefined measure shows as ``—``."""
-    headers = ["policy", "N", "backend", *(h for _, h, _ in TRANSFER_COLUMNS)]
+    (:data:`TRANSFER_COLUMNS`); an undefined measure shows as ``—``, and the last column
+    marks each size's best baseline."""
+    headers = ["policy", "N", "backend", *(h for _, h, _ in TRANSFER_COLUMNS), "best baseline"]
     lines = [
         "| " + " | ".join(headers) + " |",
-        "|---|---:|---|" + "---:|" * len(TRANSFER_COLUMNS),
+        "|---|---:|---|" + "---:|" * len(TRANSFER_COLUMNS) + ":---:|",
     ]
     for name, size, m in _rows(results):
         cells = [name, str(size["n_agents"]), size["backend"]]
         cells += [format_cell(m, key, spec) for key, _, spec in TRANSFER_COLUMNS]
+        cells.append("✓" if size.get("best_baseline") == name else "")
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
