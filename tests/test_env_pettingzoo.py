@@ -1,7 +1,7 @@
 """The PettingZoo SwarmNav envs: official tests, spaces, fresh dicts, layout, bad input.
 
-TESTING.md items 4–9 (PettingZoo checkers, seeding, max_cycles, rendering, space identity,
-fresh dicts) and 12, 13, 16 for the parallel and AEC envs.
+PettingZoo's checkers, seeding, ``max_cycles``, rendering, space identity, fresh dicts,
+pickling and bad input, for the parallel and AEC envs.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Physical invariants of the social potential model and its integrators (TESTING.md item 14).
+"""Physical invariants of the social potential model and its integrators.
 
 Everything here follows from docs/models.md §1 and could fail if the physics were wrong:
 

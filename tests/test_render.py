@@ -1,6 +1,6 @@
 """Tests of swarm_envs.render: frames, viewport, renderer state, GIF output, lazy imports.
 
-TESTING.md item 8: ``rgb_array`` frames are uint8 H×W×3, not blank, change after
+``rgb_array`` frames are uint8 H×W×3, not blank, change after
 steps; ``close()`` twice is safe. Plus the drawing details an environment relies on.
 """
 

@@ -1,7 +1,7 @@
 """The batched SB3 VecEnv: bulk bounds, auto-reset infos, seeding, layout, PPO smoke test.
 
-TESTING.md items 10 (10⁴+ steps at the action bounds, ``VecCheckNan``), 12, 13, 15 (auto
-reset with ``terminal_observation`` and ``TimeLimit.truncated``; ``seed()``) and 16.
+10⁴+ steps at the action bounds (``VecCheckNan``), seeding, pickling, auto reset with
+``terminal_observation`` and ``TimeLimit.truncated``, ``seed()``, and bad input.
 """
 
 from __future__ import annotations
