@@ -42,7 +42,8 @@ from swarm_envs.physics import SocialPotentialParams
 SETTINGS = settings(
     max_examples=int(os.environ.get("SWARM_ENVS_CONFORMANCE_EXAMPLES", "25")),
     deadline=None,
-    derandomize=bool(os.environ.get("CI")),
+    # The same examples on every run; SWARM_ENVS_EXPLORE=1 draws new ones.
+    derandomize=not os.environ.get("SWARM_ENVS_EXPLORE"),
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
 )
 

@@ -79,7 +79,7 @@ def energy_bound(cfg: Any) -> float:
 def beyond_bound(stats: dict[str, np.ndarray], bound: float) -> bool:
     """Whether some swarm's ``energy`` statistic is not within ``±bound`` (NaN
     included); ``False`` at once where ``bound`` is ``inf``."""
-    return bound < math.inf and not bool((np.abs(stats["energy"]) <= bound).all())
+    return bound < math.inf and not bool((np.abs(stats["energy"]) <= np.float64(bound)).all())
 
 
 def unstable_swarms(
@@ -91,8 +91,8 @@ def unstable_swarms(
     bad = np.array(over_cap, dtype=bool, copy=True)
     for key in FINITE_KEYS:
         bad |= ~np.isfinite(stats[key])
-    if bound < math.inf:
-        bad |= ~(np.abs(stats["energy"]) <= bound)
+    if bound < math.inf:  # compared in float64: the bound may pass float32's range
+        bad |= ~(np.abs(stats["energy"]) <= np.float64(bound))
     return bad
 
 

@@ -118,7 +118,9 @@ def nearest_neighbors(
         holds = cand == dist[:, None, :]
         if strict and later is not None:
             holds = holds & later
-        indices.append(torch.where(holds, columns, math.inf).amin(-2))
+        # A NaN distance (a state that diverged within the step) holds no entry: clamp,
+        # so that the index stays valid and the unstable guard, not a gather, reports it.
+        indices.append(torch.where(holds, columns, math.inf).amin(-2).clamp(max=n - 1))
     return _by_rank(dists), _by_rank(indices).to(torch.int64)
 
 
