@@ -31,8 +31,7 @@ from swarm_envs.physics._validation import check_real
 
 __all__ = ["SATURATIONS", "SaturatedPDController", "saturate"]
 
-#: How the PD law is brought into the action box (:func:`saturate`); the tuned table
-#: stores the choice as ``box`` 0 or 1.
+#: How the PD law is brought into the action box (:func:`saturate`).
 SATURATIONS = ("norm", "box", "clip")
 
 
@@ -56,7 +55,7 @@ class SaturatedPDController(Controller):
         saturation: ``"norm"`` (the norm capped at 1), ``"box"`` (the largest
             component capped at 1: more thrust along the diagonals) or ``"clip"``
             (each component on its own), see :func:`saturate`. ``None``: as ``k_p``
-            (the tuned table stores ``box`` 0, 1 or 2), else ``"norm"``.
+            (its tuned ``saturation``), else ``"norm"``.
 
     >>> from swarm_envs.config import SwarmConfig
     >>> ctrl = SaturatedPDController(SwarmConfig(), k_p=1.0, k_d=0.5, saturation="norm")
@@ -92,7 +91,7 @@ class SaturatedPDController(Controller):
         self.k_p: float = check_real(owner, "k_p", k_p, low=0.0)
         self.k_d: float = check_real(owner, "k_d", k_d, low=0.0)
         if saturation is None:
-            saturation = SATURATIONS[int(tuned.get("box", 0.0))]
+            saturation = str(tuned.get("saturation", "norm"))
         if saturation not in SATURATIONS:
             raise ValueError(f"{owner}.saturation must be one of {SATURATIONS}, got {saturation!r}")
         self.saturation: str = saturation

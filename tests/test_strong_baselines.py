@@ -137,7 +137,7 @@ def test_tuned_table_is_read_by_the_controllers():
     assert gains, "configs/baselines/tuned.yaml holds the navigation PD gains"
     ctrl = SaturatedPDController(cfg)
     assert (ctrl.k_p, ctrl.k_d) == (gains["k_p"], gains["k_d"])
-    assert ctrl.saturation == ("box" if gains.get("box") else "norm")
+    assert ctrl.saturation == gains["saturation"]
     assert scenario_key(task_config("mill")) == "mill/social_potential"
 
 

@@ -206,13 +206,11 @@ class TrainConfig(RunConfig):
                     f"allowed: {', '.join(sorted(allowed))}"
                 )
         if self.residual is not None:
-            from agents import CONTROLLERS
+            from train.residual import check_baseline_name
 
             if self.mode != "shared":
                 raise ValueError(f"residual needs mode 'shared', got mode {self.mode!r}")
-            if self.residual not in CONTROLLERS or self.residual == "random":
-                known = ", ".join(n for n in CONTROLLERS if n != "random")
-                raise ValueError(f"residual must be null or one of {known}, got {self.residual!r}")
+            check_baseline_name(self.residual)
         if isinstance(self.residual_log_std, bool) or not isinstance(
             self.residual_log_std, int | float
         ):

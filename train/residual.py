@@ -27,6 +27,8 @@ __all__ = [
     "ResidualPolicy",
     "ResidualVecEnv",
     "as_policy",
+    "check_baseline_name",
+    "make_baseline",
     "residual_record",
 ]
 
@@ -37,16 +39,23 @@ RESIDUAL = "swarm_residual"
 _GAIN_ATTRS = ("k_p", "k_d", "k_v", "k_c", "saturation", "approach", "spin", "omega")
 
 
+def check_baseline_name(name: Any) -> str:
+    """``name`` if it names a controller a policy can correct (any of
+    :data:`agents.CONTROLLERS` but the random one), else ``ValueError`` listing them."""
+    from agents import CONTROLLERS
+
+    known = [n for n in CONTROLLERS if n != "random"]
+    if name not in known:
+        raise ValueError(f"residual must be null or one of {', '.join(known)}, got {name!r}")
+    return name
+
+
 def make_baseline(name: str, cfg: SwarmConfig, gains: Mapping[str, Any] | None = None) -> Any:
     """The controller ``name`` of :data:`agents.CONTROLLERS` for ``cfg``, with ``gains``
     (``None``: its tuned or default gains)."""
     from agents import CONTROLLERS, make_controller
 
-    if name not in CONTROLLERS or name in ("random",):
-        raise ValueError(
-            f"residual: unknown baseline {name!r}; use one of "
-            f"{', '.join(n for n in CONTROLLERS if n != 'random')}"
-        )
+    check_baseline_name(name)
     if gains is None:
         return make_controller(name, cfg)
     return CONTROLLERS[name](cfg, **dict(gains))

@@ -25,6 +25,7 @@ from typing import Any
 
 import yaml
 
+from agents.tuned import Gain
 from swarm_envs.config import CONFIG_ROOT, SwarmConfig, load_swarm_config
 from train.cli_common import CliError, OneLineParser, check_seed, fail
 from train.config import read_yaml_mapping
@@ -36,18 +37,26 @@ PROG = "swarm-tune"
 #: The grid file read unless ``--grids`` names another.
 DEFAULT_GRIDS = CONFIG_ROOT / "baselines" / "grids.yaml"
 
-#: Seeds the evaluations use: a tuning seed must be none of them.
-EVALUATION_SEEDS = (2026, 4242, 1_000_000)
+#: A grid: each gain's values (numbers, or names such as ``saturation``'s).
+Grid = dict[str, list[Gain]]
 
-Grid = dict[str, list[float]]
+
+def evaluation_seeds() -> tuple[int, ...]:
+    """The seeds the evaluations use (the benchmark's and the demo's, and the periodic
+    evaluation's during training): a tuning seed must be none of them."""
+    from train.benchmark.run import DEFAULT_EVAL_SEED
+    from train.config import TrainConfig
+
+    return (DEFAULT_EVAL_SEED, TrainConfig.eval_seed)
 
 
 def load_grids(path: str | Path = DEFAULT_GRIDS) -> tuple[int, int, dict[str, Grid]]:
     """``(seed, episodes, {baseline: {gain: values}})`` from a grid file.
 
     Raises:
-        ValueError: an unknown key, a baseline that is not a simple one, an empty or
-            non-numeric grid, or an evaluation seed as the tuning seed.
+        ValueError: an unknown key, a baseline that is not a simple one, an empty grid
+            or one of values that are neither numbers nor names, or an evaluation seed as
+            the tuning seed.
     """
     from agents import CONTROLLERS, SIMPLE
 
@@ -58,7 +67,7 @@ def load_grids(path: str | Path = DEFAULT_GRIDS) -> tuple[int, int, dict[str, Gr
             f"{path}: unknown key(s) {', '.join(unknown)}; allowed: seed, episodes, grids"
         )
     seed = check_seed("seed", data.get("seed", 0))
-    if seed in EVALUATION_SEEDS:
+    if seed in evaluation_seeds():
         raise ValueError(f"{path}: seed {seed} is an evaluation seed; tune on a training seed")
     episodes = data.get("episodes", 50)
     if not isinstance(episodes, int) or isinstance(episodes, bool) or episodes < 1:
@@ -77,32 +86,32 @@ def load_grids(path: str | Path = DEFAULT_GRIDS) -> tuple[int, int, dict[str, Gr
             if (
                 not isinstance(values, list)
                 or not values
-                or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in values)
+                or not all(
+                    isinstance(v, int | float | str) and not isinstance(v, bool) for v in values
+                )
             ):
-                raise ValueError(f"{path}: grids.{name}.{gain} must be a non-empty list of numbers")
-            grids[name][str(gain)] = [float(v) for v in values]
+                raise ValueError(
+                    f"{path}: grids.{name}.{gain} must be a non-empty list of numbers or names"
+                )
+            grids[name][str(gain)] = [v if isinstance(v, str) else float(v) for v in values]
     return seed, episodes, grids
 
 
-def grid_points(grid: Grid) -> list[dict[str, float]]:
+def grid_points(grid: Grid) -> list[dict[str, Gain]]:
     """Every point of ``grid``, in order (the last gain varies fastest).
 
-    >>> grid_points({"k_p": [1.0, 2.0], "box": [0.0, 1.0]})[:3]
-    [{'k_p': 1.0, 'box': 0.0}, {'k_p': 1.0, 'box': 1.0}, {'k_p': 2.0, 'box': 0.0}]
+    >>> grid_points({"k_p": [1.0, 2.0], "saturation": ["box"]})
+    [{'k_p': 1.0, 'saturation': 'box'}, {'k_p': 2.0, 'saturation': 'box'}]
     """
     names = list(grid)
     return [dict(zip(names, values, strict=True)) for values in itertools.product(*grid.values())]
 
 
-def make_tuned(name: str, cfg: SwarmConfig, point: Mapping[str, float]) -> Any:
+def make_tuned(name: str, cfg: SwarmConfig, point: Mapping[str, Any]) -> Any:
     """The baseline ``name`` for ``cfg`` with the gains of one grid point."""
     from agents import CONTROLLERS
-    from agents.pd import SATURATIONS
 
-    gains = {k: v for k, v in point.items() if k != "box"}
-    if "box" in point:
-        gains["saturation"] = SATURATIONS[int(point["box"])]
-    return CONTROLLERS[name](cfg, **gains)
+    return CONTROLLERS[name](cfg, **point)
 
 
 def tune_scenario(

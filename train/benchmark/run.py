@@ -36,7 +36,8 @@ from train.benchmark.stats import (
     summarize_runs,
 )
 from train.config import TrainConfig, load_train_config
-from train.evaluate.bound import bound_reason, time_to_goal_bound
+from train.evaluate.bound import bound_reason, time_over_bound, time_to_goal_bound
+from train.evaluate.harness import best_baseline
 from train.evaluate.measures import finite
 
 __all__ = [
@@ -235,7 +236,7 @@ def _episodes(policy: Any, cfg: SwarmConfig, s: Settings, name: str) -> dict[str
         "success": batch.success,
         "steps": batch.lengths,
         "reached": reached,
-        "bound": np.full(len(batch.returns), np.nan) if bound is None else bound,
+        "bound": bound,
     }
 
 
@@ -260,10 +261,8 @@ def _policy_result(
         "steps": arrays["steps"].astype(int).tolist(),
     }
     bound = runs[0]["bound"]
-    ok = arrays["success"].astype(bool) & (bound[None, :] > 0)
-    over = arrays["reached"] * cfg.dt / np.where(bound > 0, bound, 1.0)[None, :] - 1.0
-    time_over_bound = finite(over[ok].mean()) if ok.any() else None
-    return {**extra, **summary, "time_over_bound": time_over_bound, "per_episode": per_episode}
+    over = time_over_bound(arrays["reached"] * cfg.dt, arrays["success"], bound)
+    return {**extra, **summary, "time_over_bound": over, "per_episode": per_episode}
 
 
 def evaluate_entry(
@@ -309,10 +308,16 @@ def evaluate_entry(
             run = _episodes(policy, cfg, s, name)
             baseline_runs[name] = run
             policies[name] = _policy_result([run], cfg, s, kind="baseline", controller=controller)
-        best = max(
-            baseline_runs,
-            key=lambda n: (policies[n]["return"]["value"], policies[n]["success"]["value"]),
+        best = best_baseline(
+            {
+                n: {
+                    "mean_return": policies[n]["return"]["value"],
+                    "success_rate": policies[n]["success"]["value"],
+                }
+                for n in baseline_runs
+            }
         )
+        assert best is not None
         if runs:
             policies["learned"]["minus_best"] = {
                 "baseline": best,
@@ -324,7 +329,7 @@ def evaluate_entry(
                     confidence=s.confidence,
                 ),
             }
-        bound = runs[0]["bound"] if runs else baseline_runs[best]["bound"]
+        bound = baseline_runs[best]["bound"]  # the same starts for every policy
         results.append(
             {
                 "label": ev.label,
@@ -335,9 +340,7 @@ def evaluate_entry(
                 "config": as_dict(cfg),
                 "eval_seconds": round(time.perf_counter() - started, 3),
                 "best_baseline": best,
-                "time_to_goal_bound": finite(np.nanmean(bound))
-                if np.isfinite(bound).any()
-                else None,
+                "time_to_goal_bound": None if bound is None else finite(bound.mean()),
                 "bound_undefined": bound_reason(cfg),
                 "policies": policies,
             }

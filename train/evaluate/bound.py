@@ -32,7 +32,7 @@ import numpy as np
 
 from swarm_envs.config import SwarmConfig
 
-__all__ = ["bound_reason", "free_agent_time", "time_to_goal_bound"]
+__all__ = ["bound_reason", "free_agent_time", "time_over_bound", "time_to_goal_bound"]
 
 
 def bound_reason(cfg: SwarmConfig) -> str | None:
@@ -100,34 +100,58 @@ def time_to_goal_bound(
     m, beta = cfg.physics.m, cfg.physics.beta
     accel = cfg.u_max * np.abs(unit).sum(axis=1) / m  # the box's support along ĝ
     speed0 = np.einsum("bk,bk->b", drift, unit)
-    return np.array(
-        [
-            _steps_to_cover(g, s0, a, beta / m, cfg.dt, cfg.max_steps) * cfg.dt
-            for g, s0, a in zip(gap, speed0, accel, strict=True)
-        ]
-    )
+    return _steps_to_cover(gap, speed0, accel, beta / m, cfg.dt, cfg.max_steps) * cfg.dt
 
 
 def _steps_to_cover(
-    gap: float, speed: float, accel: float, drag: float, dt: float, max_steps: int
-) -> int:
-    """Steps of ``dt`` until ``s ≥ gap`` under ``s̈ = accel − drag ṡ``, the fewer of the
-    exact flow's and one-substep semi-implicit Euler's (``max_steps + 1``: never)."""
-    if gap <= 0:
-        return 0
-    s_euler, v_euler = 0.0, speed
+    gap: np.ndarray, speed: np.ndarray, accel: np.ndarray, drag: float, dt: float, max_steps: int
+) -> np.ndarray:
+    """Steps of ``dt`` until ``s ≥ gap`` under ``s̈ = accel − drag ṡ`` from ``ṡ = speed``,
+    elementwise over arrays of one shape: the fewer of the exact flow's and one-substep
+    semi-implicit Euler's (``max_steps + 1``: never)."""
+    steps = np.where(gap <= 0, 0, max_steps + 1)
+    s_euler, v_euler = np.zeros_like(gap), np.array(speed, dtype=np.float64)
     for n in range(1, max_steps + 1):
+        open_ = steps > n - 1
+        if not open_.any():
+            break
         v_euler = v_euler + dt * (accel - drag * v_euler)
-        s_euler += dt * v_euler
+        s_euler = s_euler + dt * v_euler
         t = n * dt
         if drag > 0:
             terminal = accel / drag
             s_exact = terminal * t + (speed - terminal) * (1.0 - math.exp(-drag * t)) / drag
         else:
             s_exact = speed * t + 0.5 * accel * t * t
-        if max(s_euler, s_exact) >= gap - 1e-12:
-            return n
-    return max_steps + 1
+        covered = np.maximum(s_euler, s_exact) >= gap - 1e-12
+        steps = np.where(open_ & covered, n, steps)
+    return steps
+
+
+def time_over_bound(
+    reached: np.ndarray, success: np.ndarray, bound: np.ndarray | None
+) -> float | None:
+    """The mean, over the successful episodes, of the time to goal over its episode's
+    lower bound, minus 1 (0: optimal); ``None`` where no bound is defined or no episode
+    with a positive bound succeeded.
+
+    Args:
+        reached: each episode's time to goal in seconds, ``(..., E)`` (any value where
+            it failed).
+        success: which episodes succeeded, shaped like ``reached``.
+        bound: each episode's bound ``(E,)`` (:func:`time_to_goal_bound`), or ``None``.
+
+    >>> time_over_bound(np.array([3.0, 9.0]), np.array([True, False]), np.array([2.0, 2.0]))
+    0.5
+    """
+    if bound is None:
+        return None
+    ok = np.asarray(success, bool) & (bound > 0)
+    if not ok.any():
+        return None
+    ratio = np.asarray(reached, np.float64) / np.where(bound > 0, bound, 1.0)
+    value = float(ratio[ok].mean() - 1.0)
+    return value if math.isfinite(value) else None
 
 
 def free_agent_time(
@@ -153,13 +177,5 @@ def free_agent_time(
     accel = cfg.u_max * np.abs(unit).sum(axis=-1) / cfg.physics.m
     speed0 = np.einsum("bnk,bnk->bn", v, unit)
     drag = cfg.physics.beta / cfg.physics.m
-    steps = np.array(
-        [
-            max(
-                _steps_to_cover(g, s0, a, drag, cfg.dt, cfg.max_steps)
-                for g, s0, a in zip(gaps, speeds, accels, strict=True)
-            )
-            for gaps, speeds, accels in zip(gap, speed0, accel, strict=True)
-        ]
-    )
-    return steps * cfg.dt
+    steps = _steps_to_cover(gap, speed0, accel, drag, cfg.dt, cfg.max_steps)
+    return steps.max(axis=1) * cfg.dt

@@ -31,9 +31,6 @@ __all__ = [
     "evaluate_policies",
 ]
 
-#: The name of the trained policy in the demo's and the benchmark's evaluations.
-LEARNED = "learned"
-
 
 def controller_names(policies: Mapping[str, Any]) -> list[str]:
     """The names of the :mod:`agents` controllers among ``policies``: the baselines of
@@ -44,15 +41,15 @@ def controller_names(policies: Mapping[str, Any]) -> list[str]:
 def best_baseline(
     measures: Mapping[str, Mapping[str, Any]], baselines: Sequence[str] | None = None
 ) -> str | None:
-    """The baseline with the highest mean return (ties: the higher success rate, then
-    the first named); ``baselines`` ``None``: every policy but ``"learned"``. ``None``
+    """Among ``baselines`` (``None``: every entry of ``measures``), the one with the
+    highest mean return (ties: the higher success rate, then the first named); ``None``
     when there is none.
 
     >>> best_baseline({"a": {"mean_return": 1.0}, "b": {"mean_return": 2.0},
-    ...                "learned": {"mean_return": 3.0}})
+    ...                "learned": {"mean_return": 3.0}}, ["a", "b"])
     'b'
     """
-    names = [n for n in (baselines if baselines is not None else measures) if n != LEARNED]
+    names = list(measures if baselines is None else baselines)
     scored = [n for n in names if measures.get(n, {}).get("mean_return") is not None]
     if not scored:
         return None

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from train.evaluate.bound import time_over_bound
 from train.evaluate.episodes import FINAL_KEYS, EpisodeBatch
 
 __all__ = ["METRIC_DOCS", "finite", "json_safe", "summarize", "wilson_interval"]
@@ -105,11 +106,8 @@ def summarize(batch: EpisodeBatch, bound: np.ndarray | None = None) -> dict[str,
         "control_effort_per_step": _mean(batch.effort / np.maximum(lengths, 1)),
         "unstable_episodes": int(batch.unstable.sum()),
         "mean_substeps": finite(batch.substeps.sum() / integrated) if integrated else None,
-        "time_over_bound": None,
     }
-    if bound is not None:
-        positive = ok & (bound > 0)
-        out["time_over_bound"] = _mean(times[positive[ok]] / bound[positive] - 1.0)
+    out["time_over_bound"] = time_over_bound(reached * batch.dt, ok, bound)
     for k in FINAL_KEYS:
         out[f"final_{k}"] = _mean(batch.final[k])
     out["per_episode"] = {
