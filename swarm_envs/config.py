@@ -420,6 +420,18 @@ class SwarmConfig:
                 )
 
     @property
+    def passive_sink(self) -> bool:
+        """Whether the goal pulls every agent in the physics: the social potential's sink
+        (``goal_in_physics`` and ``physics.C_g > 0``)."""
+        return self.goal_in_physics and self.physics.C_g > 0
+
+    @property
+    def needs_statuses(self) -> bool:
+        """Whether the core takes agent statuses (``set_status`` is called): agents that
+        leave or stop in the physics, or observations with status flags."""
+        return self.perturbations.needs_masks or self.observe_status
+
+    @property
     def informs_agents(self) -> bool:
         """Whether the observation says who is informed (``task="informed"``)."""
         return self.task == "informed"

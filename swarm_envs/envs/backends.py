@@ -79,7 +79,7 @@ STATUS_BACKENDS = ("native", "numpy", "torch", "sparse")
 
 
 def _needs_statuses(cfg: SwarmConfig) -> bool:
-    return cfg.perturbations.needs_masks or cfg.observe_status
+    return cfg.needs_statuses
 
 
 def unsupported(cfg: SwarmConfig, backend: str) -> str | None:

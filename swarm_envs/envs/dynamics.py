@@ -164,7 +164,7 @@ class SocialPotentialDynamics(Dynamics):
         self._force: np.ndarray | None = None  # the passive force carried to the next step
         self._h_stable = np.full(batch, np.inf)  # the stable substep of the current state
         self._verlet = cfg.integrator == "velocity_verlet"
-        self._sink = cfg.goal_in_physics and cfg.physics.C_g > 0
+        self._sink = cfg.passive_sink
 
     def _physics_goal(self, goal: np.ndarray) -> np.ndarray | None:
         return goal if self._sink else None
@@ -372,7 +372,7 @@ def piecewise_substeps(cfg: SwarmConfig) -> int:
     parameters, :func:`~swarm_envs.physics.piecewise.piecewise_rates`; the goal sink's
     curvature ``C_g/l_g²`` joins them when it acts passively)."""
     omega2, gamma = piecewise_rates(cfg.piecewise)
-    if cfg.goal_in_physics and cfg.physics.C_g > 0:
+    if cfg.passive_sink:
         omega2 += cfg.physics.C_g / (cfg.physics.l_g**2 * cfg.piecewise.m)
     n, _ = substep_plan(np.float64(cfg.dt), stable_substep(np.float64(omega2), np.float64(gamma)))
     return int(n)

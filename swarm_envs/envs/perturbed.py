@@ -51,7 +51,7 @@ class PerturbedCore:
         self.schedule = AgentSchedule(p, self.batch, cfg.n_agents)
         #: Each agent's status ``(B, N)`` int8 (agent_status).
         self.status = all_active(self.batch, cfg.n_agents)
-        self._statuses_in_core = p.needs_masks or cfg.observe_status
+        self._statuses_in_core = cfg.needs_statuses
         self._noisy_obs = p.bounds("obs_noise")[1] > 0 or p.bounds("neighbor_dropout")[1] > 0
         self._rng: np.random.Generator | None = None
         self._join_x = np.zeros((self.batch, cfg.n_agents, cfg.dim))

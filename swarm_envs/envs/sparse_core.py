@@ -278,7 +278,7 @@ class SparseSwarmNavCore(SparseStatuses, SparseNeighbors, SwarmNavCore):
 
     def _physics_goal(self) -> np.ndarray | None:
         cfg = self.cfg
-        return self.goal if cfg.goal_in_physics and cfg.physics.C_g > 0 else None
+        return self.goal if cfg.passive_sink else None
 
     def _pair_pass(
         self,

@@ -66,7 +66,7 @@ def start_substeps(cfg: SwarmConfig) -> int:
         + p.C_a / p.l_a**2 * ball_mean_decay(R, p.l_a, d)
     )
     omega2 = 2.0 * kappa / p.m
-    if cfg.goal_in_physics and p.C_g > 0:
+    if cfg.passive_sink:
         omega2 += p.C_g / (p.l_g**2 * p.m)
     # self-propelled agents cruise at v₀, where the Rayleigh rate 3β v₀² − α is 2α
     rate = 2.0 * p.alpha if p.alpha > 0 else p.beta

@@ -24,7 +24,7 @@ __all__ = ["StatusControl", "needs_statuses"]
 def needs_statuses(cfg: Any) -> bool:
     """Whether a core of ``cfg`` takes agent statuses: agents that leave, stop or join
     the physics (``perturbations.needs_masks``), or statuses in the observation."""
-    return bool(cfg.perturbations.needs_masks or cfg.observe_status)
+    return bool(cfg.needs_statuses)
 
 
 class StatusControl:

@@ -147,7 +147,7 @@ def _passive(
     fs, pairs = pair_terms(geo, vs, p, energy=energy)
     fs = dissipation(fs, vs, p)
     sink, potential, goal_distance = goal_terms(xs, p, goal)
-    if cfg.goal_in_physics and p.C_g > 0:
+    if cfg.passive_sink:
         fs = [fc + gc for fc, gc in zip(fs, sink, strict=True)]
     return fs, pairs, potential, goal_distance
 
@@ -156,7 +156,7 @@ def _stable(geo: PairGeometry, vs: list[torch.Tensor], cfg: Any) -> torch.Tensor
     """The stable substep ``h*`` ``(B,)`` of the state of ``geo`` with the velocities
     ``vs`` (the shared rule)."""
     p = cfg.physics
-    omega2, gamma = pair_rates(geo, p, sink=cfg.goal_in_physics and p.C_g > 0, v=vs)
+    omega2, gamma = pair_rates(geo, p, sink=cfg.passive_sink, v=vs)
     return stable_substep(omega2, gamma, torch)
 
 

@@ -59,7 +59,7 @@ def bound_reason(cfg: SwarmConfig) -> str | None:
         return f"dynamics {cfg.dynamics!r}: the pair forces do not cancel"
     if cfg.physics.alpha > 0:
         return "self-propulsion"
-    if cfg.goal_in_physics and cfg.physics.C_g > 0:
+    if cfg.passive_sink:
         return "the passive sink"
     return None
 

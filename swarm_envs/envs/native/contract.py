@@ -155,7 +155,7 @@ DERIVED: tuple[tuple[str, str, Callable[[SwarmConfig, np.dtype], float], str], .
     (
         "physics_goal",
         "int64_t",
-        lambda c, dt: int(c.goal_in_physics and c.physics.C_g > 0),
+        lambda c, dt: int(c.passive_sink),
         "the sink acts passively",
     ),
     (
@@ -303,7 +303,7 @@ def unsupported(cfg: SwarmConfig, kernel: KernelInfo) -> str | None:
             return f"physics.{f.name} is not implemented in the C step"
     if layout(cfg) not in kernel.obs_layouts:
         return f"writes the observation layouts {kernel.obs_layouts!r}, not {layout(cfg)!r}"
-    if cfg.perturbations.needs_masks or cfg.observe_status:  # set_status is called
+    if cfg.needs_statuses:  # set_status is called
         missing = [mask for mask in STATUS_MASKS if mask not in kernel.statuses]
         if missing:
             return f"does not apply the agents' statuses ({', '.join(missing)})"
