@@ -1,7 +1,7 @@
 """The Gymnasium SwarmNav env: official checkers, TimeLimit, determinism, physics, bad input.
 
-Gymnasium's checkers, ``gym.make``, edge separations, seeding, pickling, bad input and the
-zero-action/``simulate`` equivalence of the env docstring.
+Gymnasium's checkers, ``gym.make``, edge separations, seeding, pickling and bad input
+(docs/testing.md), and the zero-action/``simulate`` equivalence of the env docstring.
 """
 
 from __future__ import annotations

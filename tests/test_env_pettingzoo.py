@@ -1,7 +1,7 @@
 """The PettingZoo SwarmNav envs: official tests, spaces, fresh dicts, layout, bad input.
 
 PettingZoo's checkers, seeding, ``max_cycles``, rendering, space identity, fresh dicts,
-pickling and bad input, for the parallel and AEC envs.
+pickling and bad input (docs/testing.md), for the parallel and AEC envs.
 """
 
 from __future__ import annotations

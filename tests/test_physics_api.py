@@ -1,7 +1,7 @@
 """The physics' public interface: batching, dtypes, 3-D, coincident agents, bad input, control.
 
 Coincident and extreme separations, bad input (a ``ValueError`` that names the problem
-and the allowed range), and docs/design.md's interface
+and the allowed range; docs/testing.md), and docs/design.md's interface
 (``(..., N, d)`` arrays, frozen parameter dataclass, ``simulate`` returning ``steps + 1``
 states).
 """

@@ -1,4 +1,4 @@
-"""Physical invariants of the social potential model and its integrators.
+"""Physical invariants of the social potential model and its integrators (docs/testing.md).
 
 Everything here follows from docs/models.md §1 and could fail if the physics were wrong:
 

@@ -1,7 +1,7 @@
 """Tests of swarm_envs.render: frames, viewport, renderer state, GIF output, lazy imports.
 
-``rgb_array`` frames are uint8 H×W×3, not blank, change after
-steps; ``close()`` twice is safe. Plus the drawing details an environment relies on.
+``rgb_array`` frames are uint8 H×W×3, not blank, change after steps; ``close()`` twice
+is safe (docs/testing.md). Plus the drawing details an environment relies on.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ Same seed and actions → same starts, observations, rewards, flags and statisti
 :class:`SwarmNavCore` over dozens of steps (float32 and float64), including partial
 resets (of the whole batch, and of a few swarms through the sub-batch function),
 padding (N − 1 < k), N = 1, 3-D and the passive goal; coincident agents, seeding,
-pickling and bad input. Step-size control: steps that
+pickling and bad input (docs/testing.md). Step-size control: steps that
 need several substeps (64 and 100 agents, a long dt; each swarm its own count), the cap
 in both ``on_unstable`` modes (a raise leaves the last sound state), a non-finite state,
 a start that overflows the dtype and the substeps after a reset give the numpy core's

@@ -1,7 +1,8 @@
 """The batched SB3 VecEnv: bulk bounds, auto-reset infos, seeding, layout, PPO smoke test.
 
 10⁴+ steps at the action bounds (``VecCheckNan``), seeding, pickling, auto reset with
-``terminal_observation`` and ``TimeLimit.truncated``, ``seed()``, and bad input.
+``terminal_observation`` and ``TimeLimit.truncated``, ``seed()``, and bad input
+(docs/testing.md).
 """
 
 from __future__ import annotations
