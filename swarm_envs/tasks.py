@@ -353,6 +353,12 @@ def with_task_defaults(data: Mapping[str, Any]) -> dict[str, Any]:
     task = data.get("task", "navigation")
     if not isinstance(task, str) or task not in task_names():
         return dict(data)
+    reward = data.get("reward")
+    if isinstance(reward, Mapping) and isinstance(reward.get("terms"), Mapping):
+        # every weight by its term's name, as the defaults give them (a saved config's
+        # ``terms`` then lies over the defaults)
+        flat = {k: v for k, v in reward.items() if k != "terms"}
+        data = {**data, "reward": {**flat, **reward["terms"]}}
     return _merge(task_defaults(task), data)
 
 

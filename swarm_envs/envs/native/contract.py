@@ -293,6 +293,9 @@ def unsupported(cfg: SwarmConfig, kernel: KernelInfo) -> str | None:
         return "does not write the informed agents' observation (task='informed')"
     if cfg.task_spec.statistics:
         return f"does not compute task {cfg.task!r}'s own statistics"
+    if cfg.task_spec.features:
+        features = ", ".join(f.name for f in cfg.task_spec.features)
+        return f"does not write task {cfg.task!r}'s observation features ({features})"
     known = set(KERNEL_CONFIG_FIELDS) | set(HOST_CONFIG_FIELDS)
     for f in dataclasses.fields(SwarmConfig):
         if f.name not in known:
