@@ -31,7 +31,7 @@ from swarm_envs.config import DYNAMICS, INTEGRATORS, SwarmConfig, config_from_ma
 from swarm_envs.envs import backends
 from swarm_envs.envs.core import SwarmNavCore
 from swarm_envs.envs.perturbed import PerturbedCore
-from swarm_envs.envs.task import STAT_KEYS, ranked_neighbors, stat_keys
+from swarm_envs.envs.task import ranked_neighbors, stat_keys
 from swarm_envs.envs.task.agent_status import ABSENT, ACTIVE, FAILED, FROZEN, masks
 from swarm_envs.envs.task.observation import observation_size
 from swarm_envs.perturbations import FAILURE_MODES, Perturbations

@@ -385,11 +385,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _main(args: Any) -> int:
+    from swarm_envs.plugins import load_plugins
     from train.evaluate.robustness import ROBUSTNESS_FILES
     from train.evaluate.transfer import TRANSFER_FILES
     from train.outdir import EVAL_FILES, OutDirError, check_out_dir, prepare_out_dir
-
-    from swarm_envs.plugins import load_plugins
 
     tune_allocator()  # a long-running tool: keep freed heap for reuse
     out = Path(args.out)

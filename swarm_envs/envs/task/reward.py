@@ -109,7 +109,7 @@ REWARD_TERMS: tuple[RewardTerm, ...] = (
     RewardTerm(
         "effort",
         -1.0,
-        "Σ_i |a_i|²/N: the clipped actions' mean square",
+        "Σ_i ‖a_i‖²/N: the clipped actions' mean square",
         lambda r: r.effort / r.n_agents,
         _DEFAULT.effort,
     ),
