@@ -442,6 +442,7 @@ class SwarmConfig:
             spec = task_spec(self.task)
         except ValueError as err:
             raise ValueError(f"{owner}.{err}") from None
+        object.__setattr__(self, "_task_spec", spec)  # resolved once per config
         fraction = check_ranged(
             owner,
             "informed_fraction",
@@ -486,8 +487,19 @@ class SwarmConfig:
 
     @property
     def task_spec(self) -> TaskSpec:
-        """The registered :class:`~swarm_envs.tasks.TaskSpec` of ``task``."""
-        return task_spec(self.task)
+        """The registered :class:`~swarm_envs.tasks.TaskSpec` of ``task``, as it was
+        when this config was built (looked up once)."""
+        return self.__dict__["_task_spec"]
+
+    def __getstate__(self) -> dict[str, Any]:
+        """The fields (a task's spec holds functions: it is looked up again on loading)."""
+        state = dict(self.__dict__)
+        state.pop("_task_spec", None)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        object.__setattr__(self, "_task_spec", task_spec(self.task))
 
     @property
     def passive_sink(self) -> bool:
@@ -505,7 +517,7 @@ class SwarmConfig:
     def informs_agents(self) -> bool:
         """Whether only some agents observe the goal, drawn per episode, and the
         observation says who (``task="informed"``; the task spec's ``informed``)."""
-        return task_spec(self.task).informed
+        return self.task_spec.informed
 
     @property
     def start_radius(self) -> float:
