@@ -97,7 +97,7 @@ def baseline_names(env: Any) -> list[str]:
     ['potential', 'pd', 'follow']
     """
     cfg = swarm_config_of(env)
-    names = [analytic_name(cfg), *SIMPLE[cfg.task]]
+    names = [analytic_name(cfg), *SIMPLE.get(cfg.task, ())]  # a user's task: none tuned
     return list(dict.fromkeys(names))  # the mill's analytic controller is its simple one
 
 

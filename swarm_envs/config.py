@@ -24,7 +24,7 @@ import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -44,7 +44,10 @@ from swarm_envs.physics import (
     ZoneParams,
 )
 from swarm_envs.physics._validation import SUPPORTED_DIMS, check_real
-from swarm_envs.tasks import TASKS, with_task_defaults
+from swarm_envs.tasks import task_spec, with_task_defaults
+
+if TYPE_CHECKING:
+    from swarm_envs.tasks import TaskSpec
 
 #: The models a SwarmNav environment can run (``SwarmConfig.dynamics``), the first the
 #: default. Each has its parameter section in :class:`SwarmConfig` (``physics`` for the
@@ -118,11 +121,17 @@ def _warn_empty_slots(owner: str, n_agents: int, n_neighbors: int) -> None:
 
 @dataclass(frozen=True)
 class RewardWeights:
-    """Weights of the cooperative navigation reward, one per documented term.
+    """Weights of the reward's terms: one field per shipped term, and ``terms`` for a
+    registered task's own (:mod:`swarm_envs.tasks`).
 
-    ``r_t = progress · (d_{t−1} − d_t)/d_0 + arrival · (newly arrived fraction)
-    + success (once, on success) − collision · (colliding pairs)/N
-    − effort · mean_i |a_i|² − time`` (see the SwarmNav docstring for the exact terms).
+    ``r_t = Σ sign · weight · value`` over the terms of the config's task (the SwarmNav
+    docstring's table lists them). In a mapping (YAML, keywords) every term is a key of
+    ``reward``, its own terms' too: ``reward: {gather: 0.5}`` puts ``gather`` into
+    ``terms``. A term the config's task does not have must weigh 0, and a name that is
+    none of its terms is refused (:class:`SwarmConfig` checks both).
+
+    >>> RewardWeights(progress=2.0, terms={"gather": 0.5}).terms["gather"]
+    0.5
     """
 
     progress: float = 10.0
@@ -141,11 +150,50 @@ class RewardWeights:
     """Scale of the mill's order, paid every step: the members' tangential speed about
     the goal (those within the arrival radius counted) over the cruise speed ``v₀``, at
     most 1 (``info["mill_order"]``; needs self-propulsion, ``physics.alpha > 0``)."""
+    terms: Mapping[str, float] = field(default_factory=dict, hash=False)
+    """The weights of a registered task's own terms, by name (a copy of the mapping
+    given; not to be changed in place, as the other fields cannot be)."""
 
     def __post_init__(self) -> None:
+        owner = type(self).__name__
         for f in fields(self):
-            value = check_real(type(self).__name__, f.name, getattr(self, f.name), low=0.0)
-            object.__setattr__(self, f.name, value)
+            if f.name != "terms":
+                value = check_real(owner, f.name, getattr(self, f.name), low=0.0)
+                object.__setattr__(self, f.name, value)
+        if not isinstance(self.terms, Mapping):
+            raise ValueError(f"{owner}.terms must map term names to weights, got {self.terms!r}")
+        terms = {}
+        for name, weight in self.terms.items():
+            if name in self.shipped_terms() or name == "terms":
+                raise ValueError(f"{owner}.terms: {name!r} is a field; give it as {name}=")
+            terms[str(name)] = check_real(owner, f"terms.{name}", weight, low=0.0)
+        object.__setattr__(self, "terms", terms)
+
+    @classmethod
+    def shipped_terms(cls) -> tuple[str, ...]:
+        """The fields that weigh the shipped terms (every field but ``terms``)."""
+        return tuple(f.name for f in fields(cls) if f.name != "terms")
+
+    @classmethod
+    def from_config_mapping(cls, data: Mapping[str, Any]) -> dict[str, Any]:
+        """A ``reward`` section with every key not a field moved into ``terms`` (the
+        config's task then checks the names)."""
+        names = {f.name for f in fields(cls)}
+        own = {k: v for k, v in data.items() if k not in names}
+        if not own:
+            return dict(data)
+        given = data.get("terms", {})
+        if not isinstance(given, Mapping):
+            return dict(data)  # refused by the dataclass, naming the key
+        out = {k: v for k, v in data.items() if k in names}
+        out["terms"] = {**given, **own}
+        return out
+
+    def weight(self, name: str) -> float:
+        """The weight of term ``name`` (a field, else ``terms[name]``, else 0)."""
+        if name in self.shipped_terms():
+            return float(getattr(self, name))
+        return float(self.terms.get(name, 0.0))
 
 
 @dataclass(frozen=True)
@@ -248,16 +296,17 @@ class SwarmConfig:
     neighbour is active, 0 when it has failed (and the central Gymnasium env appends
     every agent's flag); see ``perturbations``."""
     task: str = "navigation"
-    """What the swarm must do, one of :data:`~swarm_envs.tasks.TASKS`: ``"navigation"``
-    (gather at the goal), ``"informed"`` (the same, with only ``informed_fraction`` of
-    the agents observing the goal) or ``"mill"`` (reach the goal and circle it, on the
-    self-propelled social potential). Each has its registered id, and defaults that the
-    envs and :func:`load_swarm_config` apply beneath the given values
-    (:mod:`swarm_envs.tasks`)."""
+    """What the swarm must do: a registered task (:func:`~swarm_envs.tasks.task_names`),
+    the package's being ``"navigation"`` (gather at the goal), ``"informed"`` (the
+    same, with only ``informed_fraction`` of the agents observing the goal) and
+    ``"mill"`` (reach the goal and circle it, on the self-propelled social potential).
+    Each has its defaults, which the envs and :func:`load_swarm_config` apply beneath
+    the given values (:mod:`swarm_envs.tasks`; a user's own task registers there)."""
     informed_fraction: float | tuple[float, float] = 1.0
-    """Fraction of each swarm's agents that observe the goal (``task="informed"``), in
-    ``(0, 1]``, or a ``[low, high]`` range drawn per episode; ``f·N`` agents rounded to
-    the nearest (at least one), drawn per episode. Must stay 1 for the other tasks. (The
+    """Fraction of each swarm's agents that observe the goal (``task="informed"``, or a
+    task whose spec is ``informed``), in ``(0, 1]``, or a ``[low, high]`` range drawn per
+    episode; ``f·N`` agents rounded to the nearest (at least one), drawn per episode.
+    Must stay 1 for the other tasks. (The
     zone model's own ``zone.informed_fraction`` is another thing: the agents its
     passive physics steers to the goal with ``goal_in_physics``.)"""
     reward: RewardWeights = field(default_factory=RewardWeights)
@@ -387,9 +436,13 @@ class SwarmConfig:
                 )
 
     def _check_task(self, owner: str) -> None:
-        """The task and what it needs (:mod:`swarm_envs.tasks`)."""
-        if self.task not in TASKS:
-            raise ValueError(f"{owner}.task must be one of {TASKS}, got {self.task!r}")
+        """The task and what it needs (:mod:`swarm_envs.tasks`): its name, the informed
+        fraction, its own requirements, and reward weights for its terms only."""
+        try:
+            spec = task_spec(self.task)
+        except ValueError as err:
+            raise ValueError(f"{owner}.{err}") from None
+        object.__setattr__(self, "_task_spec", spec)  # resolved once per config
         fraction = check_ranged(
             owner,
             "informed_fraction",
@@ -400,24 +453,53 @@ class SwarmConfig:
             low_inclusive=False,
         )
         object.__setattr__(self, "informed_fraction", fraction)
-        if self.task != "informed" and fraction != 1.0:
+        if not spec.informed and fraction != 1.0:
             raise ValueError(
                 f"{owner}.informed_fraction applies to task='informed' "
                 f"(swarm_envs/SwarmInformed-v0) and must be 1 for task={self.task!r}, got "
                 f"{fraction!r}"
             )
+        self._check_reward(owner, spec)
+        reason = spec.check(self) if spec.check is not None else None
+        if reason is not None:
+            raise ValueError(f"{owner}.task={self.task!r} {reason}")
+
+    def _check_reward(self, owner: str, spec: TaskSpec) -> None:
+        """Weights for the task's terms only: an unknown name, or a weight on a shipped
+        term the task does not have, is refused naming the task's terms."""
+        terms = spec.term_names
+        listed = f"task {self.task!r} has the reward terms {', '.join(terms)}"
+        for name in self.reward.terms:
+            if name not in terms:
+                raise ValueError(f"unknown config key 'reward.{name}'; {listed}")
+        for name in RewardWeights.shipped_terms():
+            if name not in terms and getattr(self.reward, name) != 0:
+                raise ValueError(
+                    f"{owner}.reward.{name} = {getattr(self.reward, name)!r} weighs no term: "
+                    f"{listed} (its config defaults, tasks.task_config({self.task!r}), weigh "
+                    "those only)"
+                )
         if self.reward.mill > 0 and self.physics.alpha <= 0:
             raise ValueError(
                 f"{owner}.reward.mill rewards circling at the cruise speed of "
                 f"self-propulsion: it needs physics.alpha > 0, got {self.physics.alpha!r}"
             )
-        if self.task == "mill":
-            if self.dynamics != "social_potential" or self.physics.alpha <= 0:
-                raise ValueError(
-                    f"{owner}.task='mill' runs on the self-propelled social potential: it "
-                    f"needs dynamics='social_potential' and physics.alpha > 0, got "
-                    f"dynamics={self.dynamics!r}, physics.alpha={self.physics.alpha!r}"
-                )
+
+    @property
+    def task_spec(self) -> TaskSpec:
+        """The registered :class:`~swarm_envs.tasks.TaskSpec` of ``task``, as it was
+        when this config was built (looked up once)."""
+        return self.__dict__["_task_spec"]
+
+    def __getstate__(self) -> dict[str, Any]:
+        """The fields (a task's spec holds functions: it is looked up again on loading)."""
+        state = dict(self.__dict__)
+        state.pop("_task_spec", None)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        object.__setattr__(self, "_task_spec", task_spec(self.task))
 
     @property
     def passive_sink(self) -> bool:
@@ -433,8 +515,9 @@ class SwarmConfig:
 
     @property
     def informs_agents(self) -> bool:
-        """Whether the observation says who is informed (``task="informed"``)."""
-        return self.task == "informed"
+        """Whether only some agents observe the goal, drawn per episode, and the
+        observation says who (``task="informed"``; the task spec's ``informed``)."""
+        return self.task_spec.informed
 
     @property
     def start_radius(self) -> float:

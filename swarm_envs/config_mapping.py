@@ -59,13 +59,17 @@ def config_from_mapping(cls: type[T], data: Mapping[str, Any] | T, *, path: str 
     default: ``{"zone": {"r_o": 2}}`` changes only ``r_o`` of the zone section's
     default) or an instance. Unknown keys raise ``ValueError`` naming the dotted key and
     the allowed keys; a value the dataclass rejects is re-raised with its dotted key in
-    front.
+    front. A class with a ``from_config_mapping(data)`` classmethod reads its mapping
+    through it first (the reward weights gather a task's own terms so).
     """
     if isinstance(data, cls):
         return data
     if not isinstance(data, Mapping):
         where = path or cls.__name__
         raise ValueError(f"config section '{where}' must be a mapping, got {type(data).__name__}")
+    prepare = getattr(cls, "from_config_mapping", None)
+    if prepare is not None:
+        data = prepare(data)
     by_name = {f.name: f for f in fields(cls)}  # type: ignore[arg-type]
     names = set(by_name)
     hints = _field_types(cls)
@@ -82,6 +86,8 @@ def config_from_mapping(cls: type[T], data: Mapping[str, Any] | T, *, path: str 
             if isinstance(value, Mapping) and isinstance(default, tp):
                 # A partial section changes only the keys it names: the rest keep the
                 # field's default (e.g. ZoneParams.navigation()), not the class's.
+                prepare = getattr(tp, "from_config_mapping", None)
+                value = prepare(value) if prepare is not None else value
                 unknown = [k for k in value if k not in {f.name for f in fields(tp)}]
                 if not unknown:
                     value = {**{f.name: getattr(default, f.name) for f in fields(tp)}, **value}
@@ -134,6 +140,8 @@ def as_dict(obj: Any) -> Any:
     """A dataclass config as plain, YAML/JSON-ready Python data (non-finite as strings)."""
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         return {f.name: as_dict(getattr(obj, f.name)) for f in fields(obj)}
+    if isinstance(obj, Mapping):
+        return {key: as_dict(value) for key, value in obj.items()}
     if isinstance(obj, float) and not math.isfinite(obj):
         return str(obj)
     if isinstance(obj, (list, tuple)):

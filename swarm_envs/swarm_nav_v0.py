@@ -77,16 +77,22 @@ def for_task(task: str, module: str, kwargs: dict[str, Any]) -> dict[str, Any]:
     such as ``swarm_informed_v0``); another ``task`` given raises :class:`ValueError`."""
     given = kwargs.get("task", task)
     if given != task:
+        from swarm_envs.tasks import task_names, task_spec
+
+        modules = [task_spec(n).module for n in task_names()]
         raise ValueError(
             f"{module} runs task={task!r}, got task={given!r}; each task has its module "
-            "(swarm_nav_v0, swarm_informed_v0, swarm_mill_v0)"
+            f"({', '.join(m.rsplit('.', 1)[-1] for m in modules if m)}), and "
+            "swarm_nav_v0 runs any task with task=..."
         )
     return {**kwargs, "task": task}
 
 
 def task_functions(task: str, module: str) -> tuple[Callable[..., Any], ...]:
     """``(parallel_env, raw_env, env, vec_env)`` of the PettingZoo module ``module`` of
-    ``task``: this module's functions with ``task`` set (:func:`for_task`)."""
+    ``task``: this module's functions with ``task`` set (:func:`for_task`). A user's
+    task file becomes such a module with
+    ``parallel_env, raw_env, env, vec_env = task_functions("my_task", __name__)``."""
 
     def task_parallel_env(**kwargs: Any) -> SwarmNavParallelEnv:
         return parallel_env(**for_task(task, module, kwargs))

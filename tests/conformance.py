@@ -31,11 +31,11 @@ from swarm_envs.config import DYNAMICS, INTEGRATORS, SwarmConfig, config_from_ma
 from swarm_envs.envs import backends
 from swarm_envs.envs.core import SwarmNavCore
 from swarm_envs.envs.perturbed import PerturbedCore
-from swarm_envs.envs.task import STAT_KEYS, ranked_neighbors
+from swarm_envs.envs.task import ranked_neighbors, stat_keys
 from swarm_envs.envs.task.agent_status import ABSENT, ACTIVE, FAILED, FROZEN, masks
 from swarm_envs.envs.task.observation import observation_size
 from swarm_envs.perturbations import FAILURE_MODES, Perturbations
-from swarm_envs.tasks import TASKS
+from swarm_envs.tasks import TASKS, task_spec
 
 #: Tolerances against the float64 reference, per state dtype (float64: round-off).
 TOLERANCE = {
@@ -153,8 +153,13 @@ def perturbation_strategies() -> dict[str, Any]:
     }
 
 
-def field_strategies(dynamics: tuple[str, ...] = ("social_potential",)) -> dict[str, Any]:
+def field_strategies(
+    dynamics: tuple[str, ...] = ("social_potential",), tasks: tuple[str, ...] = TASKS
+) -> dict[str, Any]:
     """A strategy per drawn :class:`SwarmConfig` field (a dict of strategies for a section).
+
+    ``tasks``: the registered tasks drawn (the package's by default; a user's own task
+    is checked by naming it, its own reward terms' weights drawn by :func:`configs`).
 
     The physics stays in ranges where a few dozen steps of the explicit integration stay
     finite and smooth (stiff settings are for the step-size control, not for a
@@ -189,7 +194,7 @@ def field_strategies(dynamics: tuple[str, ...] = ("social_potential",)) -> dict[
         "obs_velocity_scale": _real(0.2, 5.0),
         "observe_status": st.booleans(),
         "perturbations": perturbation_strategies(),
-        "task": st.sampled_from(TASKS),
+        "task": st.sampled_from(tasks),
         "informed_fraction": _ranged(_real(0.05, 1.0)),
         "reward": {
             name: weight
@@ -222,8 +227,13 @@ _MASK_DEFAULTS = {"failure_mode": "passive", "absent_fraction": 0.0, "join_fract
 
 
 @st.composite
-def configs(draw: Any, dynamics: tuple[str, ...] = ("social_potential",)) -> SwarmConfig:
+def configs(
+    draw: Any, dynamics: tuple[str, ...] = ("social_potential",), tasks: tuple[str, ...] = TASKS
+) -> SwarmConfig:
     """A random valid config: every field of :func:`field_strategies` drawn.
+
+    For a task of ``tasks`` without some shipped reward term that term weighs 0, and its
+    own terms' weights are drawn too.
 
     Roughly one config in :data:`PERTURBED_ONE_IN` is perturbed (``observe_status`` and
     the ``perturbations`` section drawn); the others perturb nothing, so the draws share
@@ -231,7 +241,7 @@ def configs(draw: Any, dynamics: tuple[str, ...] = ("social_potential",)) -> Swa
     """
     perturb = draw(st.integers(0, PERTURBED_ONE_IN - 1)) == PERTURBED_ONE_IN - 1
     fields: dict[str, Any] = {}
-    for name, strategy in field_strategies(dynamics).items():
+    for name, strategy in field_strategies(dynamics, tasks).items():
         if name in PERTURBED_FIELDS and not perturb:
             continue
         if isinstance(strategy, dict):
@@ -244,8 +254,16 @@ def configs(draw: Any, dynamics: tuple[str, ...] = ("social_potential",)) -> Swa
         fields["task"] = "navigation"  # the mill is a task of the social potential
     if fields["task"] == "mill" and physics["alpha"] == 0:
         physics["alpha"] = 0.5  # and of its self-propelled form
-    if fields["task"] != "informed":
+    spec = task_spec(fields["task"])
+    if not spec.informed:
         fields["informed_fraction"] = 1.0  # the fraction of the informed task only
+    for name in fields["reward"]:
+        if name not in spec.term_names:
+            fields["reward"][name] = 0.0  # a term this task does not have
+    weight = field_strategies()["reward"]["progress"]
+    for name in spec.term_names:
+        if name not in fields["reward"]:
+            fields["reward"][name] = draw(weight)  # the task's own term
     if physics["alpha"] == 0:
         fields["reward"]["mill"] = 0.0  # the mill's order needs a cruise speed
     if physics["alpha"] > 0:  # self-propulsion needs a Rayleigh coefficient
@@ -372,7 +390,7 @@ def compare(ours_core: Any, ref_core: Any, seed: int, tol: dict, margin: float) 
             break
         obs, ref_obs = ours_core.observe(), ref_core.observe()
         problems += _obs_mismatch(obs, ref_obs, cfg, tol, step)
-        problems += _stats_mismatch(ours_core.stats(), ref_core.stats(), tol, step)
+        problems += _stats_mismatch(ours_core.stats(), ref_core.stats(), tol, step, cfg)
         if problems or step == STEPS:
             break
         a = actions.uniform(-1.2, 1.2, shape)
@@ -382,7 +400,7 @@ def compare(ours_core: Any, ref_core: Any, seed: int, tol: dict, margin: float) 
             problems.append(f"step {step}: reward dtype/shape {ours[0].dtype} {ours[0].shape}")
         if _undecidable(ref_core, margin) is not None:
             break
-        problems += _step_mismatch(ours, ref, tol, step)
+        problems += _step_mismatch(ours, ref, tol, step, cfg)
         if problems:
             break
         ended = ref[1] | ref[2]
@@ -393,20 +411,28 @@ def compare(ours_core: Any, ref_core: Any, seed: int, tol: dict, margin: float) 
 
 
 def observation_features(cfg: SwarmConfig) -> list[str]:
-    """The name of every observation column (the shared layout)."""
+    """The name of every observation column (the shared layout; a task's features by
+    name, with ``.c`` for the c-th entry of a wider one)."""
     d, k = cfg.dim, cfg.n_neighbors
     axes = "xyz"[:d]
     names = [f"goal_offset.{a}" for a in axes] + [f"velocity.{a}" for a in axes]
-    if cfg.informs_agents:
-        names.append("informed")
+    features = cfg.task_spec.features
+
+    def columns(f: Any) -> list[str]:
+        width = f.size(cfg)
+        return [f.name] if width == 1 else [f"{f.name}.{c}" for c in range(width)]
+
+    for f in features:
+        names += columns(f)
     for s in range(k):
         names += [f"neighbor{s}.offset.{a}" for a in axes]
         names += [f"neighbor{s}.relative_velocity.{a}" for a in axes]
         names.append(f"neighbor{s}.mask")
         if cfg.observe_status:
             names.append(f"neighbor{s}.status")
-        if cfg.informs_agents:
-            names.append(f"neighbor{s}.informed")
+        for f in features:
+            if f.neighbors:
+                names += [f"neighbor{s}.{c}" for c in columns(f)]
     assert len(names) == observation_size(cfg)
     return names
 
@@ -419,7 +445,7 @@ def _obs_mismatch(obs: np.ndarray, ref: np.ndarray, cfg: SwarmConfig, tol: dict,
     return [f"step {step}: observation {names[i]}" for i in np.flatnonzero(bad)]
 
 
-def _step_mismatch(ours: tuple, ref: tuple, tol: dict, step: int) -> list[str]:
+def _step_mismatch(ours: tuple, ref: tuple, tol: dict, step: int, cfg: Any) -> list[str]:
     """Where one step's ``(reward, terminated, truncated, stats)`` differ from the
     reference's."""
     problems = []
@@ -428,14 +454,15 @@ def _step_mismatch(ours: tuple, ref: tuple, tol: dict, step: int) -> list[str]:
     for name, i in (("terminated", 1), ("truncated", 2)):
         if not np.array_equal(ours[i], ref[i]):
             problems.append(f"step {step}: {name} {ours[i]} != {ref[i]}")
-    return problems + _stats_mismatch(ours[3], ref[3], tol, step)
+    return problems + _stats_mismatch(ours[3], ref[3], tol, step, cfg)
 
 
-def _stats_mismatch(stats: dict, ref: dict, tol: dict, step: int) -> list[str]:
-    if list(stats) != list(STAT_KEYS):
+def _stats_mismatch(stats: dict, ref: dict, tol: dict, step: int, cfg: Any) -> list[str]:
+    keys = stat_keys(cfg)  # STAT_KEYS, then the task's own statistics
+    if list(stats) != list(keys) or list(ref) != list(keys):
         return [f"step {step}: statistics {list(stats)}"]
     out = []
-    for key in STAT_KEYS:
+    for key in keys:
         scale = max(1.0, float(np.abs(ref[key]).max()))
         if stats[key].dtype != ref[key].dtype and key in (
             "fraction_arrived",
@@ -537,7 +564,7 @@ def compare_statuses(
         if _undecidable(ref_core, margin) is not None:
             break
         problems += _obs_mismatch(ours_core.observe(), ref_core.observe(), cfg, tol, step)
-        problems += _stats_mismatch(ours_core.stats(), ref_core.stats(), tol, step)
+        problems += _stats_mismatch(ours_core.stats(), ref_core.stats(), tol, step, cfg)
         if problems or step == STATUS_STEPS:
             break
         a = actions.uniform(-1.2, 1.2, shape) * (status == ACTIVE)[..., None]
@@ -545,7 +572,7 @@ def compare_statuses(
         ref = ref_core.step(a)
         if _undecidable(ref_core, margin) is not None:
             break
-        problems += _step_mismatch(ours, ref, tol, step)
+        problems += _step_mismatch(ours, ref, tol, step, cfg)
         if problems:
             break
         ended = ref[1] | ref[2]

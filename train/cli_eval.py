@@ -107,6 +107,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--env", default=ENV_ID, help=f"Gymnasium env id (default {ENV_ID})")
     p.add_argument(
+        "--plugin",
+        action="append",
+        default=[],
+        metavar="PATH",
+        help="a .py file or module to import first: a user's own task or model "
+        "(swarm_envs.plugins); repeatable",
+    )
+    p.add_argument(
         "--config",
         default=None,
         help="env YAML, e.g. configs/env/paper_navigation.yaml (default: the env's defaults)",
@@ -377,6 +385,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _main(args: Any) -> int:
+    from swarm_envs.plugins import load_plugins
     from train.evaluate.robustness import ROBUSTNESS_FILES
     from train.evaluate.transfer import TRANSFER_FILES
     from train.outdir import EVAL_FILES, OutDirError, check_out_dir, prepare_out_dir
@@ -392,6 +401,10 @@ def _main(args: Any) -> int:
         check_device("--device", args.device)
         if args.torch_threads < 0:
             raise CliError(f"--torch-threads must be >= 0, got {args.torch_threads}")
+        try:
+            load_plugins(args.plugin)
+        except ValueError as err:
+            raise CliError(str(err)) from None
         overrides = _parse_overrides(args.overrides, args.max_steps)
         sweeps = robustness_sweeps(args)
         if args.n_agents is not None and "n_agents" in overrides:

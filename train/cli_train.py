@@ -88,6 +88,14 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="rllib: CPUs of the local Ray (default: the config's num_cpus, else all)",
     )
+    parser.add_argument(
+        "--plugin",
+        action="append",
+        default=[],
+        metavar="PATH",
+        help="a .py file or module to import first: a user's own task or model "
+        "(swarm_envs.plugins); repeatable, added to the config's plugins",
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("overrides", nargs="*", help="key=value overrides (dotted keys)")
     return parser
@@ -117,7 +125,8 @@ def _main(args: argparse.Namespace) -> int:
                 return _rllib(args, out)
             if args.address is not None or args.num_cpus is not None:
                 raise CliError("--address and --num-cpus apply only to --engine rllib")
-            tc = load_train_config(args.config, parse_overrides(args.overrides))
+            overrides = parse_overrides(args.overrides)
+            tc = load_train_config(args.config, overrides, tuple(args.plugin))
             from train.outdir import check_out_dir
 
             check_out_dir(out, overwrite=args.overwrite)
@@ -184,6 +193,9 @@ def _rllib(args: argparse.Namespace, out: Path) -> int:
     from train.rllib.config import load_rllib_config
 
     try:
+        from swarm_envs.plugins import load_plugins
+
+        load_plugins(args.plugin)
         rc = load_rllib_config(args.config, parse_overrides(args.overrides))
         check_address(args.address)
         check_num_cpus(args.num_cpus)

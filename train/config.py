@@ -85,6 +85,8 @@ class RunConfig:
         """Plain data for YAML (saved beside the model or checkpoint)."""
         out = {f.name: getattr(self, f.name) for f in fields(self)}  # type: ignore[arg-type]
         out["net_arch"] = list(self.net_arch)
+        if hasattr(self, "plugins"):
+            out["plugins"] = list(self.plugins)
         out["env"] = dict(self.env)
         out["hyperparams"] = dict(self.hyperparams)
         return out
@@ -107,6 +109,10 @@ class TrainConfig(RunConfig):
     """Path of an env YAML (``configs/env/...``), or null for the defaults."""
     env: dict = field(default_factory=dict)
     """Overrides of :class:`swarm_envs.config.SwarmConfig` keys (e.g. ``n_agents``)."""
+    plugins: tuple[str, ...] = ()
+    """Python files or module names imported before the env config is read: a user's
+    own tasks and models (:mod:`swarm_envs.plugins`). A relative file path is read from
+    the working folder, else from the train config's folder."""
     n_swarms: int = 8
     """Parallel swarms (shared mode: batch of the VecEnv; central: number of envs)."""
     total_timesteps: int = 100_000
@@ -195,6 +201,7 @@ class TrainConfig(RunConfig):
             object.__setattr__(self, "torch_threads", threads)
         object.__setattr__(self, "net_arch", net_arch_tuple(self.net_arch))
         object.__setattr__(self, "env", env_overrides(self.env))
+        object.__setattr__(self, "plugins", load_run_plugins(self.plugins))
         if not isinstance(self.hyperparams, Mapping):
             raise ValueError(f"hyperparams must be a mapping, got {self.hyperparams!r}")
         allowed = set(inspect.signature(cls.__init__).parameters) - RESERVED - {"self"}
@@ -224,6 +231,30 @@ class TrainConfig(RunConfig):
     def n_slots(self) -> int:
         """Env slots SB3 sees: ``n_swarms × n_agents`` (shared) or ``n_swarms`` (central)."""
         return self.n_swarms * (self.swarm_config().n_agents if self.mode == "shared" else 1)
+
+
+def load_run_plugins(plugins: Any, base: str | Path | None = None) -> tuple[str, ...]:
+    """Import each plugin of ``plugins`` (a list of files or module names;
+    :func:`~swarm_envs.plugins.load_plugin`) and return them as a tuple, a file found
+    relative to ``base`` (a train config's folder) as its absolute path.
+
+    Raises:
+        ValueError: ``plugins`` is not a list of strings, or a plugin cannot be loaded
+            (naming it).
+    """
+    from swarm_envs.plugins import load_plugin
+
+    if isinstance(plugins, str) or not isinstance(plugins, (list, tuple)):
+        raise ValueError(f"plugins must be a list of .py files or module names, got {plugins!r}")
+    out = []
+    for ref in plugins:
+        if not isinstance(ref, str):
+            raise ValueError(f"plugins must be a list of .py files or module names, got {ref!r}")
+        module = load_plugin(ref, base)
+        path = getattr(module, "__file__", None)
+        relative = base is not None and not Path(ref).is_file() and path is not None
+        out.append(str(Path(path).resolve()) if relative else ref)
+    return tuple(out)
 
 
 def net_arch_tuple(net_arch: Any) -> tuple[int, ...]:
@@ -340,12 +371,24 @@ def parse_overrides(items: list[str]) -> dict[str, Any]:
 
 
 def load_train_config(
-    path: str | Path | None, overrides: Mapping[str, Any] | None = None
+    path: str | Path | None,
+    overrides: Mapping[str, Any] | None = None,
+    plugins: tuple[str, ...] = (),
 ) -> TrainConfig:
-    """Load ``configs/train/<name>.yaml`` and merge ``overrides`` (nested dicts merge)."""
+    """Load ``configs/train/<name>.yaml`` and merge ``overrides`` (nested dicts merge).
+
+    ``plugins`` (files or module names, ``swarm-train --plugin``) are loaded first and
+    added to the file's ``plugins``, whose relative paths may be relative to the file.
+    """
     data: dict[str, Any] = {}
+    head = load_run_plugins(list(plugins))
     if path is not None:
-        data = read_yaml_mapping(resolve_config_path(path, "train", "train config"), "train config")
+        found = resolve_config_path(path, "train", "train config")
+        data = read_yaml_mapping(found, "train config")
+        if "plugins" in data:
+            data["plugins"] = load_run_plugins(data["plugins"], found.parent)
+    if head:
+        data["plugins"] = (*head, *[p for p in data.get("plugins", ()) if p not in head])
     return train_config_from_mapping(merge_overrides(data, overrides))
 
 

@@ -192,7 +192,16 @@ def check_dtype(dtype: Any) -> np.dtype:
 def draw_starts(
     cfg: Any, rng: np.random.Generator, n: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``n`` new starts ``(x (n, N, d), v (n, N, d), goal (n, d))``, float64.
+    """``n`` new starts ``(x (n, N, d), v (n, N, d), goal (n, d))``, float64: the task's
+    start law (its spec's ``start``) where it has one, else :func:`uniform_starts`."""
+    law = cfg.task_spec.start
+    return uniform_starts(cfg, rng, n) if law is None else law(cfg, rng, n)
+
+
+def uniform_starts(
+    cfg: Any, rng: np.random.Generator, n: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The default start law: ``n`` starts ``(x, v, goal)``, float64.
 
     Agents uniform in a disc (ball) of ``cfg.start_radius`` around the origin
     (``init_radius``, or the radius of ``init_density``), velocities uniform in a disc of
@@ -212,12 +221,14 @@ def draw_starts(
     return x, v, bearing * dist
 
 
-def wide_dtypes(dtype: np.dtype) -> dict[str, np.dtype]:
-    """The dtype of each statistic a core reports: float64 for the ``wide`` ones
-    (counts, fractions, flags), ``dtype`` for the rest."""
-    from swarm_envs.envs.task.statistics import STATISTICS
+def wide_dtypes(dtype: np.dtype, cfg: Any = None) -> dict[str, np.dtype]:
+    """The dtype of each statistic a core reports (those of ``cfg``'s task; without
+    ``cfg`` the common ones): float64 for the ``wide`` ones (counts, fractions, flags),
+    ``dtype`` for the rest."""
+    from swarm_envs.envs.task.statistics import task_statistics
 
-    return {s.name: np.dtype(np.float64) if s.wide else np.dtype(dtype) for s in STATISTICS}
+    wide, narrow = np.dtype(np.float64), np.dtype(dtype)
+    return {s.name: wide if s.wide else narrow for s in task_statistics(cfg)}
 
 
 class StatisticColumns:

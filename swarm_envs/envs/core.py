@@ -102,7 +102,7 @@ class SwarmNavCore:
         self.dynamics = make_dynamics(cfg, self.batch, self.dtype)
         self._stiffness = StiffnessWatch(cfg, self.batch)
         self._energy_bound = energy_bound(cfg)  # the unstable guard's (common.energy_bound)
-        self._wide = wide_dtypes(self.dtype)
+        self._wide = wide_dtypes(self.dtype, cfg)
         self._stats = self._empty_stats()
         self._prev = self._empty_stats()  # the previous step's statistics
         self._start = self._empty_stats()  # each episode's first statistics

@@ -1,7 +1,9 @@
 """SwarmNav: goal-sink navigation of a social-potential swarm (PettingZoo and Gymnasium).
 
-Both classes are thin adapters over :class:`swarm_envs.envs.core.SwarmNavCore` with one
-swarm (B = 1). The shared docstring below follows Gymnasium's sections.
+Both classes are adapters over one core (:func:`~swarm_envs.envs.backends.make_core`)
+with one swarm (B = 1). The shared docstring below follows Gymnasium's sections; its
+reward table, statistics and episode ends are made from the task registry's
+declarations (:func:`env_doc_sections`), so that they are written once.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ from swarm_envs.envs.task.agent_status import ACTIVE
 
 RENDER_MODES = ("rgb_array", "human")
 
-SWARM_NAV_DOC = """
+_SWARM_NAV_DOC = """
     ## Description
 
     A swarm of ``N`` agents obeys the social potential model of Mabrouk & McInnes
@@ -71,10 +73,12 @@ SWARM_NAV_DOC = """
     - ``"mill"`` (``swarm_envs/SwarmMill-v0``): reach the goal and circle it, on the
       self-propelled social potential (``physics.alpha > 0``: the friction becomes
       the Rayleigh term ``(α − β|v|²) v``, cruise speed ``v₀ = √(α/β)``; default α = β
-      = 0.5, ``v₀ = 1``) with the sink acting passively (``goal_in_physics``). The reward adds
-      ``w_mill · mill_order`` every step; the episode never terminates (it is truncated
-      at ``max_steps``, 300 by default), and ``success`` reports each step whether the
-      members have arrived and circle the goal at ``mill_order ≥ 0.5``.
+      = 0.5, ``v₀ = 1``) with the sink acting passively (``goal_in_physics``); it is
+      rewarded by the ``mill`` term and holds its success (below).
+
+    A task of one's own is a ``swarm_envs.tasks.TaskSpec`` registered with
+    ``swarm_envs.tasks.register_task`` (docs/tasks.md): ``task="<its name>"`` then runs
+    it here, with its reward terms, statistics and observation features.
 
     ## Action Space
 
@@ -118,17 +122,7 @@ SWARM_NAV_DOC = """
 
     ## Rewards
 
-    Cooperative: every agent receives the same reward each step,
-
-    ``r = w_progress (D_{t−1} − D_t)/D_0 + w_arrival (A_t − A_{t−1}) + w_success 1[success]
-    − w_collision C_t/N − w_effort mean_i |a_i|² − w_time + w_mill M_t``
-
-    with ``D`` the mean agent-to-goal distance (``D_0`` at the start), ``A`` the fraction
-    of agents within ``goal_radius``, ``C_t`` the number of pairs closer than
-    ``collision_radius``, ``M_t`` the ``mill_order`` (the tangential speed about the
-    goal of the agents within the goal radius, ``|Σ_i r̂_ig × v_i|/N``, over ``v₀``, at
-    most 1). Weights: ``reward`` in the config (defaults 10, 1, 5, 0.5, 0.01, 0.05, 0;
-    the mill task: success 0, time 0, mill 0.1).
+    {rewards}
 
     ## Starting State
 
@@ -138,14 +132,13 @@ SWARM_NAV_DOC = """
 
     ## Episode End
 
-    Navigation and informed: terminated (success) when at least ``success_fraction``
-    of the swarm's members
-    (every agent, unless ``perturbations`` fail some: then the agents that still move,
-    active or failed passively) are within ``goal_radius`` of the goal at once;
-    truncated after ``max_steps`` steps (``max_cycles`` in PettingZoo). The mill task
-    never terminates: it is truncated after ``max_steps``. ``gym.make``
-    adds no ``TimeLimit``: ``max_steps`` is the only episode length (a
-    ``max_episode_steps`` given to ``gym.make`` adds one).
+    {episode_end}
+
+    Truncated after ``max_steps`` steps (``max_cycles`` in PettingZoo) where not
+    terminated. The members are every agent, unless ``perturbations`` fail some: then
+    the agents that still move (active, or failed passively). ``gym.make`` adds no
+    ``TimeLimit``: ``max_steps`` is the only episode length (a ``max_episode_steps``
+    given to ``gym.make`` adds one).
 
     ## Arguments
 
@@ -168,14 +161,13 @@ SWARM_NAV_DOC = """
 
     ## Info
 
-    Per agent in PettingZoo, one dict in Gymnasium: ``polarization``,
-    ``angular_momentum`` (unit-heading forms), ``expanse``,
-    ``nearest_neighbor_distance``, ``energy`` (eq. 16 with the sink; ``L`` for the
-    Lagrangian model, kinetic energy for the zone and piecewise models), ``fraction_arrived``,
-    ``collisions`` (this step), ``centroid_distance``, ``mean_goal_distance``,
-    ``goal_angular_momentum`` (``|Σ_i (r_i − r_g) × v_i|/N``, the true angular momentum
-    about the goal), ``mill_speed`` and ``mill_order`` (the mill's tangential speed and
-    its fraction of ``v₀``), ``success``, ``substeps``, ``unstable`` (Python floats). With
+    Per agent in PettingZoo, one dict in Gymnasium, as Python floats: the statistics
+    (over the members; a task's own statistics follow these)
+
+    {statistics}
+
+    ``energy`` is eq. 16 with the sink for the social potential, ``L`` for the
+    Lagrangian model and the kinetic energy for the zone and piecewise models. With
     ``info_kinematics=True`` also ``pos`` (``r_i``), ``vel``
     (``v_i``) and ``goal_offset`` (``r_g − r_i``), float32 in world units (unscaled,
     unclipped): ``(d,)`` in each agent's info in PettingZoo, ``(N, d)`` in Gymnasium —
@@ -208,6 +200,57 @@ SWARM_NAV_DOC = """
       and mill tasks (their own ids) added without changing the default
       social-potential navigation env.
 """
+
+
+def _number(value: float) -> str:
+    return f"{value:g}"
+
+
+def env_doc_sections() -> dict[str, str]:
+    """The env docstring's generated sections, from the package's tasks
+    (:mod:`~swarm_envs.envs.task.shipped`): ``rewards`` (every reward term's sign, value and default
+    weight per task), ``statistics`` (every statistic of ``info``) and ``episode_end``
+    (each task's success and whether it terminates)."""
+    from swarm_envs.envs.task.shipped import SHIPPED_TASKS
+    from swarm_envs.envs.task.statistics import STATISTICS
+
+    specs = SHIPPED_TASKS
+    terms = list(dict.fromkeys(t.name for spec in specs for t in spec.reward_terms))
+    by_name = {t.name: t for spec in specs for t in spec.reward_terms}
+    weights = [spec.reward_defaults() for spec in specs]
+    rows = [
+        "| term | sign | value | " + " | ".join(f"``{s.name}``" for s in specs) + " |",
+        "|---|---|---|" + "---|" * len(specs),
+    ]
+    for name in terms:
+        term = by_name[name]
+        sign = "+" if term.sign > 0 else "−"
+        cells = " | ".join(_number(w[name]) for w in weights)
+        rows.append(f"| ``{name}`` | {sign} | {term.doc} | {cells} |")
+    rewards = (
+        "Cooperative: every agent receives its swarm's reward each step, ``r = Σ sign · "
+        "w · value`` over the task's terms, with the weights ``w`` of ``reward`` in the "
+        "config (by term name; the columns: each task's defaults)\n\n" + "\n".join(rows)
+    )
+    statistics = "\n".join(f"- ``{s.name}``: {s.doc}" for s in STATISTICS)
+    ends = []
+    for spec in specs:
+        success = spec.success_doc or (
+            "at least ``success_fraction`` of the members are within ``goal_radius`` of "
+            "the goal at once"
+        )
+        how = "terminated on success" if spec.terminates_on_success else "never terminated"
+        ends.append(f"- ``{spec.name}``: {how}; success: {success}.")
+    return {"rewards": rewards, "statistics": statistics, "episode_end": "\n".join(ends)}
+
+
+def _indented(text: str) -> str:
+    return text.replace("\n", "\n    ")
+
+
+SWARM_NAV_DOC = _SWARM_NAV_DOC
+for _key, _text in env_doc_sections().items():
+    SWARM_NAV_DOC = SWARM_NAV_DOC.replace("{" + _key + "}", _indented(_text))
 
 
 def make_config(

@@ -220,6 +220,8 @@ class TorchSwarmNavCore(SubstepControl, StatusControl, ResetControl):
             return f"supports integrator='semi_implicit_euler' only, got {cfg.integrator!r}"
         if cfg.informs_agents:
             return "does not write the informed agents' observation (task='informed')"
+        if cfg.task_spec.statistics:
+            return f"does not carry task {cfg.task!r}'s own statistics"
         return None
 
     def _build(

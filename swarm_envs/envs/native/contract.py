@@ -109,8 +109,8 @@ HOST_CONFIG_FIELDS = {
     "on_unstable": "the guard after the step runs in Python (it raises, or undoes the step)",
     "perturbations": "drawn and applied in Python (PerturbedCore: the schedule, the noise, "
     "the dropout); the agents' statuses reach the kernel as an array (set_status)",
-    "task": "navigation and mill (termination and the mill's success in Python); "
-    "'informed' refused (checked)",
+    "task": "the reward, termination, starts and a task's own success rule in Python; "
+    "informed agents, a task's own statistics and observation features refused (checked)",
     "informed_fraction": "task='informed' only, which is refused",
 }
 
@@ -291,6 +291,11 @@ def unsupported(cfg: SwarmConfig, kernel: KernelInfo) -> str | None:
         return f"runs on the CPU only, got device={cfg.device!r}"
     if cfg.informs_agents:
         return "does not write the informed agents' observation (task='informed')"
+    if cfg.task_spec.statistics:
+        return f"does not compute task {cfg.task!r}'s own statistics"
+    if cfg.task_spec.features:
+        features = ", ".join(f.name for f in cfg.task_spec.features)
+        return f"does not write task {cfg.task!r}'s observation features ({features})"
     known = set(KERNEL_CONFIG_FIELDS) | set(HOST_CONFIG_FIELDS)
     for f in dataclasses.fields(SwarmConfig):
         if f.name not in known:

@@ -179,7 +179,7 @@ class NativeSwarmNavCore:
         self._bind()
         # The statistics the kernel does not write, and the task's success where it is
         # not the kernel's (arrival alone): evaluated on the state by their definitions.
-        own_success = cfg.task != "mill"
+        own_success = cfg.task_spec.success is None
         # (Their indices into STATISTICS: the core pickles, the definitions need not.)
         self._extra = tuple(
             i

@@ -1,9 +1,10 @@
 """When an episode ends, defined once for every core.
 
-Navigation (with or without informed agents) terminates on success: the swarm has
-gathered at the goal. The mill task has no end state to reach, only one to hold: it
-never terminates, and ``success`` reports each step whether the swarm mills there.
-Every task truncates after ``max_steps`` steps (where it has not terminated).
+A task terminates on success (its spec's ``terminates_on_success``): navigation, with
+or without informed agents, ends once the swarm has gathered at the goal. A task with
+no end state to reach, only one to hold, never terminates: the mill's ``success``
+reports each step whether the swarm mills there. Every task truncates after
+``max_steps`` steps (where it has not terminated).
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ def episode_end(task: Any, success: np.ndarray, t: np.ndarray) -> tuple[np.ndarr
     """
     success = np.asarray(success, dtype=bool)
     late = np.asarray(t) >= task.max_steps
-    if task.task == "mill":
+    if not task.task_spec.terminates_on_success:
         return np.zeros_like(success), late
     return success, late & ~success
 

@@ -9,7 +9,9 @@ statistics come from :mod:`swarm_envs.metrics` (``docs/models.md`` §2).
 
 Adding a statistic is one entry in :data:`STATISTICS`; every core then reports it in
 ``info`` (the C step computes the ones it knows and leaves the others to these
-definitions, evaluated on its state).
+definitions, evaluated on its state). A task's own statistics
+(:class:`~swarm_envs.tasks.TaskSpec` ``statistics``) follow the common ones
+(:func:`task_statistics`), and its success rule is the ``success`` statistic.
 """
 
 from __future__ import annotations
@@ -117,7 +119,9 @@ def _centroid_distance(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
     return xp.norm(centre - f.goal)
 
 
-def _success(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
+def arrival_success(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
+    """1.0 where at least ``success_fraction`` of the members are within the arrival
+    radius of the goal, else 0.0 (the default success rule of a task)."""
     if f.members is None:
         need = success_count(task.n_agents, task.success_fraction)
         return xp.astype(_arrived_count(f, task, xp) >= need, f.goal_distance)
@@ -158,13 +162,19 @@ def _mill_order(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
     return xp.clip(_mill_speed(f, task, xp) / v0, None, 1.0)
 
 
-def _task_success(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
-    """:func:`_success`; in the mill task, while the members within the arrival radius
-    also circle the goal at ``mill_order ≥ MILL_SUCCESS_SPEED``."""
-    arrived = _success(f, task, xp)
-    if getattr(task, "task", "navigation") != "mill":
-        return arrived
+def mill_success(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
+    """The mill task's success: :func:`arrival_success`, while the members within the
+    arrival radius also circle the goal at ``mill_order ≥ MILL_SUCCESS_SPEED``."""
+    arrived = arrival_success(f, task, xp)
     return arrived * xp.astype(_mill_order(f, task, xp) >= MILL_SUCCESS_SPEED, arrived)
+
+
+def _task_success(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
+    """The success rule of ``task``'s spec; :func:`arrival_success` where it has none
+    (or ``task`` is not a config with a task)."""
+    spec = getattr(task, "task_spec", None)
+    rule = spec.success if spec is not None else None
+    return (rule or arrival_success)(f, task, xp)
 
 
 def _substeps(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
@@ -238,8 +248,8 @@ STATISTICS: tuple[Statistic, ...] = (
     ),
     Statistic(
         "success",
-        "1 when at least success_fraction of the members have arrived (the mill task: "
-        f"and mill_order ≥ {MILL_SUCCESS_SPEED:g})",
+        "1 when the task succeeds: by default when at least success_fraction of the "
+        "members have arrived (each task's rule: its spec's success_doc)",
         _task_success,
         wide=True,
         pairwise=False,
@@ -258,10 +268,23 @@ STATISTICS: tuple[Statistic, ...] = (
     ),
 )
 
-#: The statistics' names, in the order of :data:`STATISTICS`.
+#: The common statistics' names, in the order of :data:`STATISTICS`.
 STAT_KEYS: tuple[str, ...] = tuple(s.name for s in STATISTICS)
 
 
+def task_statistics(task: Any) -> tuple[Statistic, ...]:
+    """Every statistic a config reports: :data:`STATISTICS`, then its task's own."""
+    spec = getattr(task, "task_spec", None)
+    return STATISTICS if spec is None or not spec.statistics else STATISTICS + spec.statistics
+
+
+def stat_keys(task: Any) -> tuple[str, ...]:
+    """The names of :func:`task_statistics`, in order (``STAT_KEYS`` for the package's
+    tasks)."""
+    return tuple(s.name for s in task_statistics(task))
+
+
 def statistics(frame: Frame, task: Any, xp: ArrayNamespace) -> dict[str, Array]:
-    """Every statistic of :data:`STATISTICS` for ``frame``, as ``{name: (B,)}``."""
-    return {s.name: s.value(frame, task, xp) for s in STATISTICS}
+    """Every statistic of ``task`` (:func:`task_statistics`) for ``frame``, as
+    ``{name: (B,)}``."""
+    return {s.name: s.value(frame, task, xp) for s in task_statistics(task)}
