@@ -134,6 +134,8 @@ def as_dict(obj: Any) -> Any:
     """A dataclass config as plain, YAML/JSON-ready Python data (non-finite as strings)."""
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         return {f.name: as_dict(getattr(obj, f.name)) for f in fields(obj)}
+    if isinstance(obj, Mapping):
+        return {key: as_dict(value) for key, value in obj.items()}
     if isinstance(obj, float) and not math.isfinite(obj):
         return str(obj)
     if isinstance(obj, (list, tuple)):
