@@ -36,11 +36,12 @@ A model of one's own is a parameter class, a simulator, an adapter and one call 
 
 >>> model_spec("zone").params.__name__, model_spec("zone").section
 ('ZoneParams', 'zone')
->>> model_spec("boids")
-Traceback (most recent call last):
-...
-ValueError: dynamics must be one of the registered models ('social_potential', 'zone', \
-'piecewise', 'lagrangian'), got 'boids'
+>>> try:
+...     model_spec("boids")
+... except ValueError as err:
+...     print(err)  # doctest: +ELLIPSIS
+dynamics must be one of the registered models ('social_potential', 'zone', 'piecewise', \
+'lagrangian'...), got 'boids'
 """
 
 from __future__ import annotations

@@ -9,6 +9,7 @@ from __future__ import annotations
 import functools
 import importlib.util
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
 
@@ -21,7 +22,7 @@ from pettingzoo.test import parallel_api_test, parallel_seed_test
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 from agents import PotentialFieldController, baseline_names, make_controller
-from swarm_envs import ENV_ID, swarm_nav_v0
+from swarm_envs import ENV_ID, models, swarm_nav_v0
 from swarm_envs.config import SwarmConfig, as_dict, config_from_mapping, load_swarm_config
 from swarm_envs.envs import backends
 from swarm_envs.envs.core import SwarmNavCore
@@ -43,7 +44,14 @@ def load_example() -> ModuleType:
     return module
 
 
-cs = load_example()
+@pytest.fixture(scope="module", autouse=True)
+def cs() -> Iterator[ModuleType]:
+    """The example, registered for this module's tests; the registry is restored after."""
+    saved = dict(models._REGISTRY)
+    yield load_example()
+    models._REGISTRY.clear()
+    models._REGISTRY.update(saved)
+    sys.modules.pop("cucker_smale_model", None)
 
 
 def cfg_of(**kw) -> SwarmConfig:
@@ -129,7 +137,7 @@ def test_the_velocity_disagreement_never_rises_without_action():
     assert (energy[-1] < 0.5 * energy[0]).all()  # and the flock aligns
 
 
-def test_simulate_dispatches_to_the_registered_simulator():
+def test_simulate_dispatches_to_the_registered_simulator(cs):
     assert model_spec(NAME).simulate is cs.simulate_cucker_smale
     rng = np.random.default_rng(0)
     x0, v0 = rng.normal(size=(2, 6, 2)), rng.normal(size=(2, 6, 2))
@@ -159,7 +167,7 @@ def test_an_unknown_model_name_lists_the_registered_ones():
     assert NAME in model_names()
 
 
-def test_its_section_is_built_validated_and_round_trips():
+def test_its_section_is_built_validated_and_round_trips(cs):
     cfg = cfg_of(model_params={NAME: {"K": 2.0}})
     assert cfg.dynamics_params == cs.CuckerSmaleParams(K=2.0)  # the rest: class defaults
     assert cfg_of().dynamics_params == cs.CuckerSmaleParams()  # filled where absent
@@ -177,7 +185,7 @@ def test_its_section_is_built_validated_and_round_trips():
         cfg_of(perturbations={"failed_fraction": 0.2, "failure_mode": "frozen"})
 
 
-def test_a_partial_section_given_as_an_override_merges_into_the_files(tmp_path):
+def test_a_partial_section_given_as_an_override_merges_into_the_files(cs, tmp_path):
     path = tmp_path / "cs.yaml"
     path.write_text(f"dynamics: {NAME}\nmodel_params:\n  {NAME}: {{K: 3.0, sigma: 2.0}}\n")
     cfg = load_swarm_config(path, {"model_params": {NAME: {"beta": 0.1}}})
