@@ -20,6 +20,7 @@ ValueError: unknown config key 'n_agent'; allowed keys: ...
 from __future__ import annotations
 
 import math
+import typing
 import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
@@ -38,6 +39,7 @@ from swarm_envs.config_mapping import (
 from swarm_envs.models import (
     SHIPPED,
     ModelParams,
+    ModelSpec,
     lagrangian_min_init_radius,
     model_names,
     model_spec,
@@ -203,11 +205,11 @@ class SwarmConfig:
     """Lagrangian gradient model parameters (``dynamics="lagrangian"``); array-valued
     fields must match ``n_agents``."""
     model_params: ModelParams = field(default_factory=ModelParams)
-    """The parameter sections of the registered models that are not shipped, keyed by
-    each model's section name (``ModelSpec.section``): ``{"cucker_smale": {"K": 2.0}}``.
-    A section given as a mapping is built on its parameter class's defaults; the section
-    of the selected ``dynamics``, where not given, is those defaults. The shipped models'
-    sections are the keys above."""
+    """The parameter sections of the registered models whose section is not one of the
+    keys above, keyed by each model's section name (``ModelSpec.section``):
+    ``{"cucker_smale": {"K": 2.0}}``. A section given as a mapping is built on its
+    parameter class's defaults; the section of the selected ``dynamics``, where not
+    given, is those defaults."""
     init_radius: float = 1.5
     """Agents start uniformly in a disc (ball) of this radius around the origin (unless
     ``init_density`` is set; see :attr:`start_radius`)."""
@@ -379,16 +381,17 @@ class SwarmConfig:
             check(self)
 
     def _check_model_sections(self, owner: str) -> None:
-        """``dynamics`` is a registered model, the shipped models' sections are their
-        parameter classes, and ``model_params`` holds registered sections only (built
-        from mappings; the selected model's filled with its defaults where absent)."""
+        """``dynamics`` is a registered model, the sections that are config keys hold
+        their models' parameter classes, and ``model_params`` holds the other registered
+        models' sections only (built from mappings; the selected model's filled with its
+        defaults where absent)."""
         if not isinstance(self.dynamics, str) or self.dynamics not in model_names():
             raise ValueError(
                 f"{owner}.dynamics must be one of the registered models {model_names()}, "
                 f"got {self.dynamics!r}"
             )
-        for name in SHIPPED:
-            spec = model_spec(name)
+        specs = [model_spec(name) for name in model_names()]
+        for spec in filter(_section_is_key, specs):
             if not isinstance(getattr(self, spec.section), spec.params):
                 raise ValueError(f"{owner}.{spec.section} must be {spec.params.__name__}")
         if not isinstance(self.model_params, Mapping):
@@ -396,20 +399,20 @@ class SwarmConfig:
                 f"{owner}.model_params must be a mapping of section names to parameters, "
                 f"got {self.model_params!r}"
             )
-        sections = {model_spec(n).section: model_spec(n) for n in model_names() if n not in SHIPPED}
+        sections = {spec.section: spec for spec in specs if not _section_is_key(spec)}
         built: dict[str, Any] = {}
         for key, value in self.model_params.items():
             if key not in sections:
+                keys = tuple(spec.section for spec in specs if _section_is_key(spec))
                 raise ValueError(
-                    f"{owner}.model_params: unknown section {key!r}; the registered models' "
-                    f"sections: {tuple(sections)} (the shipped models' sections "
-                    f"{tuple(model_spec(n).section for n in SHIPPED)} are keys of the "
-                    "config itself)"
+                    f"{owner}.model_params: unknown section {key!r}; allowed: the registered "
+                    f"models' sections {tuple(sections)} (the sections {keys} are keys of "
+                    "the config itself)"
                 )
             params = sections[key].params
             built[key] = config_from_mapping(params, value, path=f"model_params.{key}")
         spec = model_spec(self.dynamics)
-        if self.dynamics not in SHIPPED and spec.section not in built:
+        if not _section_is_key(spec) and spec.section not in built:
             built[spec.section] = spec.params()
         object.__setattr__(self, "model_params", ModelParams(built))
 
@@ -448,14 +451,15 @@ class SwarmConfig:
 
     @property
     def dynamics_params(self) -> Any:
-        """The parameters of the selected model: its section of the config (``physics``,
-        ``zone``, ... for the shipped models, ``model_params[section]`` for the others).
+        """The parameters of the selected model: its section of the config (the keys
+        ``physics``, ``zone``, ``piecewise``, ``lagrangian``, or ``model_params[section]``
+        for the other registered models).
 
         >>> SwarmConfig(dynamics="zone").dynamics_params == SwarmConfig().zone
         True
         """
         spec = model_spec(self.dynamics)
-        if self.dynamics in SHIPPED:
+        if _section_is_key(spec):
             return getattr(self, spec.section)
         return self.model_params[spec.section]
 
@@ -510,6 +514,15 @@ class SwarmConfig:
 
 #: ``SwarmConfig.init_radius``'s default (``init_density`` requires it unchanged).
 _INIT_RADIUS_DEFAULT = next(f.default for f in fields(SwarmConfig) if f.name == "init_radius")
+
+#: The type of each :class:`SwarmConfig` field.
+_FIELD_TYPES = typing.get_type_hints(SwarmConfig)
+
+
+def _section_is_key(spec: ModelSpec) -> bool:
+    """Whether a model's section is a key of the config itself (a field of its parameter
+    class: the four models shipped first), not an entry of ``model_params``."""
+    return _FIELD_TYPES.get(spec.section) is spec.params
 
 
 def check_keywords(given: Iterable[str], owner: str, keywords: Sequence[str] = ("config",)) -> None:

@@ -272,8 +272,10 @@ NOT_DRAWN = {
         f"({', '.join(model_spec(name).backends)} only)"
         for name in DYNAMICS
         if model_spec(name).section not in field_strategies(DYNAMICS)
+        and model_spec(name).section in {f.name for f in dataclasses.fields(SwarmConfig)}
     },
-    "model_params": "user models' sections: their own tests (tests/test_user_model.py)",
+    "model_params": "the other registered models' sections: their own tests "
+    "(tests/test_user_model.py)",
 }
 
 #: Every shipped dynamics (the model registry's), for the refusal checks.

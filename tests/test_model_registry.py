@@ -102,6 +102,13 @@ def test_a_registered_model_gets_its_section_and_adapter(registry):
     assert isinstance(make_dynamics(cfg, 1, np.dtype(np.float64)), ToyDynamics)
 
 
+def test_a_section_named_like_a_config_key_of_another_kind_lives_in_model_params(registry):
+    register_model(toy(section="reward"))
+    cfg = SwarmConfig(dynamics="toy", model_params={"reward": {"k": 3.0}})
+    assert cfg.dynamics_params == ToyParams(k=3.0)
+    assert cfg.reward == SwarmConfig().reward  # the reward weights untouched
+
+
 def test_an_adapter_that_is_not_a_dynamics_is_refused_when_built(registry):
     register_model(toy(adapter=ToyParams))
     with pytest.raises(TypeError, match="adapter must be a subclass of"):

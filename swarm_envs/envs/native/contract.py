@@ -87,6 +87,8 @@ KERNEL_CONFIG_FIELDS = (
     "observe_status",
 )
 
+_KEYS = {f.name for f in dataclasses.fields(SwarmConfig)}
+
 #: The :class:`SwarmConfig` fields the C step does not read, and why.
 HOST_CONFIG_FIELDS = {
     "physics": "expanded into the physics_* fields",
@@ -95,9 +97,9 @@ HOST_CONFIG_FIELDS = {
     **{
         model_spec(name).section: "another model's section"
         for name in SHIPPED
-        if "native" not in model_spec(name).backends
+        if "native" not in model_spec(name).backends and model_spec(name).section in _KEYS
     },
-    "model_params": "the sections of registered models that are not shipped (refused)",
+    "model_params": "the other registered models' sections (refused)",
     "init_radius": "starts are drawn in Python",
     "init_speed": "starts are drawn in Python",
     "init_density": "starts are drawn in Python",
