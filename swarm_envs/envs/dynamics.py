@@ -75,7 +75,19 @@ MAX_START_DRAWS = 1000
 
 
 class Dynamics(ABC):
-    """One model's step on a batch of swarms (see the module docstring)."""
+    """One model's step on a batch of swarms (see the module docstring): a model's
+    ``ModelSpec.adapter``.
+
+    Built once per core as ``cls(cfg, batch, dtype)``; reads its parameters as
+    ``cfg.dynamics_params``. A subclass implements :meth:`step` and, where its model
+    needs them, :meth:`reset` (per-swarm model state), :meth:`measure` (its energy
+    statistic; kinetic by default) and :meth:`restore`. The state arrays are ``(B, N,
+    d)`` of ``dtype``; a step returns arrays of that dtype. A model that integrates in
+    substeps reports them in :attr:`substeps`, :attr:`over_cap` and :attr:`needed`
+    (:meth:`fixed_substeps` does it for a rule fixed by the parameters); the core turns
+    a step over the cap into an unstable step. A model whose ``ModelSpec.applies_masks``
+    is true honours :attr:`present` and :attr:`mobile`.
+    """
 
     def __init__(self, cfg: SwarmConfig, batch: int, dtype: np.dtype) -> None:
         self.cfg = cfg
