@@ -98,8 +98,8 @@ def baseline_names(env: Any) -> list[str]:
     ['potential', 'pd', 'follow']
     """
     cfg = swarm_config_of(env)
-    analytic = [] if _analytic_or_none(cfg) is None else [analytic_name(cfg)]
-    names = [*analytic, *SIMPLE[cfg.task]]
+    analytic = _analytic_or_none(cfg)
+    names = [*([] if analytic is None else [analytic]), *SIMPLE[cfg.task]]
     return list(dict.fromkeys(names))  # the mill's analytic controller is its simple one
 
 
