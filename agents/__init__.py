@@ -27,10 +27,11 @@ observation. Their gains are tuned on training seeds by ``swarm-tune`` and read 
 ``configs/baselines/tuned.yaml`` (:mod:`agents.tuned`). :func:`baseline_names` lists, per
 task, every baseline an evaluation compares a learned policy with.
 
-Each model has its analytic baseline (:data:`ANALYTIC`); the name ``"analytic"`` picks
-the one that matches the environment's ``dynamics`` and task (the mill task has its own,
-:data:`TASK_ANALYTIC`; in the informed task the model's controller acts through the
-informed agents only).
+Each model names its analytic baseline in its registry entry (``ModelSpec.baseline`` of
+:mod:`swarm_envs.models`, a name in :data:`CONTROLLERS`; :data:`ANALYTIC` lists the
+shipped models'); the name ``"analytic"`` picks the one that matches the environment's
+``dynamics`` and task (the mill task has its own, :data:`TASK_ANALYTIC`; in the informed
+task the model's controller acts through the informed agents only).
 
 Build one from any environment of the package or from a config::
 
@@ -51,6 +52,7 @@ from agents.naterop import GoalForceController, InformedIndividualController
 from agents.pd import SaturatedPDController
 from agents.trivial import RandomController, ZeroController
 from agents.vanualailai_sharma import LyapunovTargetController
+from swarm_envs.models import SHIPPED, model_spec
 
 #: Names of the built-in policies, as ``swarm-eval --policies`` accepts them (plus
 #: ``"analytic"``, the entry of :data:`ANALYTIC` for the environment's dynamics).
@@ -66,12 +68,11 @@ CONTROLLERS: dict[str, type[Controller]] = {
     "random": RandomController,
 }
 
-#: The analytic baseline of each ``SwarmConfig.dynamics``, as a name in :data:`CONTROLLERS`.
+#: The analytic baseline of each shipped ``SwarmConfig.dynamics``, as a name in
+#: :data:`CONTROLLERS`: their registry entries' ``ModelSpec.baseline`` (a model
+#: registered later is read from its entry by :func:`analytic_name`).
 ANALYTIC: dict[str, str] = {
-    "social_potential": "potential",
-    "zone": "informed",
-    "piecewise": "goal_force",
-    "lagrangian": "lyapunov",
+    name: baseline for name in SHIPPED if (baseline := model_spec(name).baseline) is not None
 }
 
 
@@ -89,28 +90,42 @@ SIMPLE: dict[str, tuple[str, ...]] = {
 
 
 def baseline_names(env: Any) -> list[str]:
-    """Every baseline of ``env``'s task: the analytic controller (by its own name), then
-    the task's simple controllers (:data:`SIMPLE`).
+    """Every baseline of ``env``'s task: the analytic controller (by its own name; a
+    model without one has none), then the task's simple controllers (:data:`SIMPLE`).
 
     >>> from swarm_envs.tasks import task_config
     >>> baseline_names(task_config("informed"))
     ['potential', 'pd', 'follow']
     """
     cfg = swarm_config_of(env)
-    names = [analytic_name(cfg), *SIMPLE.get(cfg.task, ())]  # a user's task: none tuned
+    analytic = _analytic_or_none(cfg)
+    simple = SIMPLE.get(cfg.task, ())  # a user's task: none tuned
+    names = [*([] if analytic is None else [analytic]), *simple]
     return list(dict.fromkeys(names))  # the mill's analytic controller is its simple one
 
 
 def analytic_name(env: Any) -> str:
     """The name of the analytic baseline matching ``env``'s task and dynamics
-    (:data:`TASK_ANALYTIC`, else :data:`ANALYTIC`).
+    (:data:`TASK_ANALYTIC`, else the model's ``ModelSpec.baseline``); :class:`ValueError`
+    where there is none.
 
     >>> from swarm_envs.config import SwarmConfig
     >>> analytic_name(SwarmConfig(dynamics="zone"))
     'informed'
     """
     cfg = swarm_config_of(env)
-    return TASK_ANALYTIC.get(cfg.task, ANALYTIC[cfg.dynamics])
+    name = _analytic_or_none(cfg)
+    if name is None:
+        raise ValueError(
+            f"dynamics {cfg.dynamics!r} has no analytic baseline (its ModelSpec.baseline is "
+            f"None); name a policy instead: {', '.join(CONTROLLERS)}"
+        )
+    return name
+
+
+def _analytic_or_none(cfg: Any) -> str | None:
+    """The task's own analytic controller, else the model's (``None``: neither has one)."""
+    return TASK_ANALYTIC.get(cfg.task, model_spec(cfg.dynamics).baseline)
 
 
 def make_controller(name: str, env: Any, *, seed: int | None = None) -> Controller:

@@ -20,6 +20,7 @@ ValueError: unknown config key 'n_agent'; allowed keys: ...
 from __future__ import annotations
 
 import math
+import typing
 import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
@@ -35,6 +36,14 @@ from swarm_envs.config_mapping import (
     load_yaml,
     resolve_config_path,
 )
+from swarm_envs.models import (
+    SHIPPED,
+    ModelParams,
+    ModelSpec,
+    lagrangian_min_init_radius,
+    model_names,
+    model_spec,
+)
 from swarm_envs.perturbations import Perturbations, check_ranged
 from swarm_envs.physics import (
     INTEGRATORS,
@@ -49,10 +58,11 @@ from swarm_envs.tasks import task_spec, with_task_defaults
 if TYPE_CHECKING:
     from swarm_envs.tasks import TaskSpec
 
-#: The models a SwarmNav environment can run (``SwarmConfig.dynamics``), the first the
-#: default. Each has its parameter section in :class:`SwarmConfig` (``physics`` for the
-#: social potential, which also holds the task's goal sink ``C_g, l_g``).
-DYNAMICS = ("social_potential", "zone", "piecewise", "lagrangian")
+#: The models shipped with the package (``SwarmConfig.dynamics``), the first the default,
+#: from the model registry (:mod:`swarm_envs.models`, where a user's model registers too).
+#: Each has its parameter section in :class:`SwarmConfig` (``physics`` for the social
+#: potential, which also holds the task's goal sink ``C_g, l_g``).
+DYNAMICS = SHIPPED
 
 #: How the env computes a step (``SwarmConfig.backend``); see ``swarm_envs.envs.backends``.
 BACKENDS = ("auto", "numpy", "sparse", "native", "torch")
@@ -209,10 +219,12 @@ class SwarmConfig:
     pair forces, collisions or neighbours (every neighbour slot is padding and the
     nearest-neighbour distance is 0)."""
     dynamics: str = "social_potential"
-    """The passive physics, one of :data:`DYNAMICS`: the social potential (Mabrouk &
-    McInnes), Couzin's zone model or Viscido's piecewise force model (both as in
-    Naterop), or the Lagrangian gradient model (Vanualailai & Sharma). Each reads its
-    own section below; how an action biases each is in ``swarm_envs.envs.dynamics``."""
+    """The passive physics, a model of the registry (:mod:`swarm_envs.models`): one of
+    the shipped :data:`DYNAMICS`, the social potential (Mabrouk & McInnes), Couzin's zone
+    model or Viscido's piecewise force model (both as in Naterop), or the Lagrangian
+    gradient model (Vanualailai & Sharma), each reading its own section below, or a
+    model registered by the user, reading its section of ``model_params``. How an action
+    biases each is in ``swarm_envs.envs.dynamics``."""
     dim: int = 2
     """Spatial dimension d, 2 or 3."""
     dt: float = 0.1
@@ -240,6 +252,12 @@ class SwarmConfig:
     lagrangian: LagrangianParams = field(default_factory=LagrangianParams.navigation)
     """Lagrangian gradient model parameters (``dynamics="lagrangian"``); array-valued
     fields must match ``n_agents``."""
+    model_params: ModelParams = field(default_factory=ModelParams)
+    """The parameter sections of the registered models whose section is not one of the
+    keys above, keyed by each model's section name (``ModelSpec.section``):
+    ``{"cucker_smale": {"K": 2.0}}``. A section given as a mapping is built on its
+    parameter class's defaults; the section of the selected ``dynamics``, where not
+    given, is those defaults."""
     init_radius: float = 1.5
     """Agents start uniformly in a disc (ball) of this radius around the origin (unless
     ``init_density`` is set; see :attr:`start_radius`)."""
@@ -343,22 +361,7 @@ class SwarmConfig:
             raise ValueError(f"{owner}.backend must be one of {BACKENDS}, got {self.backend!r}")
         if not isinstance(self.device, str) or not self.device:
             raise ValueError(f"{owner}.device must be a torch device name, got {self.device!r}")
-        if self.dynamics not in DYNAMICS:
-            raise ValueError(f"{owner}.dynamics must be one of {DYNAMICS}, got {self.dynamics!r}")
-        sections = {
-            "physics": SocialPotentialParams,
-            "zone": ZoneParams,
-            "piecewise": PiecewiseParams,
-            "lagrangian": LagrangianParams,
-        }
-        for name, cls in sections.items():
-            if not isinstance(getattr(self, name), cls):
-                raise ValueError(f"{owner}.{name} must be {cls.__name__}")
-        if self.dynamics == "lagrangian":
-            try:
-                self.lagrangian.arrays(self.n_agents, self.dim)
-            except ValueError as err:
-                raise ValueError(f"{owner}.lagrangian: {err}") from None
+        self._check_model_sections(owner)
         if not isinstance(self.reward, RewardWeights):
             raise ValueError(f"{owner}.reward must be RewardWeights")
         if not isinstance(self.goal_in_physics, bool):
@@ -368,11 +371,13 @@ class SwarmConfig:
         if not isinstance(self.perturbations, Perturbations):
             raise ValueError(f"{owner}.perturbations must be Perturbations")
         self._check_task(owner)
-        if self.perturbations.needs_masks and self.dynamics != "social_potential":
+        if self.perturbations.needs_masks and not model_spec(self.dynamics).applies_masks:
+            masks = [n for n in model_names() if model_spec(n).applies_masks]
+            masked = " or ".join(f"dynamics={n!r}" for n in masks)
             raise ValueError(
                 f"{owner}.perturbations: removed, frozen, absent and joining agents need "
-                f"dynamics='social_potential' (the other models take failure_mode='passive' "
-                f"and the noise), got dynamics={self.dynamics!r}"
+                f"{masked} (the other models take failure_mode='passive' and the noise), "
+                f"got dynamics={self.dynamics!r}"
             )
         if self.perturbations.needs_masks and self.integrator != "semi_implicit_euler":
             raise ValueError(
@@ -407,11 +412,6 @@ class SwarmConfig:
                     f"({self.init_radius!r}) are both set: give one (init_density sets the "
                     "start radius from N; set init_density to None to start in init_radius)"
                 )
-            if self.dynamics == "lagrangian":
-                raise ValueError(
-                    f"{owner}.init_density must be None with dynamics='lagrangian' (its "
-                    f"start checks read init_radius), got {self.init_density!r}"
-                )
         if self.goal_distance_scale not in GOAL_DISTANCE_SCALES:
             raise ValueError(
                 f"{owner}.goal_distance_scale must be one of {GOAL_DISTANCE_SCALES}, got "
@@ -425,15 +425,45 @@ class SwarmConfig:
         _check_int(owner, "max_steps", self.max_steps, low=1)
         _check_int(owner, "n_neighbors", self.n_neighbors, low=0)
         _warn_empty_slots(owner, self.n_agents, self.n_neighbors)
-        if self.dynamics == "lagrangian" and self.n_agents > 1:
-            low = lagrangian_min_init_radius(self.lagrangian, self.n_agents, self.dim)
-            if not self.init_radius > low:
+        check = model_spec(self.dynamics).check
+        if check is not None:
+            check(self)
+
+    def _check_model_sections(self, owner: str) -> None:
+        """``dynamics`` is a registered model, the sections that are config keys hold
+        their models' parameter classes, and ``model_params`` holds the other registered
+        models' sections only (built from mappings; the selected model's filled with its
+        defaults where absent)."""
+        if not isinstance(self.dynamics, str) or self.dynamics not in model_names():
+            raise ValueError(
+                f"{owner}.dynamics must be one of the registered models {model_names()}, "
+                f"got {self.dynamics!r}"
+            )
+        specs = [model_spec(name) for name in model_names()]
+        for spec in filter(_section_is_key, specs):
+            if not isinstance(getattr(self, spec.section), spec.params):
+                raise ValueError(f"{owner}.{spec.section} must be {spec.params.__name__}")
+        if not isinstance(self.model_params, Mapping):
+            raise ValueError(
+                f"{owner}.model_params must be a mapping of section names to parameters, "
+                f"got {self.model_params!r}"
+            )
+        sections = {spec.section: spec for spec in specs if not _section_is_key(spec)}
+        built: dict[str, Any] = {}
+        for key, value in self.model_params.items():
+            if key not in sections:
+                keys = tuple(spec.section for spec in specs if _section_is_key(spec))
                 raise ValueError(
-                    f"{owner}.init_radius must be in ({low:g}, inf) with "
-                    f"dynamics='lagrangian': {self.n_agents} agents start in a disc of "
-                    f"this radius with non-overlapping bins (lagrangian.r), got "
-                    f"{self.init_radius!r}"
+                    f"{owner}.model_params: unknown section {key!r}; allowed: the registered "
+                    f"models' sections {tuple(sections)} (the sections {keys} are keys of "
+                    "the config itself)"
                 )
+            params = sections[key].params
+            built[key] = config_from_mapping(params, value, path=f"model_params.{key}")
+        spec = model_spec(self.dynamics)
+        if not _section_is_key(spec) and spec.section not in built:
+            built[spec.section] = spec.params()
+        object.__setattr__(self, "model_params", ModelParams(built))
 
     def _check_task(self, owner: str) -> None:
         """The task and what it needs (:mod:`swarm_envs.tasks`): its name, the informed
@@ -502,6 +532,20 @@ class SwarmConfig:
         object.__setattr__(self, "_task_spec", task_spec(self.task))
 
     @property
+    def dynamics_params(self) -> Any:
+        """The parameters of the selected model: its section of the config (the keys
+        ``physics``, ``zone``, ``piecewise``, ``lagrangian``, or ``model_params[section]``
+        for the other registered models).
+
+        >>> SwarmConfig(dynamics="zone").dynamics_params == SwarmConfig().zone
+        True
+        """
+        spec = model_spec(self.dynamics)
+        if _section_is_key(spec):
+            return getattr(self, spec.section)
+        return self.model_params[spec.section]
+
+    @property
     def passive_sink(self) -> bool:
         """Whether the goal pulls every agent in the physics: the social potential's sink
         (``goal_in_physics`` and ``physics.C_g > 0``)."""
@@ -554,28 +598,14 @@ class SwarmConfig:
 #: ``SwarmConfig.init_radius``'s default (``init_density`` requires it unchanged).
 _INIT_RADIUS_DEFAULT = next(f.default for f in fields(SwarmConfig) if f.name == "init_radius")
 
+#: The type of each :class:`SwarmConfig` field.
+_FIELD_TYPES = typing.get_type_hints(SwarmConfig)
 
-def lagrangian_min_init_radius(params: LagrangianParams, n_agents: int, dim: int) -> float:
-    """The start radius at or below which ``n_agents`` Lagrangian bins can never fit.
 
-    The model needs every pair apart by more than its bins' radii, ``|x_i − x_j| >
-    r_i + r_j`` (``R_ij > 0``). In a ball of radius ``R`` that needs ``R > (r_i + r_j)/2``
-    for the two largest bins and, the bins being disjoint inside the ball grown by the
-    largest radius, ``Σ_i r_i^d < (R + max_i r_i)^d``; with point bins (``r = 0``) still
-    ``R > 0``. A radius above this bound can still be too tight for random starts: the
-    environments then refuse it when they are built (see ``docs/inputs.md``).
-
-    >>> lagrangian_min_init_radius(LagrangianParams(r=0.0), 10, 2)
-    0.0
-    >>> lagrangian_min_init_radius(LagrangianParams(r=1.0), 2, 2)
-    1.0
-    """
-    if n_agents < 2:
-        return 0.0
-    r = np.sort(np.diagonal(params.arrays(n_agents, dim)["r_sum"]) / 2.0)
-    pair = float(r[-1] + r[-2]) / 2.0
-    volume = float((r**dim).sum() ** (1.0 / dim) - r[-1])
-    return max(0.0, pair, volume)
+def _section_is_key(spec: ModelSpec) -> bool:
+    """Whether a model's section is a key of the config itself (a field of its parameter
+    class: the four models shipped first), not an entry of ``model_params``."""
+    return _FIELD_TYPES.get(spec.section) is spec.params
 
 
 def check_keywords(given: Iterable[str], owner: str, keywords: Sequence[str] = ("config",)) -> None:
@@ -612,7 +642,13 @@ def load_swarm_config(
     data: dict[str, Any] = load_yaml(resolve_config_path(path)) if path is not None else {}
     for key, value in (overrides or {}).items():
         if isinstance(value, Mapping) and isinstance(data.get(key), Mapping):
-            data[key] = {**data[key], **value}
+            merged = {**data[key], **value}
+            if key == "model_params":  # sections of sections: merged one level deeper
+                for name, section in value.items():
+                    old = data[key].get(name)
+                    if isinstance(section, Mapping) and isinstance(old, Mapping):
+                        merged[name] = {**old, **section}
+            data[key] = merged
         else:
             data[key] = value
     return config_from_mapping(SwarmConfig, with_task_defaults(data))

@@ -34,6 +34,7 @@ from swarm_envs.envs.perturbed import PerturbedCore
 from swarm_envs.envs.task import ranked_neighbors, stat_keys
 from swarm_envs.envs.task.agent_status import ABSENT, ACTIVE, FAILED, FROZEN, masks
 from swarm_envs.envs.task.observation import observation_size
+from swarm_envs.models import model_spec
 from swarm_envs.perturbations import FAILURE_MODES, Perturbations
 from swarm_envs.tasks import TASKS, task_spec
 
@@ -284,12 +285,18 @@ def configs(
 NOT_DRAWN = {
     "backend": "the suite runs each backend itself",
     "device": "CUDA is covered by the GPU tests",
-    "zone": "other models' sections: drawn with their defaults (numpy only)",
-    "piecewise": "other models' sections: drawn with their defaults (numpy only)",
-    "lagrangian": "other models' sections: drawn with their defaults (numpy only)",
+    **{
+        model_spec(name).section: "other models' sections: drawn with their defaults "
+        f"({', '.join(model_spec(name).backends)} only)"
+        for name in DYNAMICS
+        if model_spec(name).section not in field_strategies(DYNAMICS)
+        and model_spec(name).section in {f.name for f in dataclasses.fields(SwarmConfig)}
+    },
+    "model_params": "the other registered models' sections: their own tests "
+    "(tests/test_user_model.py)",
 }
 
-#: Every dynamics, for the refusal checks.
+#: Every shipped dynamics (the model registry's), for the refusal checks.
 ALL_DYNAMICS = DYNAMICS
 
 

@@ -20,6 +20,10 @@ backend      what it is
              potential, semi-implicit Euler).
 ===========  =========================================================================
 
+Which models each core implements is the model registry's (``ModelSpec.backends`` of
+:mod:`swarm_envs.models`): every model runs on ``numpy``; the others implement the
+shipped social potential, and refuse the other models and a user's.
+
 ``backend="auto"`` (the default) picks by measured speed among the backends that
 support the config (:func:`select_backend`; ``docs/performance.md`` has the
 measurements). A backend asked for by name that cannot run a config is refused up front
@@ -39,6 +43,7 @@ from swarm_envs.envs.core import SwarmNavCore
 from swarm_envs.envs.protocol import Core
 from swarm_envs.envs.sparse_core import SPARSE_MIN_AGENTS, SparseSwarmNavCore
 from swarm_envs.envs.step_control import check_step_control
+from swarm_envs.models import model_spec, models_on
 
 #: Agent slots ``B·N`` from which ``"auto"`` runs the torch core on the CPU where the C
 #: step is not available: below it the compile time (tens of seconds, once) outweighs
@@ -88,6 +93,9 @@ def unsupported(cfg: SwarmConfig, backend: str) -> str | None:
     >>> unsupported(SwarmConfig(dynamics="zone"), "torch")
     "supports dynamics='social_potential' only, got 'zone'"
     """
+    if backend not in model_spec(cfg.dynamics).backends:
+        names = " or ".join(f"{name!r}" for name in models_on(backend))
+        return f"supports dynamics={names} only, got {cfg.dynamics!r}"
     if backend not in STATUS_BACKENDS and _needs_statuses(cfg):
         return (
             "does not take agent statuses (removed, frozen, absent or joining agents, "
@@ -116,7 +124,8 @@ def _auto(cfg: SwarmConfig, batch: int) -> tuple[str, str | None]:
 def _auto_by_speed(cfg: SwarmConfig, batch: int) -> tuple[str, str | None]:
     if cfg.device != "cpu":
         return "torch", None
-    if cfg.dynamics == "social_potential" and cfg.n_agents >= SPARSE_MIN_AGENTS:
+    implemented = model_spec(cfg.dynamics).backends
+    if "sparse" in implemented and cfg.n_agents >= SPARSE_MIN_AGENTS:
         return "sparse", None
     why = unsupported(cfg, "native")
     if why is None:
@@ -124,7 +133,7 @@ def _auto_by_speed(cfg: SwarmConfig, batch: int) -> tuple[str, str | None]:
     from swarm_envs.envs.native.core import UNAVAILABLE
 
     missing = why if why.startswith(UNAVAILABLE) else None  # not built here: say so
-    if cfg.dynamics == "social_potential" and cfg.integrator == "semi_implicit_euler":
+    if "native" in implemented and cfg.integrator == "semi_implicit_euler":
         if batch * cfg.n_agents >= TORCH_MIN_SLOTS and unsupported(cfg, "torch") is None:
             return "torch", missing
         return "numpy", missing

@@ -1,24 +1,14 @@
 """The physics behind SwarmNav, one adapter per model: how an action biases each model.
 
 :class:`~swarm_envs.envs.core.SwarmNavCore` owns the batched state ``x, v`` ``(B, N, d)``
-and the goals ``(B, d)``; the adapter selected by ``SwarmConfig.dynamics`` advances it
-by one step with the control ``u = u_max · a`` (``a ∈ [−1, 1]^d`` per agent) and draws
-whatever per-swarm state its model needs at reset. The actions follow ``docs/models.md`` §6;
-with ``a = 0`` every model runs exactly its passive physics:
+and the goals ``(B, d)``; the adapter of the model ``SwarmConfig.dynamics`` names (its
+``ModelSpec.adapter`` in the registry, :mod:`swarm_envs.models`; :func:`make_dynamics`)
+advances it by one step with the control ``u = u_max · a`` (``a ∈ [−1, 1]^d`` per agent)
+and draws whatever per-swarm state its model needs at reset. The actions follow
+``docs/models.md`` §6; with ``a = 0`` every model runs exactly its passive physics. The
+shipped models (this table is generated from their registry entries):
 
-============================  =====================================================
-``dynamics``                  what the control ``u_i = u_max · a_i`` does
-============================  =====================================================
-``"social_potential"``        a force added to ``F_i`` (Mabrouk & McInnes eq. 13)
-``"zone"``                    a bias added to the unit desired direction before the
-                              turn, ``d̂_i + u_i`` (Naterop eqs. 3–6; ``u_i = ω ĝ_i``
-                              is the informed-individual rule)
-``"piecewise"``               a force added to Viscido's ``Σ F(ρ_ij) u_ij + ξ_i − β v_i``
-                              (Naterop eq. 15)
-``"lagrangian"``              a velocity added to ``−α_i ∂L/∂x_i`` (Vanualailai &
-                              Sharma eq. 7); the safe substep keeps every bin pair
-                              apart (``R_ij > 0``) whatever the action
-============================  =====================================================
+<models table>
 
 The goal acts passively only with ``goal_in_physics``: the social potential's sink
 (eq. 19), the zone model's informed individuals (Naterop eq. 6, a fraction
@@ -29,6 +19,9 @@ The ``energy`` statistic is each model's own: the total energy ``φ`` (social
 potential), ``L`` (Lagrangian; ``+inf`` never occurs, as bins never overlap), and the
 kinetic energy ``½ m Σ|v_i|²`` for the zone and piecewise models, which have no
 potential (the piecewise neighbour relation is one-way).
+
+A user's model brings its own adapter, a subclass of :class:`Dynamics`
+(``docs/design.md``, "Adding a model").
 """
 
 from __future__ import annotations
@@ -38,6 +31,8 @@ from abc import ABC, abstractmethod
 import numpy as np
 
 from swarm_envs.config import DYNAMICS, SwarmConfig
+from swarm_envs.envs.step_control import start_substeps
+from swarm_envs.models import SHIPPED, model_spec, models_table
 from swarm_envs.physics import (
     PairGeometry,
     energy,
@@ -48,19 +43,14 @@ from swarm_envs.physics import (
     uniform_ball,
     verlet_step,
 )
-from swarm_envs.physics.integrators import (
-    SubstepBudget,
-    euler_update,
-    stable_substep,
-    substep_plan,
-)
+from swarm_envs.physics.integrators import SubstepBudget, euler_update, stable_substep
 from swarm_envs.physics.lagrangian import (
     lagrangian_frame,
     lagrangian_value,
     lagrangian_velocity,
     pair_clearance,
 )
-from swarm_envs.physics.piecewise import interaction_forces, piecewise_rates, random_force
+from swarm_envs.physics.piecewise import interaction_forces, random_force
 from swarm_envs.physics.social_potential import (
     components,
     dissipation,
@@ -77,12 +67,27 @@ from swarm_envs.physics.zone import (
     zone_step,
 )
 
+if __doc__ is not None:  # the table of the module docstring, from the registry
+    __doc__ = __doc__.replace("<models table>", models_table(SHIPPED))
+
 #: Redraws of a swarm's start before a Lagrangian reset gives up (bins overlapping).
 MAX_START_DRAWS = 1000
 
 
 class Dynamics(ABC):
-    """One model's step on a batch of swarms (see the module docstring)."""
+    """One model's step on a batch of swarms (see the module docstring): a model's
+    ``ModelSpec.adapter``.
+
+    Built once per core as ``cls(cfg, batch, dtype)``; reads its parameters as
+    ``cfg.dynamics_params``. A subclass implements :meth:`step` and, where its model
+    needs them, :meth:`reset` (per-swarm model state), :meth:`measure` (its energy
+    statistic; kinetic by default) and :meth:`restore`. The state arrays are ``(B, N,
+    d)`` of ``dtype``; a step returns arrays of that dtype. A model that integrates in
+    substeps reports them in :attr:`substeps`, :attr:`over_cap` and :attr:`needed`
+    (:meth:`fixed_substeps` does it for a rule fixed by the parameters); the core turns
+    a step over the cap into an unstable step. A model whose ``ModelSpec.applies_masks``
+    is true honours :attr:`present` and :attr:`mobile`.
+    """
 
     def __init__(self, cfg: SwarmConfig, batch: int, dtype: np.dtype) -> None:
         self.cfg = cfg
@@ -141,6 +146,20 @@ class Dynamics(ABC):
 
     def _count(self, used: np.ndarray, over: np.ndarray, needed: np.ndarray) -> None:
         self.substeps, self.over_cap, self.needed = used, over, needed
+
+    def fixed_substeps(self) -> int:
+        """For a model whose step-size rule holds for every step
+        (``ModelSpec.substeps_fixed``): the substeps each step takes, the rule's count
+        capped at ``cfg.max_substeps``; the counts every step then reports are recorded
+        (a count over the cap makes every step unstable)."""
+        needed = start_substeps(self.cfg)
+        n = min(needed, self.cfg.max_substeps)
+        self._count(
+            np.full(self.batch, float(n)),
+            np.full(self.batch, needed > self.cfg.max_substeps),
+            np.full(self.batch, float(needed)),
+        )
+        return n
 
 
 class SocialPotentialDynamics(Dynamics):
@@ -331,13 +350,7 @@ class PiecewiseDynamics(Dynamics):
     def __init__(self, cfg: SwarmConfig, batch: int, dtype: np.dtype) -> None:
         super().__init__(cfg, batch, dtype)
         self._noise_rng: np.random.Generator | None = None
-        needed = piecewise_substeps(cfg)
-        self._n = min(needed, cfg.max_substeps)
-        self._count(
-            np.full(batch, float(self._n)),
-            np.full(batch, needed > cfg.max_substeps),
-            np.full(batch, float(needed)),
-        )
+        self._n = self.fixed_substeps()  # piecewise_substeps, its step-size rule
 
     def reset(self, x, v, goal, idx, rng) -> None:
         if self.cfg.piecewise.sigma > 0 and (self._noise_rng is None or idx.size == self.batch):
@@ -365,17 +378,6 @@ class PiecewiseDynamics(Dynamics):
 
     def measure(self, x, v, goal, geometry):
         return 0.5 * self.cfg.piecewise.m * np.einsum("bik,bik->b", v, v)
-
-
-def piecewise_substeps(cfg: SwarmConfig) -> int:
-    """The substeps every step of the piecewise model needs (its rates are fixed by the
-    parameters, :func:`~swarm_envs.physics.piecewise.piecewise_rates`; the goal sink's
-    curvature ``C_g/l_g²`` joins them when it acts passively)."""
-    omega2, gamma = piecewise_rates(cfg.piecewise)
-    if cfg.passive_sink:
-        omega2 += cfg.physics.C_g / (cfg.physics.l_g**2 * cfg.piecewise.m)
-    n, _ = substep_plan(np.float64(cfg.dt), stable_substep(np.float64(omega2), np.float64(gamma)))
-    return int(n)
 
 
 class LagrangianDynamics(Dynamics):
@@ -429,19 +431,21 @@ class LagrangianDynamics(Dynamics):
         return lagrangian_value(x, self.cfg.lagrangian, self._centre(goal))
 
 
-_ADAPTERS: dict[str, type[Dynamics]] = {
-    "social_potential": SocialPotentialDynamics,
-    "zone": ZoneDynamics,
-    "piecewise": PiecewiseDynamics,
-    "lagrangian": LagrangianDynamics,
-}
-
-
 def make_dynamics(cfg: SwarmConfig, batch: int, dtype: np.dtype) -> Dynamics:
-    """The adapter for ``cfg.dynamics`` (one of :data:`DYNAMICS`)."""
-    if cfg.dynamics not in _ADAPTERS:
-        raise ValueError(f"dynamics must be one of {DYNAMICS}, got {cfg.dynamics!r}")
-    return _ADAPTERS[cfg.dynamics](cfg, batch, dtype)
+    """The adapter of ``cfg.dynamics`` (its ``ModelSpec.adapter``) for ``batch`` swarms.
+
+    Raises:
+        ValueError: ``cfg.dynamics`` is not a registered model (the message lists them).
+        TypeError: the registered adapter is not a :class:`Dynamics` subclass.
+    """
+    spec = model_spec(cfg.dynamics)
+    cls = spec.adapter_class()
+    if not (isinstance(cls, type) and issubclass(cls, Dynamics)):
+        raise TypeError(
+            f"ModelSpec({spec.name!r}).adapter must be a subclass of "
+            f"swarm_envs.envs.dynamics.Dynamics, got {cls!r}"
+        )
+    return cls(cfg, batch, dtype)
 
 
 __all__ = ["DYNAMICS", "Dynamics", "make_dynamics"]

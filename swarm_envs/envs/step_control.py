@@ -4,20 +4,23 @@ Every step of ``dt`` is integrated in as many substeps as the state's stiffness 
 (``docs/models.md`` §7), at most ``SwarmConfig.max_substeps``; a state that needs more
 fails the step (:class:`~swarm_envs.envs.common.SwarmUnstableError`, or truncation).
 Some configs fail predictably, before any step: :func:`check_step_control` refuses them
-when the env is built, with the reason.
+when the env is built, with the reason. Each model's step-size rule
+(``ModelSpec.substeps`` of :mod:`swarm_envs.models`) says what a step needs
+(:func:`start_substeps`); the shipped rules are here:
 
 - Piecewise model: its rates do not depend on the state, so every step needs the same
-  substeps (:func:`~swarm_envs.envs.dynamics.piecewise_substeps`).
+  substeps (:func:`piecewise_substeps`; ``ModelSpec.substeps_fixed``, and the model's
+  adapter takes that many).
 - Social potential model: the start. The agents start uniform in a ball of radius
   ``R = start_radius`` (``init_radius``, or from ``init_density``), so the agent at
   its centre feels, on average, ``Σ_j κ(ρ_ij) ≈ (N − 1) E[κ(ρ)]`` with ``ρ`` uniform
   in the ball (and the same for the alignment rate); the Gershgorin rates of
   :func:`~swarm_envs.physics.social_potential.pair_rates` from these sums give the
-  substeps an average start needs (:func:`start_substeps`). A config whose average
-  start already needs more than ``max_substeps`` is refused; dissipation alone
+  substeps an average start needs (:func:`social_potential_substeps`). A config whose
+  average start already needs more than ``max_substeps`` is refused; dissipation alone
   (``γ ≥ β/m``) is part of it.
 - The zone model is a discrete-time model (its turn per step is part of the model) and
-  the Lagrangian model has its own safe substep: nothing to predict.
+  the Lagrangian model has its own safe substep: they have no rule, nothing to predict.
 """
 
 from __future__ import annotations
@@ -27,9 +30,17 @@ import math
 import numpy as np
 
 from swarm_envs.config import SwarmConfig
+from swarm_envs.models import model_spec
 from swarm_envs.physics.integrators import stable_substep, substep_plan
+from swarm_envs.physics.piecewise import piecewise_rates
 
-__all__ = ["ball_mean_decay", "check_step_control", "start_substeps"]
+__all__ = [
+    "ball_mean_decay",
+    "check_step_control",
+    "piecewise_substeps",
+    "social_potential_substeps",
+    "start_substeps",
+]
 
 #: Quadrature points of :func:`ball_mean_decay`.
 _QUADRATURE = 4097
@@ -52,14 +63,26 @@ def ball_mean_decay(radius: float, length: float, dim: int) -> float:
 
 
 def start_substeps(cfg: SwarmConfig) -> int:
-    """The substeps a step needs at an average start (see the module docstring); 1 for
-    the models whose needs are not predicted."""
-    if cfg.dynamics == "piecewise":
-        from swarm_envs.envs.dynamics import piecewise_substeps
+    """The substeps a step needs at an average start, by the step-size rule of the
+    model (``ModelSpec.substeps``); 1 for the models whose needs are not predicted."""
+    rule = model_spec(cfg.dynamics).substep_rule()
+    return 1 if rule is None else int(rule(cfg))
 
-        return piecewise_substeps(cfg)
-    if cfg.dynamics != "social_potential":
-        return 1
+
+def piecewise_substeps(cfg: SwarmConfig) -> int:
+    """The substeps every step of the piecewise model needs (its rates are fixed by the
+    parameters, :func:`~swarm_envs.physics.piecewise.piecewise_rates`; the goal sink's
+    curvature ``C_g/l_g²`` joins them when it acts passively)."""
+    omega2, gamma = piecewise_rates(cfg.piecewise)
+    if cfg.passive_sink:
+        omega2 += cfg.physics.C_g / (cfg.physics.l_g**2 * cfg.piecewise.m)
+    n, _ = substep_plan(np.float64(cfg.dt), stable_substep(np.float64(omega2), np.float64(gamma)))
+    return int(n)
+
+
+def social_potential_substeps(cfg: SwarmConfig) -> int:
+    """The substeps a step of the social potential model needs at an average start
+    (the module docstring)."""
     p, n, R, d = cfg.physics, cfg.n_agents - 1, cfg.start_radius, cfg.dim
     kappa = n * (
         p.C_r / p.l_r**2 * ball_mean_decay(R, p.l_r, d)
@@ -82,8 +105,8 @@ def check_step_control(cfg: SwarmConfig) -> None:
     needed = start_substeps(cfg)
     if needed <= cfg.max_substeps:
         return
-    if cfg.dynamics == "piecewise":
-        what = "every step of the piecewise model (its stiffness is fixed by its parameters)"
+    if model_spec(cfg.dynamics).substeps_fixed:
+        what = f"every step of dynamics={cfg.dynamics!r} (its stiffness is fixed by its parameters)"
     else:
         what = (
             f"an average start of {cfg.n_agents} agents in a ball of radius "

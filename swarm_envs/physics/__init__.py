@@ -3,8 +3,10 @@
 Public interface (docs/design.md): :class:`SocialPotentialParams`, :func:`forces`,
 :func:`energy`, :func:`simulate`. The other models of the seeds live in their own
 modules (``zone``, ``piecewise``, ``lagrangian``) with ``ZoneParams``,
-``PiecewiseParams`` and ``LagrangianParams``, exported here too; ``simulate`` dispatches
-on the parameter type. No environment, training or rendering code is
+``PiecewiseParams`` and ``LagrangianParams``, exported here too. ``simulate`` dispatches
+on the parameter type to the simulator of the model registered for it
+(:mod:`swarm_envs.models`, which imports the physics alone; a user's model registered
+there is simulated the same way). No environment, training or rendering code is
 imported here.
 """
 

@@ -254,9 +254,11 @@ def simulate(
     """Integrate the model from ``(x0, v0)`` for ``steps`` steps of length ``dt``.
 
     The type of ``params`` selects the model: :class:`SocialPotentialParams` (this
-    module), ``ZoneParams`` (:func:`swarm_envs.physics.zone.simulate_zone`),
-    ``PiecewiseParams`` (:func:`swarm_envs.physics.piecewise.simulate_piecewise`) or
-    ``LagrangianParams`` (:func:`swarm_envs.physics.lagrangian.simulate_lagrangian`).
+    module), or the parameter class of another registered model, whose own simulator
+    runs (``ModelSpec.simulate`` of :mod:`swarm_envs.models`: ``ZoneParams`` →
+    :func:`~swarm_envs.physics.zone.simulate_zone`, ``PiecewiseParams`` →
+    :func:`~swarm_envs.physics.piecewise.simulate_piecewise`, ``LagrangianParams`` →
+    :func:`~swarm_envs.physics.lagrangian.simulate_lagrangian`, and a user's model).
 
     Args:
         params: model parameters (its type selects the model).
@@ -315,20 +317,16 @@ def simulate(
 
 
 def _model_simulator(params: Any) -> Callable[..., tuple[np.ndarray, np.ndarray]]:
-    """The ``simulate_*`` function of the model whose parameter type ``params`` has."""
-    from swarm_envs.physics.lagrangian import LagrangianParams, simulate_lagrangian
-    from swarm_envs.physics.piecewise import PiecewiseParams, simulate_piecewise
-    from swarm_envs.physics.zone import ZoneParams, simulate_zone
+    """The simulator of the registered model whose parameter class ``params`` has.
 
-    table: dict[type, Callable[..., tuple[np.ndarray, np.ndarray]]] = {
-        ZoneParams: simulate_zone,
-        PiecewiseParams: simulate_piecewise,
-        LagrangianParams: simulate_lagrangian,
-    }
-    for cls, fn in table.items():
-        if isinstance(params, cls):
-            return fn
-    known = ", ".join(["SocialPotentialParams", *(c.__name__ for c in table)])
-    raise ValueError(
-        f"simulate: unsupported parameter type {type(params).__name__}; expected one of {known}"
-    )
+    The registry (:mod:`swarm_envs.models`) imports the physics modules, so it is read
+    here, at the call, not at import; it imports nothing above the physics."""
+    from swarm_envs.models import model_names, model_spec, spec_for_params
+
+    spec = spec_for_params(params)
+    if spec is None:
+        known = ", ".join(model_spec(name).params.__name__ for name in model_names())
+        raise ValueError(
+            f"simulate: unsupported parameter type {type(params).__name__}; expected one of {known}"
+        )
+    return spec.simulate

@@ -49,6 +49,7 @@ from swarm_envs.envs.task import (
 from swarm_envs.envs.task.observation import LAYOUT, layout
 from swarm_envs.envs.task.statistics import mill_speed_scale
 from swarm_envs.metrics import CENTRE_RTOL
+from swarm_envs.models import SHIPPED, model_spec, models_on
 from swarm_envs.physics import SocialPotentialParams
 from swarm_envs.physics.integrators import STEP_SAFETY
 from swarm_envs.physics.social_potential import RHO_FLOOR
@@ -86,14 +87,19 @@ KERNEL_CONFIG_FIELDS = (
     "observe_status",
 )
 
+_KEYS = {f.name for f in dataclasses.fields(SwarmConfig)}
+
 #: The :class:`SwarmConfig` fields the C step does not read, and why.
 HOST_CONFIG_FIELDS = {
     "physics": "expanded into the physics_* fields",
-    "dynamics": "social_potential only (checked)",
+    "dynamics": "the models whose ModelSpec.backends has 'native' only (checked)",
     "integrator": "semi_implicit_euler only (checked)",
-    "zone": "another model's section",
-    "piecewise": "another model's section",
-    "lagrangian": "another model's section",
+    **{
+        model_spec(name).section: "another model's section"
+        for name in SHIPPED
+        if "native" not in model_spec(name).backends and model_spec(name).section in _KEYS
+    },
+    "model_params": "the other registered models' sections (refused)",
     "init_radius": "starts are drawn in Python",
     "init_speed": "starts are drawn in Python",
     "init_density": "starts are drawn in Python",
@@ -283,8 +289,9 @@ STATUS_MASKS = ("present", "mobile", "members", "active")
 
 def unsupported(cfg: SwarmConfig, kernel: KernelInfo) -> str | None:
     """Why the C step cannot run ``cfg`` (``None`` if it can), naming what it lacks."""
-    if cfg.dynamics != "social_potential":
-        return f"supports dynamics='social_potential' only, got {cfg.dynamics!r}"
+    if "native" not in model_spec(cfg.dynamics).backends:
+        names = " or ".join(f"{name!r}" for name in models_on("native"))
+        return f"supports dynamics={names} only, got {cfg.dynamics!r}"
     if cfg.integrator != "semi_implicit_euler":
         return f"supports integrator='semi_implicit_euler' only, got {cfg.integrator!r}"
     if cfg.device != "cpu":
