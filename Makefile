@@ -10,8 +10,9 @@ OUT    ?= reproductions
 help:
 	@echo "make demo       the main job: train a shared PPO policy, evaluate it against the"
 	@echo "                analytic controller, write runs/demo/ (report, plots, GIFs)"
-	@echo "make test       create .venv if missing, install, run ruff and pytest"
+	@echo "make test       create .venv if missing, install, run ruff, mypy, codespell and pytest"
 	@echo "make test-slow  the same, plus the slow tests (full training runs)"
+	@echo "make lint       ruff (lint, format check), mypy (types) and codespell, as CI runs them"
 	@echo "make reproduce  regenerate the paper figures (PNG + JSON + GIF) into $(OUT)/"
 	@echo "make bench      print the physics throughput table"
 	@echo "make benchmark  the results table: train every entry of configs/benchmark/results.yaml"
@@ -33,6 +34,8 @@ install: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
+	$(BIN)/mypy
+	$(BIN)/codespell
 
 format: $(STAMP)
 	$(BIN)/ruff format .
@@ -58,4 +61,4 @@ benchmark: $(STAMP)
 	$(BIN)/swarm-benchmark
 
 clean:
-	rm -rf $(VENV) .pytest_cache .ruff_cache
+	rm -rf $(VENV) .pytest_cache .ruff_cache .mypy_cache

@@ -65,17 +65,17 @@ class InformedFollowerController(SaturatedPDController):
         k_c: float | None = None,
         saturation: str | None = None,
     ) -> None:
-        from agents.tuned import tuned_gains
+        from agents.tuned import Gain, tuned_gains
 
         super().__init__(env, k_p=k_p, k_d=k_d, saturation=saturation)
         owner = type(self).__name__
         if not self.cfg.informs_agents:
             raise ValueError(f"{owner} needs task='informed', got task={self.cfg.task!r}")
         tuned = tuned_gains(self._TUNED_NAME, self.cfg)
-        k_v = tuned.get("k_v", self.DEFAULT_K_V) if k_v is None else k_v
-        k_c = tuned.get("k_c", self.DEFAULT_K_C) if k_c is None else k_c
-        self.k_v: float = check_real(owner, "k_v", k_v, low=0.0)
-        self.k_c: float = check_real(owner, "k_c", k_c, low=0.0)
+        k_v_value: Gain = tuned.get("k_v", self.DEFAULT_K_V) if k_v is None else k_v
+        k_c_value: Gain = tuned.get("k_c", self.DEFAULT_K_C) if k_c is None else k_c
+        self.k_v: float = check_real(owner, "k_v", k_v_value, low=0.0)
+        self.k_c: float = check_real(owner, "k_c", k_c_value, low=0.0)
         self.obs_neighbor_scale: float = self.cfg.obs_neighbor_scale
 
     def __repr__(self) -> str:

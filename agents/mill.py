@@ -57,17 +57,19 @@ class MillController(Controller):
     DEFAULT_SPIN: float = 0.2
 
     def __init__(self, env: Any, approach: float | None = None, spin: float | None = None) -> None:
-        from agents.tuned import tuned_gains
+        from agents.tuned import Gain, tuned_gains
 
         super().__init__(env)
         if self.dim != 2:
             raise ValueError(f"MillController circles in the plane: dim must be 2, got {self.dim}")
         owner = type(self).__name__
         tuned = tuned_gains("mill", self.cfg)
-        approach = tuned.get("approach", self.DEFAULT_APPROACH) if approach is None else approach
-        spin = tuned.get("spin", self.DEFAULT_SPIN) if spin is None else spin
-        self.approach = check_real(owner, "approach", approach, low=0.0, high=1.0)
-        self.spin = check_real(owner, "spin", spin, low=0.0, high=1.0)
+        approach_value: Gain = (
+            tuned.get("approach", self.DEFAULT_APPROACH) if approach is None else approach
+        )
+        spin_value: Gain = tuned.get("spin", self.DEFAULT_SPIN) if spin is None else spin
+        self.approach = check_real(owner, "approach", approach_value, low=0.0, high=1.0)
+        self.spin = check_real(owner, "spin", spin_value, low=0.0, high=1.0)
         self.radius: float = self.cfg.arrival_radius
         self.obs_goal_scale: float = self.cfg.obs_goal_scale
 

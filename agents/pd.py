@@ -82,14 +82,14 @@ class SaturatedPDController(Controller):
         saturation: str | None = None,
     ) -> None:
         super().__init__(env)
-        from agents.tuned import tuned_gains
+        from agents.tuned import Gain, tuned_gains
 
         tuned = tuned_gains(self._TUNED_NAME, self.cfg)
         owner = type(self).__name__
-        k_p = tuned.get("k_p", self.DEFAULT_K_P) if k_p is None else k_p
-        k_d = tuned.get("k_d", self.DEFAULT_K_D) if k_d is None else k_d
-        self.k_p: float = check_real(owner, "k_p", k_p, low=0.0)
-        self.k_d: float = check_real(owner, "k_d", k_d, low=0.0)
+        k_p_value: Gain = tuned.get("k_p", self.DEFAULT_K_P) if k_p is None else k_p
+        k_d_value: Gain = tuned.get("k_d", self.DEFAULT_K_D) if k_d is None else k_d
+        self.k_p: float = check_real(owner, "k_p", k_p_value, low=0.0)
+        self.k_d: float = check_real(owner, "k_d", k_d_value, low=0.0)
         if saturation is None:
             saturation = str(tuned.get("saturation", "norm"))
         if saturation not in SATURATIONS:

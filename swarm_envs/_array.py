@@ -66,7 +66,7 @@ class ArrayNamespace:
 
     def clip(self, a: Array, low: float | None = None, high: float | None = None) -> Array:
         if high is None:
-            return np.maximum(a, low)
+            return a if low is None else np.maximum(a, low)
         if low is None:
             return np.minimum(a, high)
         return np.clip(a, low, high)

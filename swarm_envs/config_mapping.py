@@ -42,6 +42,12 @@ def _field_types(cls: type) -> dict[str, Any]:
     return typing.get_type_hints(cls)
 
 
+def _fields(cls: type) -> tuple[dataclasses.Field[Any], ...]:
+    if not dataclasses.is_dataclass(cls):
+        raise TypeError(f"config_from_mapping builds dataclasses, got {cls!r}")
+    return fields(cls)
+
+
 def _is_dataclass_type(tp: Any) -> bool:
     return isinstance(tp, type) and dataclasses.is_dataclass(tp)
 
@@ -70,7 +76,7 @@ def config_from_mapping(cls: type[T], data: Mapping[str, Any] | T, *, path: str 
     prepare = getattr(cls, "from_config_mapping", None)
     if prepare is not None:
         data = prepare(data)
-    by_name = {f.name: f for f in fields(cls)}  # type: ignore[arg-type]
+    by_name = {f.name: f for f in _fields(cls)}
     names = set(by_name)
     hints = _field_types(cls)
     kwargs: dict[str, Any] = {}

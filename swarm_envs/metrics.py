@@ -95,10 +95,10 @@ CENTRE_RTOL = 4.0
 # --------------------------------------------------------------------------- helpers
 
 
-def _as_state(name: str, a: Any) -> Any:
+def _as_state(name: str, a: Any) -> np.ndarray:
     """``a`` as a floating array shaped ``(..., N, d)``, ``N ≥ 1``, ``d`` in {2, 3}.
 
-    A torch tensor stays a tensor (the statistics run on either)."""
+    A torch tensor stays a tensor (the statistics run on either; typed as numpy's)."""
     if _is_tensor(a):
         if a.ndim < 2 or a.shape[-1] not in (2, 3) or a.shape[-2] < 1:
             raise ValueError(f"{name} must have shape (..., N, d) with N >= 1, d in (2, 3)")
@@ -110,7 +110,7 @@ def _is_tensor(a: Any) -> bool:
     return type(a).__module__.startswith("torch")
 
 
-def _as_pair(x: Any, v: Any) -> tuple[Any, Any]:
+def _as_pair(x: Any, v: Any) -> tuple[np.ndarray, np.ndarray]:
     x = _as_state("positions", x)
     v = _as_state("velocities", v)
     if v.shape != x.shape:

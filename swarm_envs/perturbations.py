@@ -129,7 +129,7 @@ class Perturbations:
     def bounds(self, name: str) -> tuple[Any, Any]:
         """``(low, high)`` of a field (``(value, value)`` for a number)."""
         value = getattr(self, name)
-        return tuple(value) if isinstance(value, tuple) else (value, value)  # type: ignore[return-value]
+        return tuple(value) if isinstance(value, tuple) else (value, value)
 
     @property
     def fails_agents(self) -> bool:

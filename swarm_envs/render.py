@@ -247,7 +247,7 @@ class Viewport:
         if extra:
             p = np.concatenate([p, np.stack(extra)])
         if p.shape[0] == 0:
-            return cls(center=(0.0, 0.0), half_width=min_half_width, size=tuple(size))
+            return cls(center=(0.0, 0.0), half_width=min_half_width, size=_check_size(size))
         if not np.all(np.isfinite(p)):
             raise ValueError("points must be finite (no NaN or inf)")
         lo, hi = p.min(axis=0), p.max(axis=0)
@@ -259,7 +259,7 @@ class Viewport:
         return cls(
             center=(float(center[0]), float(center[1])),
             half_width=max(half, min_half_width),
-            size=tuple(size),
+            size=_check_size(size),
         )
 
 

@@ -55,9 +55,9 @@ class SwarmStatsCallback(BaseCallback):
         else:
             rows = [info for info in infos if "polarization" in info]
             for key in STAT_KEYS:
-                values = [info[key] for info in rows if key in info]
-                if values:
-                    self.logger.record_mean(f"swarm/{key}", float(np.mean(values)))
+                found = [info[key] for info in rows if key in info]
+                if found:
+                    self.logger.record_mean(f"swarm/{key}", float(np.mean(found)))
         if dones is not None:
             for i in np.flatnonzero(dones):
                 info = infos[i]

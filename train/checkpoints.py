@@ -30,9 +30,12 @@ import shutil
 import warnings
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from stable_baselines3.common.base_class import BaseAlgorithm
 
 CHECKPOINTS = "checkpoints"
 PREFIX = "step_"
@@ -199,7 +202,7 @@ def _prune(out: Path, keep: int) -> None:
 
 def load_checkpoint(
     path: Path,
-    cls: type,
+    cls: type[BaseAlgorithm],
     *,
     device: str,
     make_env: Callable[[], Any],
@@ -219,7 +222,9 @@ def load_checkpoint(
         env, restored = make_env(), False
     model = cls.load(path / "model.zip", env=None, device=device, tensorboard_log=tensorboard_log)
     model.set_env(env, force_reset=not restored)
-    if (path / "replay_buffer.pkl").is_file():
+    from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
+
+    if isinstance(model, OffPolicyAlgorithm) and (path / "replay_buffer.pkl").is_file():
         model.load_replay_buffer(path / "replay_buffer.pkl")
     with (path / "rng.pkl").open("rb") as fh:
         restore_rng(model, pickle.load(fh))

@@ -81,7 +81,7 @@ import sys
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from swarm_envs import ENV_ID, tune_allocator
 from train.cli_common import CliError, OneLineParser, check_device, check_seed, fail, one_line
@@ -92,6 +92,9 @@ from train.cli_eval_robustness import (
     robustness_sweeps,
 )
 from train.config import DEFAULT_TORCH_THREADS
+
+if TYPE_CHECKING:
+    from swarm_envs.config import SwarmConfig
 
 PROG = "swarm-eval"
 
@@ -203,7 +206,7 @@ def _parse_overrides(items: Sequence[str], max_steps: int | None) -> dict[str, A
     return out
 
 
-def _make_config(env_id: str, config: str | None, overrides: dict[str, Any]) -> Any:
+def _make_config(env_id: str, config: str | None, overrides: dict[str, Any]) -> SwarmConfig:
     import gymnasium
     import yaml
 
@@ -232,7 +235,7 @@ def _make_config(env_id: str, config: str | None, overrides: dict[str, Any]) -> 
         env.close()
 
 
-def check_backend(cfg: Any, batch: int) -> str:
+def check_backend(cfg: SwarmConfig, batch: int) -> str:
     """The backend that will run ``batch`` episodes of ``cfg`` (its ``backend`` and
     ``device``), or :class:`CliError` when its ``device`` is unavailable here or needs
     another backend."""
@@ -265,7 +268,7 @@ def _user_sets(key: str, config: str | None, overrides: dict[str, Any]) -> bool:
     return key in load_yaml(resolve_config_path(config))
 
 
-def _size_configs(cfg: Any, sizes: Sequence[int], episodes: int) -> list[Any]:
+def _size_configs(cfg: SwarmConfig, sizes: Sequence[int], episodes: int) -> list[SwarmConfig]:
     """``cfg`` at each ``--n-agents`` size, each checked as :func:`check_backend` does."""
     from train.evaluate.transfer import size_configs
 
@@ -279,7 +282,7 @@ def _size_configs(cfg: Any, sizes: Sequence[int], episodes: int) -> list[Any]:
 
 
 def _load_policies(
-    specs: Sequence[str], cfg: Any, seed: int, device: str, *, transfer: bool = False
+    specs: Sequence[str], cfg: SwarmConfig, seed: int, device: str, *, transfer: bool = False
 ) -> dict[str, Any]:
     """The policies of ``--policies``, each checked to fit ``cfg``; with ``transfer``,
     to be shared per-agent policies (a central one is refused)."""
@@ -384,7 +387,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
 
 
-def _main(args: Any) -> int:
+def _main(args: argparse.Namespace) -> int:
     from swarm_envs.plugins import load_plugins
     from train.evaluate.robustness import ROBUSTNESS_FILES
     from train.evaluate.transfer import TRANSFER_FILES
@@ -456,7 +459,11 @@ def _one_line_warning(message: Any, category: type, *_args: Any, **_kw: Any) -> 
 
 
 def _evaluate(
-    args: Any, policies: dict[str, Any], cfg: Any, out: Path, sweeps: dict[str, list[float]]
+    args: argparse.Namespace,
+    policies: dict[str, Any],
+    cfg: SwarmConfig,
+    out: Path,
+    sweeps: dict[str, list[float]],
 ) -> tuple[str, str]:
     """Run the evaluation ``args`` ask for; return its table and what it wrote."""
     from train.evaluate import (

@@ -8,9 +8,12 @@ and when agents fail. The sweep itself is :mod:`train.evaluate.robustness`.
 from __future__ import annotations
 
 import argparse
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from train.cli_common import CliError
+
+if TYPE_CHECKING:
+    from swarm_envs.config import SwarmConfig
 
 __all__ = [
     "add_robustness_arguments",
@@ -55,7 +58,7 @@ def add_robustness_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
-def robustness_sweeps(args: Any) -> dict[str, list[float]]:
+def robustness_sweeps(args: argparse.Namespace) -> dict[str, list[float]]:
     """The ``{option: values}`` of the robustness flags given, each checked."""
     from swarm_envs.perturbations import Perturbations
     from train.evaluate.robustness import SWEPT, sweep_values
@@ -83,7 +86,9 @@ def robustness_sweeps(args: Any) -> dict[str, list[float]]:
     return sweeps
 
 
-def robustness_configs(cfg: Any, args: Any, sweeps: dict[str, list[float]]) -> list[Any]:
+def robustness_configs(
+    cfg: SwarmConfig, args: argparse.Namespace, sweeps: dict[str, list[float]]
+) -> list[SwarmConfig]:
     """The configs of the sweep's rows, or :class:`CliError` naming what is wrong."""
     from train.evaluate import robustness
 
@@ -94,7 +99,7 @@ def robustness_configs(cfg: Any, args: Any, sweeps: dict[str, list[float]]) -> l
     return [row.cfg for row in rows]
 
 
-def failure_options(args: Any) -> dict[str, Any]:
+def failure_options(args: argparse.Namespace) -> dict[str, Any]:
     """``failure_mode`` and ``failure_time`` of the flags (``None`` where not given)."""
     time = args.failure_time
     return {

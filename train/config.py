@@ -17,9 +17,9 @@ from __future__ import annotations
 import inspect
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import Field, dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import yaml
 
@@ -32,6 +32,9 @@ from swarm_envs.config import (
 )
 from train.hyperparams import check_hyperparams
 from train.integers import ACCEPTED, check_integer, coerce_integer_fields, integral
+
+if TYPE_CHECKING:
+    from stable_baselines3.common.base_class import BaseAlgorithm
 
 ALGOS = ("PPO", "SAC")
 #: Keys a resumed run may change (``swarm-train --resume DIR key=value``): the total
@@ -46,7 +49,7 @@ DEFAULT_TORCH_THREADS = 1
 RESERVED = {"policy", "env", "seed", "device", "policy_kwargs", "tensorboard_log", "verbose"}
 
 
-def algorithm_class(name: str) -> type:
+def algorithm_class(name: str) -> type[BaseAlgorithm]:
     """The SB3 class for ``name`` (one of :data:`ALGOS`)."""
     import stable_baselines3
 
@@ -62,6 +65,7 @@ class RunConfig:
     A mixin for the frozen dataclasses that declare those fields.
     """
 
+    __dataclass_fields__: ClassVar[dict[str, Field[Any]]]  # the subclasses are dataclasses
     env_config: str | None  # declared by the subclasses' dataclass fields
     env: Mapping[str, Any]
     net_arch: Any
@@ -83,7 +87,7 @@ class RunConfig:
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data for YAML (saved beside the model or checkpoint)."""
-        out = {f.name: getattr(self, f.name) for f in fields(self)}  # type: ignore[arg-type]
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
         out["net_arch"] = list(self.net_arch)
         if hasattr(self, "plugins"):
             out["plugins"] = list(self.plugins)
@@ -267,9 +271,10 @@ def net_arch_tuple(net_arch: Any) -> tuple[int, ...]:
     if isinstance(net_arch, (str, bytes, Mapping)) or not hasattr(net_arch, "__iter__"):
         raise problem
     sizes = tuple(integral(h) for h in net_arch)
-    if not sizes or any(h is None or h < 1 for h in sizes):
+    layers = tuple(h for h in sizes if h is not None and h >= 1)
+    if not sizes or len(layers) != len(sizes):
         raise problem
-    return sizes  # type: ignore[return-value]
+    return layers
 
 
 def env_overrides(env: Any) -> dict[str, Any]:

@@ -17,7 +17,9 @@ from typing import Any
 
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs
 
 from swarm_envs.config import SwarmConfig
 
@@ -74,9 +76,9 @@ class ResidualVecEnv(VecEnvWrapper):
     def __init__(self, venv: VecEnv, baseline: Any) -> None:
         super().__init__(venv)
         self.baseline = baseline
-        self._obs: np.ndarray | None = None
+        self._obs: VecEnvObs | None = None
 
-    def reset(self) -> Any:
+    def reset(self) -> VecEnvObs:
         self._obs = self.venv.reset()
         return self._obs
 
@@ -138,6 +140,11 @@ class CriticWarmup(BaseCallback):
 
     def _actor_parameters(self) -> list[Any]:
         policy = self.model.policy
+        if not isinstance(policy, ActorCriticPolicy):
+            raise TypeError(
+                f"CriticWarmup holds the actor of an actor-critic policy (PPO) still, "
+                f"got {type(policy).__name__}"
+            )
         parts = [policy.action_net, policy.mlp_extractor.policy_net]
         params = [p for part in parts for p in part.parameters()]
         log_std = getattr(policy, "log_std", None)

@@ -56,7 +56,7 @@ import platform
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import yaml
@@ -83,6 +83,11 @@ from train.evaluate.policies import TRAINED_ENV, trained_env_record
 from train.interrupt import StopRequest, TrainingInterrupted, stop_on_signals
 from train.outdir import RUN_FILES, check_out_dir, prepare_out_dir
 
+if TYPE_CHECKING:
+    import gymnasium as gym
+    from stable_baselines3.common.base_class import BaseAlgorithm
+    from stable_baselines3.common.vec_env import VecEnv
+
 #: Where the output is not a terminal, ``progress_bar`` prints a line this often instead.
 PROGRESS_LINE_SECONDS = 30.0
 
@@ -94,7 +99,7 @@ class TrainSetupError(ValueError):
     """
 
 
-def make_training_env(tc: TrainConfig):
+def make_training_env(tc: TrainConfig) -> VecEnv:
     """The VecEnv a run trains on, reporting SB3's ``episode`` infos.
 
     Shared mode: the batched ``SwarmNavVecEnv`` itself (it reports the episodes; a
@@ -113,7 +118,7 @@ def make_training_env(tc: TrainConfig):
         return venv
     import gymnasium as gym
 
-    def make_one():
+    def make_one() -> gym.Env:
         return gym.make(tc.env_id, config=tc.env_config, **tc.env)
 
     venv = DummyVecEnv([make_one for _ in range(tc.n_swarms)])
@@ -122,7 +127,7 @@ def make_training_env(tc: TrainConfig):
 
 
 @functools.cache
-def done_slots_only(cls: type) -> type:
+def done_slots_only(cls: type[BaseAlgorithm]) -> type[BaseAlgorithm]:
     """SB3 algorithm ``cls`` whose episode bookkeeping visits the slots that ended only.
 
     SB3's ``_update_info_buffer`` reads ``info.get("episode")`` and ``"is_success"`` of
@@ -134,13 +139,16 @@ def done_slots_only(cls: type) -> type:
     Models save and load as ``cls`` (the override holds no state).
     """
 
-    def _update_info_buffer(self, infos: list[dict[str, Any]], dones: Any = None) -> None:
+    def _update_info_buffer(
+        self: BaseAlgorithm, infos: list[dict[str, Any]], dones: np.ndarray | None = None
+    ) -> None:
         if dones is None:
             return cls._update_info_buffer(self, infos, dones)
         ended = np.flatnonzero(dones)
         cls._update_info_buffer(self, [infos[i] for i in ended], np.ones(ended.size, bool))
 
-    return type(
+    # type(name, bases, namespace) makes a class from a base only known at run time.
+    subclass = type(
         cls.__name__,
         (cls,),
         {
@@ -149,9 +157,10 @@ def done_slots_only(cls: type) -> type:
             "__doc__": cls.__doc__,
         },
     )
+    return cast("type[BaseAlgorithm]", subclass)
 
 
-def build_model(tc: TrainConfig, venv, tensorboard_log: str | None = None):
+def build_model(tc: TrainConfig, venv: VecEnv, tensorboard_log: str | None = None) -> BaseAlgorithm:
     """The SB3 model of ``tc`` on ``venv`` (seeded; hyperparameters from the config).
 
     The model records the env it trains on as its
@@ -175,8 +184,13 @@ def build_model(tc: TrainConfig, venv, tensorboard_log: str | None = None):
     # Saved in the zip's data (every model.zip, checkpoint and best_model.zip), set on load.
     setattr(model, TRAINED_ENV, trained_env_record(tc.swarm_config(), tc.env_id))
     if tc.residual is not None:
-        from train.residual import RESIDUAL, residual_record
+        from train.residual import RESIDUAL, ResidualVecEnv, residual_record
 
+        if not isinstance(venv, ResidualVecEnv):
+            raise TypeError(
+                "a residual policy trains on a ResidualVecEnv (make_training_env), "
+                f"got {type(venv).__name__}"
+            )
         setattr(model, RESIDUAL, residual_record(tc.residual, venv.baseline))
     return model
 

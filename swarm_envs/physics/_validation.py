@@ -8,7 +8,7 @@ several thousand steps later.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 
@@ -69,6 +69,14 @@ def as_state(a: Any, name: str, *, min_agents: int = 0) -> np.ndarray:
     return a
 
 
+@overload
+def check_state(x: Any, v: None = None) -> tuple[np.ndarray, None]: ...
+
+
+@overload
+def check_state(x: Any, v: Any) -> tuple[np.ndarray, np.ndarray]: ...
+
+
 def check_state(x: Any, v: Any | None = None) -> tuple[np.ndarray, np.ndarray | None]:
     """Validate positions (and velocities) shaped ``(..., N, d)`` with d in {2, 3}.
 
@@ -87,6 +95,18 @@ def check_state(x: Any, v: Any | None = None) -> tuple[np.ndarray, np.ndarray | 
     if v.shape != x.shape:
         raise ValueError(f"velocities shape {v.shape} must equal positions shape {x.shape}")
     return x, v
+
+
+def _check_goal_tensor(goal: Any, x: Any) -> Any:
+    """:func:`check_goal` for positions that are a torch tensor: a tensor like ``x``."""
+    import torch
+
+    g = torch.as_tensor(goal, dtype=x.dtype, device=x.device)
+    if g.ndim < 1 or g.shape[-1] != x.shape[-1]:
+        raise ValueError(
+            f"goal must have shape (..., {x.shape[-1]}) like the positions, got {tuple(g.shape)}"
+        )
+    return g
 
 
 def _is_tensor(a: Any) -> bool:
@@ -120,15 +140,7 @@ def check_goal(goal: Any, x: np.ndarray) -> np.ndarray:
         ValueError: if the goal is not finite or its last dimension is not ``d``.
     """
     if _is_tensor(x):
-        import torch
-
-        g = torch.as_tensor(goal, dtype=x.dtype, device=x.device)
-        if g.ndim < 1 or g.shape[-1] != x.shape[-1]:
-            raise ValueError(
-                f"goal must have shape (..., {x.shape[-1]}) like the positions, "
-                f"got {tuple(g.shape)}"
-            )
-        return g
+        return _check_goal_tensor(goal, x)
     g = np.asarray(goal, dtype=x.dtype)
     d = x.shape[-1]
     if g.ndim < 1 or g.shape[-1] != d:

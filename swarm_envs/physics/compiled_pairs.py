@@ -106,7 +106,8 @@ def _scalar_exp(x: float) -> float:
 # Python), then numba.prange and the two functions through numba.njit(inline="always")
 # (inlined into the kernel's loop, where LLVM folds them into the surrounding code).
 prange = range
-_law = pair_law
+# Called with the default potential=True (U computed): one signature for both bindings.
+_law: Callable[..., tuple[Any, Any]] = pair_law
 _rates = rate_law
 _exp = _scalar_exp
 _compiled_fns: dict[Callable[..., Any], Callable[..., Any]] = {}

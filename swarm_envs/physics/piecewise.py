@@ -320,11 +320,10 @@ def piecewise_forces(
     [[-50.0, 0.0], [50.0, 0.0]]
     """
     x, v = check_state(x, v)
-    if params.sigma > 0:
-        rng = _check_rng(rng, "piecewise_forces")
+    noise_rng = _check_rng(rng, "piecewise_forces") if params.sigma > 0 else None
     total = interaction_forces(x, params)
-    if params.sigma > 0:
-        total += random_force(rng, x.shape, params, x.dtype)
+    if noise_rng is not None:
+        total += random_force(noise_rng, x.shape, params, x.dtype)
     if params.beta > 0:
         total -= params.beta * v
     return total

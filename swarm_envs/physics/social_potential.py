@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple, overload
 
 import numpy as np
 
@@ -180,6 +180,40 @@ class SocialPotentialParams:
 
 
 # --------------------------------------------------------------------------- the laws
+
+
+@overload
+def pair_law(
+    rho: Array,
+    inv_rho: Array,
+    vdot: Array | None,
+    C_a: float,
+    C_r: float,
+    l_a: float,
+    l_r: float,
+    C_o: float,
+    l_o: float,
+    exp: Any,
+    potential: Literal[True] = ...,
+    potential_decay: Any = ...,
+) -> tuple[Array, Array]: ...
+
+
+@overload
+def pair_law(
+    rho: Array,
+    inv_rho: Array,
+    vdot: Array | None,
+    C_a: float,
+    C_r: float,
+    l_a: float,
+    l_r: float,
+    C_o: float,
+    l_o: float,
+    exp: Any,
+    potential: bool = ...,
+    potential_decay: Any = ...,
+) -> tuple[Array, Array | None]: ...
 
 
 def pair_law(

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -223,7 +223,20 @@ def train_seed(
     )
 
 
-def _episodes(policy: Any, cfg: SwarmConfig, s: Settings, name: str) -> dict[str, np.ndarray]:
+@dataclass(frozen=True)
+class _Episodes:
+    """One policy's evaluation episodes, one value per episode."""
+
+    returns: np.ndarray
+    success: np.ndarray
+    steps: np.ndarray
+    reached: np.ndarray
+    """The step of first success (the episode's length where it never succeeds)."""
+    bound: np.ndarray | None
+    """The lower bound on the time to goal of each start; ``None`` where undefined."""
+
+
+def _episodes(policy: Any, cfg: SwarmConfig, s: Settings, name: str) -> _Episodes:
     from train.evaluate.episodes import run_episodes
 
     batch = run_episodes(
@@ -231,21 +244,19 @@ def _episodes(policy: Any, cfg: SwarmConfig, s: Settings, name: str) -> dict[str
     )
     reached = batch.lengths if batch.first_success is None else batch.first_success
     bound = time_to_goal_bound(cfg, batch.start["x"], batch.start["v"], batch.start["goal"])
-    return {
-        "return": batch.returns,
-        "success": batch.success,
-        "steps": batch.lengths,
-        "reached": reached,
-        "bound": bound,
-    }
+    return _Episodes(batch.returns, batch.success, batch.lengths, reached, bound)
 
 
 def _policy_result(
-    runs: Sequence[Mapping[str, np.ndarray]], cfg: SwarmConfig, s: Settings, **extra: Any
+    runs: Sequence[_Episodes], cfg: SwarmConfig, s: Settings, **extra: Any
 ) -> dict[str, Any]:
     """The measures, intervals and per-episode values of ``runs`` (one per seed)."""
-    keys = ("return", "success", "steps", "reached")
-    arrays = {k: np.stack([r[k] for r in runs]) for k in keys}
+    arrays = {
+        "return": np.stack([r.returns for r in runs]),
+        "success": np.stack([r.success for r in runs]),
+        "steps": np.stack([r.steps for r in runs]),
+        "reached": np.stack([r.reached for r in runs]),
+    }
     summary = summarize_runs(
         arrays["return"],
         arrays["success"],
@@ -260,7 +271,7 @@ def _policy_result(
         "success": arrays["success"].astype(bool).tolist(),
         "steps": arrays["steps"].astype(int).tolist(),
     }
-    bound = runs[0]["bound"]
+    bound = runs[0].bound
     over = time_over_bound(arrays["reached"] * cfg.dt, arrays["success"], bound)
     return {**extra, **summary, "time_over_bound": over, "per_episode": per_episode}
 
@@ -301,7 +312,7 @@ def evaluate_entry(
             policies["learned"] = _policy_result(
                 runs, cfg, s, kind="learned", seeds=[m.seed for m, _ in loaded], notes=notes
             )
-        baseline_runs = {}
+        baseline_runs: dict[str, _Episodes] = {}
         for name in expand_baselines(entry.baselines, cfg):
             controller = name if name != "analytic" else analytic_name(cfg)
             policy = make_controller(controller, cfg, seed=s.eval_seed)
@@ -322,14 +333,14 @@ def evaluate_entry(
             policies["learned"]["minus_best"] = {
                 "baseline": best,
                 "return": paired_difference(
-                    np.stack([r["return"] for r in runs]),
-                    baseline_runs[best]["return"],
+                    np.stack([r.returns for r in runs]),
+                    baseline_runs[best].returns,
                     n_resamples=s.n_resamples,
                     seed=s.bootstrap_seed,
                     confidence=s.confidence,
                 ),
             }
-        bound = baseline_runs[best]["bound"]  # the same starts for every policy
+        bound = baseline_runs[best].bound  # the same starts for every policy
         results.append(
             {
                 "label": ev.label,

@@ -166,9 +166,9 @@ class SwarmTorchRLEnv(EnvBase):
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         B, N, d = self.n_swarms, self.n_agents, self.cfg.dim
         action = as_action(tensordict.get((GROUP, "action")), (B, N, d), name="action")
-        reward, terminated, truncated, _ = self.core.step(action)
-        terminated = torch.from_numpy(np.asarray(terminated, bool)).reshape(B, 1)
-        truncated = torch.from_numpy(np.asarray(truncated, bool)).reshape(B, 1)
+        reward, term, trunc, _ = self.core.step(action)
+        terminated = torch.from_numpy(np.asarray(term, bool)).reshape(B, 1)
+        truncated = torch.from_numpy(np.asarray(trunc, bool)).reshape(B, 1)
         out = self._observation()
         r = torch.from_numpy(np.asarray(reward, np.float32)).reshape(B, 1, 1)
         out[GROUP]["reward"] = r.expand(B, N, 1).contiguous().to(self.device)

@@ -132,7 +132,8 @@ def sweep_values(option: str, values: Sequence[float]) -> list[float]:
     for value in values:
         if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
             raise ValueError(f"{option} values must be numbers, got {value!r}")
-        checked = Perturbations(**{option: float(value)})  # its range, its message
+        one: dict[str, Any] = {option: float(value)}
+        checked = Perturbations(**one)  # its range, its message
         out.append(float(getattr(checked, option)))
     if not out:
         raise ValueError(f"{option} must list at least one value")
@@ -189,7 +190,8 @@ def robustness_configs(
     for option in SWEPT:
         for value in swept.get(option, ()):
             try:
-                p = dataclasses.replace(base, **{option: value})
+                change: dict[str, Any] = {option: value}
+                p = dataclasses.replace(base, **change)
                 row_cfg = dataclasses.replace(cfg, perturbations=p)
             except ValueError as err:
                 raise ValueError(f"the config is not valid at {option}={value:g}: {err}") from None
@@ -278,7 +280,8 @@ def evaluate_robustness(
     swept: dict[str, list[float]] = {}
     for row in rows:
         swept.setdefault(row.option, []).append(row.value)
-    background = dataclasses.replace(rows[0].cfg.perturbations, **{rows[0].option: 0.0})
+    swept_off: dict[str, Any] = {rows[0].option: 0.0}
+    background = dataclasses.replace(rows[0].cfg.perturbations, **swept_off)
     results: dict[str, Any] = {
         "env": env_id,
         **dict(extra or {}),

@@ -52,21 +52,25 @@ def _env_class() -> type:
             kwargs = dict(config or {})
             self.par_env = swarm_nav_v0.parallel_env(**kwargs)
             self.cfg = self.par_env.cfg
-            self.possible_agents = list(self.par_env.possible_agents)
+            names: list[str] = list(self.par_env.possible_agents)
+            self.possible_agents = list(names)
             self.agents = []
-            self.observation_spaces = {
-                a: self.par_env.observation_space(a) for a in self.possible_agents
-            }
-            self.action_spaces = {a: self.par_env.action_space(a) for a in self.possible_agents}
+            self.observation_spaces = {a: self.par_env.observation_space(a) for a in names}
+            self.action_spaces = {a: self.par_env.action_space(a) for a in names}
 
-        def reset(
+        # RLlib types agent ids as Hashable | str, and MultiAgentEnv's reset and step
+        # override gymnasium.Env's incompatibly: this env's ids are the str names above.
+        # (Without Ray installed, MultiAgentEnv is untyped and the ignores go unused.)
+        def reset(  # type: ignore[override, unused-ignore]
             self, *, seed: int | None = None, options: dict | None = None
         ) -> tuple[dict[str, Any], dict[str, Any]]:
             obs, infos = self.par_env.reset(seed=seed, options=options)
             self.agents = list(self.par_env.agents)
             return obs, infos
 
-        def step(self, action_dict: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+        def step(  # type: ignore[override, unused-ignore]
+            self, action_dict: dict[str, Any]
+        ) -> tuple[dict, dict, dict, dict, dict]:
             obs, rewards, terminated, truncated, infos = self.par_env.step(action_dict)
             self.agents = list(self.par_env.agents)
             terminated = {**terminated, "__all__": all(terminated.values())}

@@ -162,10 +162,11 @@ class SweepConfig:
     task: str = "relax"
     """``relax`` (passive physics, group statistics) or ``navigate`` (a controller's
     episode on SwarmNav)."""
-    grid: dict = field(default_factory=dict)
+    grid: dict[str, tuple[Any, ...]] = field(default_factory=dict)
     """Parameter → list of values; the trials are the product of the lists × seeds."""
-    seeds: int | list = 4
-    """Number of seeds (``0 … seeds−1``) or an explicit list of seeds (integers >= 0)."""
+    seeds: tuple[int, ...] = (0, 1, 2, 3)
+    """The seeds: a number ``n`` (the seeds ``0 … n−1``) or an explicit list of integers
+    >= 0; held as the tuple of seeds."""
     base_seed: int = 0
     """First entry of every trial's ``SeedSequence``."""
     common_random_numbers: bool = True
@@ -209,7 +210,7 @@ class SweepConfig:
                 raise ValueError(f"grid.{key} has repeated values: {list(values)!r}")
             grid[key] = tuple(values)
         object.__setattr__(self, "grid", grid)
-        seeds = self.seeds
+        seeds: Any = self.seeds  # a number or a list until checked
         if isinstance(seeds, int) and not isinstance(seeds, bool):
             if seeds < 1:
                 raise ValueError(f"seeds must be an integer >= 1 or a list, got {seeds!r}")
@@ -269,7 +270,7 @@ class SweepConfig:
 
     def trial_specs(self) -> list[dict[str, Any]]:
         """One plain-data spec per trial (grid point × seed), the input of :func:`run_trial`."""
-        specs = []
+        specs: list[dict[str, Any]] = []
         for point in self.points():
             setup = self._setup(point)
             for seed in self.seeds:

@@ -117,7 +117,12 @@ def run_ray(
         grid = tuner.fit()
         if grid.errors:
             raise RuntimeError(f"{len(grid.errors)} sweep trial(s) failed; first: {grid.errors[0]}")
-        rows = [json.loads(result.metrics["row_json"]) for result in grid]
+        rows = []
+        for i in range(len(grid)):  # a ResultGrid is indexed (len, [i]): no iterator declared
+            metrics = grid[i].metrics
+            if metrics is None:
+                raise RuntimeError(f"sweep trial {i} reported no result")
+            rows.append(json.loads(metrics["row_json"]))
     rows.sort(key=lambda r: r["index"])
     if [r["index"] for r in rows] != [int(s["index"]) for s in specs]:
         raise RuntimeError("Ray Tune returned a different set of trials than it was given")

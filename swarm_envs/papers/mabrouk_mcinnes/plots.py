@@ -55,7 +55,9 @@ def save(fig: Any, path: str | Path, dpi: int) -> Path:
     return path
 
 
-def _errorline(ax: Any, x: Sequence[float], stat: dict[str, list[float]], key: str, **kw: Any):
+def _errorline(
+    ax: Any, x: Sequence[float], stat: dict[str, list[float]], key: str, **kw: Any
+) -> None:
     y = np.asarray(stat[key], dtype=float)
     err = np.asarray(stat[f"{key}_std"], dtype=float)
     ax.errorbar(x, y, yerr=err, capsize=2, marker="o", ms=3, **kw)

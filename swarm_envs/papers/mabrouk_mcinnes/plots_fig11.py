@@ -213,7 +213,7 @@ def write_fig11_gif(
     setup = RunSetup() if setup is None else setup
     g = np.asarray(goal, dtype=np.float64)
     xs, vs = fig11_self_propelled_positions(
-        setup=setup, goal=g, duration=duration, alpha=alpha, beta=beta, n_agents=n_agents
+        setup=setup, goal=goal, duration=duration, alpha=alpha, beta=beta, n_agents=n_agents
     )
     centres = xs.mean(axis=1)
     dist = np.linalg.norm(centres - g, axis=-1)

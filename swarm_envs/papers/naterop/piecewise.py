@@ -60,7 +60,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
@@ -102,8 +102,21 @@ PARTS: tuple[str, ...] = ("piecewise_dispersal",)
 
 #: Equilibrium distances swept (the report's table 2 gives the range 1–15 m).
 DEFAULT_R_0S = (1.0, 5.0, 10.0, 15.0)
+
+
+class _Table2(TypedDict):
+    """The report's table 2, less ``r_0`` (swept) and ``σ`` (``F_max / 6``)."""
+
+    N: int
+    n_neighbors: int
+    F_max: float
+    r_r: float
+    r_a: float
+    R: float
+
+
 #: Table 2 values other than ``r_0``.
-TABLE_2 = {"N": 100, "n_neighbors": 8, "F_max": 100.0, "r_r": 1.0, "r_a": 20.0, "R": 30.0}
+TABLE_2: _Table2 = {"N": 100, "n_neighbors": 8, "F_max": 100.0, "r_r": 1.0, "r_a": 20.0, "R": 30.0}
 
 #: Dispersal: ``E(T) ≥ DISPERSE_FACTOR E(0)`` and ``E(T) ≥ RISING_FACTOR E(T/2)``.
 DISPERSE_FACTOR = 5.0

@@ -251,8 +251,8 @@ def _table_statistics(setup: ZoneSetup) -> dict[str, np.ndarray]:
     every = max(1, round(setup.sample_every / setup.dt))
     first = math.ceil(setup.t_start / setup.dt - 1e-9)
     speed = ap.speed[..., None]
-    sums = {k: 0.0 for k in ("polarization", "angular_momentum", "angular_momentum_raw")}
-    sums["expanse"] = 0.0
+    names = ("polarization", "angular_momentum", "angular_momentum_raw", "expanse")
+    sums: dict[str, float | np.ndarray] = dict.fromkeys(names, 0.0)
     count = 0
     for step in range(1, steps + 1):
         x, h = zone_step(x, h, params, dt=setup.dt, agent_params=ap)
