@@ -258,8 +258,8 @@ def test_a_perturbed_observation_scale_in_one_backend_is_caught(monkeypatch):
 def test_a_perturbed_numpy_term_is_caught(monkeypatch):
     # The float32 numpy core (the reference's code in another dtype) with its time
     # penalty doubled: the numpy family is held to the reference too.
-    from swarm_envs.envs import core as numpy_core
     from swarm_envs.envs.task import RewardInputs
+    from swarm_envs.envs.task import layer as task_layer  # the host cores' reward
     from swarm_envs.envs.task import reward as shared_reward
 
     def broken(weights, inputs: RewardInputs):
@@ -267,7 +267,7 @@ def test_a_perturbed_numpy_term_is_caught(monkeypatch):
             weights = dataclasses.replace(weights, time=2 * weights.time)
         return shared_reward(weights, inputs)
 
-    monkeypatch.setattr(numpy_core, "reward", broken)
+    monkeypatch.setattr(task_layer, "reward", broken)
     problems = check(Variant("numpy", np.float32), BROKEN_CONFIG)
     assert problems and "reward" in problems[0]
 

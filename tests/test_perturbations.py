@@ -19,9 +19,9 @@ import yaml
 
 from swarm_envs import metrics, swarm_nav_v0
 from swarm_envs.config import SwarmConfig, as_dict, config_from_mapping
-from swarm_envs.envs import core as core_module
 from swarm_envs.envs.backends import make_core
 from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.task import layer as layer_module  # draws every core's starts
 from swarm_envs.envs.task.agent_status import (
     ABSENT,
     ACTIVE,
@@ -53,7 +53,7 @@ def fix_starts(monkeypatch: pytest.MonkeyPatch, x: np.ndarray, v: np.ndarray, go
             np.repeat(goal[None], n, axis=0),
         )
 
-    monkeypatch.setattr(core_module, "draw_starts", starts)
+    monkeypatch.setattr(layer_module, "draw_starts", starts)
 
 
 def actions(seed: int, shape: tuple[int, ...], steps: int) -> list[np.ndarray]:
@@ -405,7 +405,7 @@ def test_an_undone_step_stays_flagged_when_another_swarm_changes_statuses(monkey
     x[0, 1] = x[0, 0] + 1e-3
     goal = np.array([[4.0, 1.0], [4.0, 1.0]])
     monkeypatch.setattr(
-        core_module, "draw_starts", lambda cfg, rng, n: (x.copy(), np.zeros_like(x), goal)
+        layer_module, "draw_starts", lambda cfg, rng, n: (x.copy(), np.zeros_like(x), goal)
     )
     stiff = dataclasses.replace(SwarmConfig().physics, C_r=4.0, l_r=0.05)
     fields = dict(n_agents=5, dt=0.1, max_substeps=2, on_unstable="truncate", physics=stiff)
@@ -735,7 +735,6 @@ def test_every_status_backend_keeps_an_undone_steps_flag_as_numpy_does(monkeypat
     # The numpy test above, on each other core that takes statuses: swarm 0's undone,
     # truncated step stays reported while swarm 1 is measured again for its frozen agent.
     from swarm_envs.envs import backends
-    from swarm_envs.envs.native import core as native_module
 
     if backends.unsupported(SwarmConfig(backend=backend), backend) is not None:
         pytest.skip(f"{backend} cannot run here")
@@ -746,11 +745,7 @@ def test_every_status_backend_keeps_an_undone_steps_flag_as_numpy_does(monkeypat
     x[0, 1] = x[0, 0] + 1e-3
     goal = np.array([[4.0, 1.0], [4.0, 1.0]])
     starts = lambda cfg, rng, n: (x.copy(), np.zeros_like(x), goal)  # noqa: E731
-    monkeypatch.setattr(core_module, "draw_starts", starts)
-    monkeypatch.setattr(native_module, "draw_starts", starts)
-    import swarm_envs.envs.torch_resets as torch_resets
-
-    monkeypatch.setattr(torch_resets, "draw_starts", starts)
+    monkeypatch.setattr(layer_module, "draw_starts", starts)
     stiff = dataclasses.replace(SwarmConfig().physics, C_r=4.0, l_r=0.05)
     fields = dict(n_agents=5, dt=0.1, max_substeps=2, on_unstable="truncate", physics=stiff)
     p = Perturbations(failed_fraction=0.2, failure_mode="frozen", failure_time=1)

@@ -277,7 +277,7 @@ def test_joining_agents_are_placed_at_rest_and_the_swarm_measured_again():
     assert stats["energy"][0] != before["energy"][0]  # swarm 0 measured again
     np.testing.assert_array_equal(stats["substeps"], substeps)  # a measure is no step
     for key in STAT_KEYS:  # the next reward compares with the new statistics
-        np.testing.assert_array_equal(core._prev[key], stats[key], err_msg=key)
+        np.testing.assert_array_equal(core.task.records.prev[key], stats[key], err_msg=key)
 
 
 def test_bad_statuses_are_refused():

@@ -210,9 +210,8 @@ def test_the_mill_never_terminates_and_pays_its_order():
         r, terminated, truncated, stats = core.step(action.reshape(3, 10, 2))
         assert not terminated.any() and truncated.all() == (t == 19)
         w = cfg.reward
-        progress = (prev["mean_goal_distance"] - stats["mean_goal_distance"]) / core._start[
-            "mean_goal_distance"
-        ]
+        start = core.task.records.start["mean_goal_distance"]
+        progress = (prev["mean_goal_distance"] - stats["mean_goal_distance"]) / start
         arrival = stats["fraction_arrived"] - prev["fraction_arrived"]
         effort = (np.clip(action, -1, 1) ** 2).reshape(3, -1).sum(-1) / 10
         expected = (

@@ -17,10 +17,11 @@ def copy_state(src_cores, dst_core) -> None:
     """Put the swarms of several cores, in order, into one core of the same total batch."""
     for name in ("x", "v", "goal", "t"):
         setattr(dst_core, name, np.concatenate([getattr(c, name) for c in src_cores]).copy())
-    for name in ("_prev", "_start"):  # the reward's previous and start statistics
-        keys = getattr(src_cores[0], name)
-        merged = {k: np.concatenate([getattr(c, name)[k] for c in src_cores]) for k in keys}
-        setattr(dst_core, name, merged)
+    for name in ("prev", "start"):  # the reward's previous and start statistics
+        records = [c.task.records for c in src_cores]
+        keys = getattr(records[0], name)
+        merged = {k: np.concatenate([getattr(r, name)[k] for r in records]) for k in keys}
+        setattr(dst_core.task.records, name, merged)
     from swarm_envs.physics import pair_geometry
 
     dst_core._geometry = pair_geometry(dst_core.x)

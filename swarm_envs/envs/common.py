@@ -221,6 +221,28 @@ def uniform_starts(
     return x, v, bearing * dist
 
 
+def placed_at_rest(
+    x: Any, v: Any, mobile: Any, place: Any, at: Any, xp: Any, *, component_first: bool = False
+) -> tuple[Any, Any]:
+    """New positions and velocities after a status change (numpy arrays or tensors, of
+    ``x``'s dtype): the agents ``place`` ``(B, N)`` at ``at``, and every agent that does
+    not move (``mobile`` ``(B, N)`` false) or was placed at rest.
+
+    ``x``, ``v`` (and ``at``) are ``(B, N, d)``, or ``(d, B, N)`` with
+    ``component_first``; ``place`` (and ``at``) may be ``None``: nobody is placed.
+    ``xp``: the arrays' namespace (:mod:`swarm_envs._array`).
+    """
+
+    def spread(mask: Any) -> Any:
+        return mask[None] if component_first else mask[..., None]
+
+    still = ~mobile
+    if place is not None:
+        x = xp.astype(xp.where(spread(place), at, x), x)
+        still = still | place
+    return x, xp.astype(xp.where(spread(still), 0.0, v), v)
+
+
 def wide_dtypes(dtype: np.dtype, cfg: Any = None) -> dict[str, np.dtype]:
     """The dtype of each statistic a core reports (those of ``cfg``'s task; without
     ``cfg`` the common ones): float64 for the ``wide`` ones (counts, fractions, flags),

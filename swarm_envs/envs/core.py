@@ -13,8 +13,9 @@ One step, for all swarms at once:
    the passive model, and the goal acts passively only if ``goal_in_physics``;
 3. the pairwise distances of the new positions are computed once and shared by the
    neighbour ranking, the collision count and the model's next force evaluation;
-4. the statistics, the observations and the reward follow from the shared definitions
-   of :mod:`swarm_envs.envs.task`, as on every backend.
+4. the statistics and the observations follow from the shared definitions of
+   :mod:`swarm_envs.envs.task`, as on every backend; the reward, the episode end and the
+   unstable guard are the task layer's (:mod:`swarm_envs.envs.task.layer`).
 """
 
 from __future__ import annotations
@@ -27,35 +28,28 @@ from swarm_envs._array import NUMPY
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.common import (
     NON_FINITE_ACTIONS,
-    SwarmUnstableError,
     check_action_shape,
     check_actions,
     check_batch,
     check_dtype,
-    check_start,
     draw_starts,
-    energy_bound,
-    unstable_message,
-    unstable_swarms,
+    placed_at_rest,
     wide_dtypes,
 )
 from swarm_envs.envs.dynamics import make_dynamics
-from swarm_envs.envs.stiffness import StiffnessWatch
 from swarm_envs.envs.task import (
     OBS_BOUND,
     STAT_KEYS,
     Frame,
-    RewardInputs,
     observation,
     observation_size,
     ranked_neighbors,
-    reward,
     statistics,
     success_count,
 )
-from swarm_envs.envs.task.agent_status import keep_measured, masks, status_update
-from swarm_envs.envs.task.episode import episode_end
+from swarm_envs.envs.task.agent_status import AgentMasks, masks
 from swarm_envs.envs.task.informed import draw_informed
+from swarm_envs.envs.task.layer import Advance, HostRecords, TaskCore, TaskLayer
 from swarm_envs.physics import PairGeometry, pair_geometry
 from swarm_envs.physics.social_potential import present_geometry
 
@@ -73,12 +67,14 @@ __all__ = [
 ]
 
 
-class SwarmNavCore:
+class SwarmNavCore(TaskCore):
     """State and dynamics of ``batch`` independent SwarmNav swarms (numpy, dense).
 
     Arrays: positions ``x`` and velocities ``v`` ``(B, N, d)``, goals ``(B, d)``,
     step counters ``(B,)``. All randomness comes from the generator passed to
-    :meth:`reset`.
+    :meth:`reset`. An :class:`~swarm_envs.envs.protocol.Execution` under its
+    :class:`~swarm_envs.envs.task.layer.TaskLayer` ``task``, which gives it ``reset``,
+    ``step`` and ``set_status``.
 
     >>> core = SwarmNavCore(SwarmConfig(n_agents=4), batch=2)
     >>> core.reset(np.random.default_rng(0))
@@ -100,12 +96,13 @@ class SwarmNavCore:
         self.goal = np.zeros((B, d), self.dtype)
         self.t = np.zeros(B, np.int64)
         self.dynamics = make_dynamics(cfg, self.batch, self.dtype)
-        self._stiffness = StiffnessWatch(cfg, self.batch)
-        self._energy_bound = energy_bound(cfg)  # the unstable guard's (common.energy_bound)
         self._wide = wide_dtypes(self.dtype, cfg)
         self._stats = self._empty_stats()
-        self._prev = self._empty_stats()  # the previous step's statistics
-        self._start = self._empty_stats()  # each episode's first statistics
+        #: The task above this core: reward, episode end, previous and start statistics.
+        self.task = TaskLayer(
+            cfg, self.batch, HostRecords(self._empty_stats(), self._empty_stats())
+        )
+        self._before = (self.x, self.v)  # the state before the last step (for undo)
         self._geometry: PairGeometry | None = None
         self._near: np.ndarray | None = None  # ranked neighbours of the current state
         #: Each agent's status ``(B, N)`` int8 (:mod:`~swarm_envs.envs.task.agent_status`),
@@ -120,82 +117,62 @@ class SwarmNavCore:
     def _empty_stats(self) -> dict[str, np.ndarray]:
         return {key: np.zeros(self.batch, dt) for key, dt in self._wide.items()}
 
-    # ------------------------------------------------------------------ reset
-    def reset(self, rng: np.random.Generator, which: np.ndarray | None = None) -> None:
-        """Draw new starts for the swarms in ``which`` (bool mask ``(B,)``; all if None).
-
-        The starts of :func:`~swarm_envs.envs.common.draw_starts`; then the model's own
-        per-swarm state (:mod:`swarm_envs.envs.dynamics`) and the start's statistics.
-        """
-        idx = np.arange(self.batch) if which is None else np.flatnonzero(which)
-        if idx.size == 0:
-            return
-        self.x[idx], self.v[idx], self.goal[idx] = draw_starts(self.cfg, rng, idx.size)
+    # ------------------------------------------------------------------ execution
+    def begin(
+        self,
+        idx: np.ndarray,
+        x: np.ndarray,
+        v: np.ndarray,
+        goal: np.ndarray,
+        rng: np.random.Generator,
+    ) -> dict[str, np.ndarray]:
+        """New starts for the swarms ``idx`` (:meth:`Execution.begin
+        <swarm_envs.envs.protocol.Execution.begin>`): their informed agents
+        (``task="informed"``), then the model's own per-swarm state
+        (:mod:`swarm_envs.envs.dynamics`), then the start's statistics."""
+        self.x[idx], self.v[idx], self.goal[idx] = x, v, goal
         if self.informed is not None:
             self.informed[idx] = draw_informed(self.cfg, rng, idx.size)
-        self.t[idx] = 0
         substeps = self._stats["substeps"].copy()
         substeps[idx] = 0.0  # no step yet; the other swarms keep their last step's
         with np.errstate(over="ignore", invalid="ignore"):
             self._after_reset(idx, rng)
             self._measure(substeps=substeps)
-        check_start(self.cfg, self._stats, idx, self.dtype)
-        for key, value in self._stats.items():
-            self._prev[key][idx] = value[idx]
-            self._start[key][idx] = value[idx]
+        return self._stats
 
-    # ------------------------------------------------------------------ step
-    def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
-        """Advance every swarm by one step.
-
-        Args:
-            actions: ``(B, N, d)`` in [−1, 1] (validated by :func:`check_actions`).
-
-        Returns:
-            ``(reward (B,), terminated (B,), truncated (B,), stats)`` where ``stats``
-            maps each of :data:`STAT_KEYS` to a ``(B,)`` array.
-        """
-        cfg = self.cfg
+    def advance(self, actions: Any) -> Advance:
+        """One step of every swarm (:meth:`Execution.advance
+        <swarm_envs.envs.protocol.Execution.advance>`); ``actions`` ``(B, N, d)`` in
+        [−1, 1], validated by :func:`check_actions`."""
         # In the core's dtype, so that every adapter gives bit-identical results.
         a = check_actions(actions, self.x.shape).astype(self.dtype, copy=False)
-        before = (self.x, self.v)  # a step makes new arrays: these stay the old state
-        # Overflow on the way is not reported as it happens: the unstable check below
+        self._before = (self.x, self.v)  # a step makes new arrays: these stay the old state
+        # Overflow on the way is not reported as it happens: the task layer's guard
         # raises (or truncates) for every swarm whose state stopped being finite.
         with np.errstate(over="ignore", invalid="ignore"):
-            self._advance(cfg.u_max * a if a.any() else None)
-            self.t += 1
+            self._advance(self.cfg.u_max * a if a.any() else None)
             self._measure(substeps=self.dynamics.substeps)
-        bad = unstable_swarms(self._stats, self.dynamics.over_cap, self._energy_bound)
-        if bad.any():
-            self._unstable(bad, before)
-        stats = self._stats
         effort = np.einsum("bik,bik->b", a, a)
-        inputs = RewardInputs(stats, self._prev, self._start, effort, cfg.n_agents, NUMPY)
-        r = np.asarray(reward(cfg.reward, inputs), dtype=np.float64)
-        self._prev = {key: value.copy() for key, value in stats.items()}
-        terminated, truncated = episode_end(self.cfg, stats["success"], self.t)
-        if bad.any():
-            r[bad], terminated[bad], truncated[bad] = 0.0, False, True
-        self._stiffness.observe(stats)
-        return r, terminated, truncated, self.stats()
+        dynamics = self.dynamics
+        return Advance(self.stats(), self._stats, effort, None, dynamics.over_cap, dynamics.needed)
 
-    def _unstable(self, bad: np.ndarray, before: tuple[np.ndarray, np.ndarray]) -> None:
-        """Put the swarms ``bad`` back to their state before the step; then raise
-        :class:`SwarmUnstableError` (the core stays at the last sound state, as before
-        the step), or (``on_unstable="truncate"``) mark them ``unstable``."""
-        cfg = self.cfg
-        message = unstable_message(cfg, self._stats, bad, self.dynamics.needed, self.t)
-        idx = np.flatnonzero(bad)
+    def undo(self, idx: np.ndarray, mark: bool) -> dict[str, np.ndarray]:
+        """The swarms ``idx`` back at their state before the step (:meth:`Execution.undo
+        <swarm_envs.envs.protocol.Execution.undo>`)."""
+        before = self._before
         self.x[idx], self.v[idx] = before[0][idx], before[1][idx]
-        self.dynamics.restore(self.x, self.v, self.goal, idx)
-        self._geometry = self._pair_geometry(self.x)
+        self._restored(idx)
         substeps = self.dynamics.substeps.copy()
         substeps[idx] = 0.0  # the step was undone
         with np.errstate(over="ignore", invalid="ignore"):
             self._measure(substeps=substeps)
-        if cfg.on_unstable == "raise":
-            raise SwarmUnstableError(message)
-        self._stats["unstable"][idx] = 1.0
+        if mark:
+            self._stats["unstable"][idx] = 1.0
+        return self.stats()
+
+    def measured(self) -> dict[str, np.ndarray]:
+        """The current statistics ``{name: (B,)}`` (the core's own; a measure replaces them)."""
+        return self._stats
 
     # ------------------------------------------------------------------ physics hooks
     # A subclass with another state representation (the cut-off core for large swarms)
@@ -216,44 +193,35 @@ class SwarmNavCore:
         return present_geometry(pair_geometry(x), self.dynamics.present)
 
     # ------------------------------------------------------------------ agents
-    def set_status(
-        self,
-        status: np.ndarray,
-        place: np.ndarray | None = None,
-        at: np.ndarray | None = None,
-        *,
-        rows: np.ndarray | None = None,
-        start: bool = False,
+    def take_statuses(
+        self, status: np.ndarray, place: np.ndarray | None, at: np.ndarray | None
     ) -> None:
-        """Give the agents new statuses ``(B, N)`` (agent_status) between steps.
-
-        ``place`` ``(B, N)`` bool: agents put at ``at`` ``(B, N, d)`` (joining agents).
-        Agents that no longer move and placed agents are at rest. The swarms whose
-        statuses or places changed, and those in ``rows`` ``(B,)``, are measured
-        again, and their previous statistics become these (``start=True``: their
-        episode's start too), so that the next reward compares like with like.
-        """
-        shape = (self.batch, self.cfg.n_agents, self.cfg.dim)
-        status, place, rows = status_update(self.status, status, place, at, rows, shape)
-        if place is not None:
-            self.x = np.where(place[..., None], at, self.x).astype(self.dtype, copy=False)
+        """Checked statuses ``(B, N)`` (:meth:`Execution.take_statuses
+        <swarm_envs.envs.protocol.Execution.take_statuses>`): the statistics count the
+        mobile agents; where ``perturbations.needs_masks``, the physics leaves out the
+        agents not present and holds those that do not move."""
+        mask = masks(status)
         self.status = status
-        mask = masks(self.status)
-        self.v = np.where(mask.mobile[..., None], self.v, 0.0).astype(self.dtype, copy=False)
-        if place is not None:
-            self.v[place] = 0.0
+        self.x, self.v = placed_at_rest(self.x, self.v, mask.mobile, place, at, NUMPY)
         self._members = mask.mobile
+        self._take_masks(mask)
+
+    def _take_masks(self, mask: AgentMasks) -> None:
+        """The statuses' masks in the physics (``perturbations.needs_masks``)."""
         if self.cfg.perturbations.needs_masks:
             self.dynamics.present, self.dynamics.mobile = mask.present, mask.mobile
-        if not rows.any():
-            return
-        idx = np.flatnonzero(rows)
+
+    def remeasure(self, idx: np.ndarray) -> None:
+        """Measure the swarms ``idx`` again, the others keeping their statistics
+        (:meth:`Execution.remeasure <swarm_envs.envs.protocol.Execution.remeasure>`)."""
+        self._restored(idx)
+        with np.errstate(over="ignore", invalid="ignore"):
+            self._measure(substeps=self._stats["substeps"])
+
+    def _restored(self, idx: np.ndarray) -> None:
+        """The model's state for the swarms ``idx`` whose ``x, v`` were set."""
         self.dynamics.restore(self.x, self.v, self.goal, idx)
         self._geometry = self._pair_geometry(self.x)
-        before = self._stats
-        with np.errstate(over="ignore", invalid="ignore"):
-            self._measure(substeps=before["substeps"])
-        keep_measured(self._stats, before, self._prev, self._start, rows, start)
 
     def _pair_measures(self) -> tuple[np.ndarray | None, np.ndarray, np.ndarray, np.ndarray]:
         """``(ranked neighbours (B, N, k') or None, nearest distance (B, N), close

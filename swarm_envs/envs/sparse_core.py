@@ -42,9 +42,10 @@ array. One step:
    substeps, is never handed to the neighbour search, and its energy is NaN.
 
 Agent statuses (removed, frozen, absent and joining agents, ``observe_status``) come
-through ``set_status`` (:mod:`swarm_envs.envs.sparse_statuses`), with the dense core's
-rules: the agents not present are left out of the pair passes and the neighbour search,
-the agents that do not move have zero total force and stay put at rest.
+through ``set_status`` (the task layer's), with the dense core's rules
+(:mod:`swarm_envs.envs.sparse_statuses`): the agents not present are left out of the
+pair passes and the neighbour search, the agents that do not move have zero total force
+and stay put at rest.
 
 What differs from the dense core is the cut-off only: the pair terms (and their rates)
 of agents farther apart than ``r_c = cutoff_radius(cfg.physics, cutoff_tol,
@@ -69,21 +70,20 @@ as fast or faster (and exact); :func:`use_sparse_core` is the selection rule
 
 from __future__ import annotations
 
-from concurrent.futures import Future
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs.common import SwarmUnstableError, unstable_message
 from swarm_envs.envs.core import SwarmNavCore
 from swarm_envs.envs.sparse_neighbors import (
     KNN_AHEAD_MIN_AGENTS,
     MAX_SPAN,
-    SparseNeighbors,
+    NeighborSearch,
     sound_swarms,
 )
-from swarm_envs.envs.sparse_statuses import SparseStatuses
+from swarm_envs.envs.sparse_statuses import PhysicsMasks
+from swarm_envs.envs.task.agent_status import AgentMasks
 from swarm_envs.physics import compiled_pairs, goal_force, goal_potential, kinetic_energy
 from swarm_envs.physics._validation import check_real
 from swarm_envs.physics.cutoff import cutoff_radius
@@ -186,15 +186,16 @@ class _Pass(NamedTuple):
     pair_damping: np.ndarray | None = None  # (b,) the damping rate's pair part, times m
 
 
-class SparseSwarmNavCore(SparseStatuses, SparseNeighbors, SwarmNavCore):
+class SparseSwarmNavCore(SwarmNavCore):
     """State and dynamics of ``batch`` independent SwarmNav swarms, for large ``N``.
 
     A drop-in for :class:`~swarm_envs.envs.core.SwarmNavCore` (same methods, same
     random draws, same step-size control and guard, same results up to the cut-off; see
     the module docstring). It overrides only the physics hooks (``_after_reset``,
-    ``_advance``, ``_pair_measures`` and ``_unstable``) and ``set_status``
-    (:class:`~swarm_envs.envs.sparse_statuses.SparseStatuses`); the reset draws, the
-    reward, the statistics and the observations are the dense core's.
+    ``_advance``, ``_restored``, ``_pair_measures``) and how the statuses' masks enter
+    its physics (:class:`~swarm_envs.envs.sparse_statuses.PhysicsMasks`); the
+    statistics and the observations are the dense core's, the reset draws, the reward
+    and the guard its task layer's.
 
     Args:
         cfg: the scenario; ``cfg.dynamics`` must be ``"social_potential"``.
@@ -247,10 +248,8 @@ class SparseSwarmNavCore(SparseStatuses, SparseNeighbors, SwarmNavCore):
         self._potential = np.zeros(B)  # Σ U over the pairs within the cut-off, per swarm
         self._collisions = np.zeros(B)
         self._state = 0  # bumped whenever x, v change; keys the neighbour cache
-        self._knn_cache: tuple[int, np.ndarray, np.ndarray] | None = None
-        self._knn_radius: float | None = None
-        self._knn_pending: tuple[int, Future] | None = None
-        self._init_statuses()
+        self._neighbors = NeighborSearch()
+        self._masks = PhysicsMasks()
 
     @staticmethod
     def unsupported(cfg: SwarmConfig) -> str | None:
@@ -259,12 +258,6 @@ class SparseSwarmNavCore(SparseStatuses, SparseNeighbors, SwarmNavCore):
         if cfg.dynamics != "social_potential":
             return f"supports dynamics='social_potential' only, got {cfg.dynamics!r}"
         return None
-
-    def __getstate__(self) -> dict[str, Any]:
-        """The core without its look-ahead search in flight (a thread's future)."""
-        state = self.__dict__.copy()
-        state["_knn_pending"] = None  # searched again on demand
-        return state
 
     # ------------------------------------------------------------------ cut-off
     @property
@@ -331,14 +324,14 @@ class SparseSwarmNavCore(SparseStatuses, SparseNeighbors, SwarmNavCore):
         # the pairs it adds beyond r_c only make the sums more exact.
         radius = max(self.cutoff, cfg.collision_radius, MIN_SEARCH_RADIUS)
         where = slice(None) if rows is None else rows
-        present = None if self._present is None else self._present[where]
+        present = None if self._masks.present is None else self._masks.present[where]
         sums = compiled_pairs.swarm_pair_sums(x, velocity, p, radius, cfg.collision_radius, present)
         assert sums.kappa is not None and sums.damping is not None
         force = sums.force.astype(self.dtype, copy=False)
         kappa, damping = sums.kappa, sums.damping
         potential, collisions = sums.potential, sums.close.astype(np.float64)
-        if self._still is not None:  # a pair at rest does not collide
-            still = self._still[where]
+        if self._masks.still is not None:  # a pair at rest does not collide
+            still = self._masks.still[where]
             collisions -= close_pairs_among(x, still, cfg.collision_radius, radius)
         force = force.reshape(b, N, d)
         force[...] = np.stack(dissipation(components(force), components(velocity), p), axis=-1)
@@ -410,7 +403,7 @@ class SparseSwarmNavCore(SparseStatuses, SparseNeighbors, SwarmNavCore):
             ur = control if control is None or every else control[rows]
             gr = goal if goal is None or every else goal[rows]
             accel = fr if ur is None else fr + ur
-            accel = self._hold(accel, None if every else rows)
+            accel = self._masks.hold(accel, None if every else rows)
             if verlet:
                 # Kick–drift–kick with the force at the extrapolated velocity
                 # 2v_{n+½} − v_n (swarm_envs.physics.integrators.verlet_step).
@@ -448,27 +441,45 @@ class SparseSwarmNavCore(SparseStatuses, SparseNeighbors, SwarmNavCore):
             self._state += 1
         self.dynamics.record(budget.used, budget.over, budget.needed)
 
-    def _unstable(self, bad: np.ndarray, before: tuple[np.ndarray, np.ndarray]) -> None:
-        """As the dense core's: raise :class:`SwarmUnstableError`, or put the swarms
-        ``bad`` back to their state before the step (one pair pass over them), marked
-        ``unstable``."""
-        cfg = self.cfg
-        if cfg.on_unstable == "raise":
-            raise SwarmUnstableError(
-                unstable_message(cfg, self._stats, bad, self.dynamics.needed, self.t)
-            )
+    def _restored(self, idx: np.ndarray) -> None:
+        """The carried force, rates and measures of the swarms ``idx`` whose ``x, v`` were
+        set (one pair pass over them); a new state for the neighbour search."""
         assert self._f_passive is not None
-        idx = np.flatnonzero(bad)
-        self.x[idx], self.v[idx] = before[0][idx], before[1][idx]
         self._state += 1
         goal = self._physics_goal()
         res = self._pair_pass(self.x[idx], self.v[idx], None if goal is None else goal[idx], idx)
         self._f_passive[idx] = res.force
         self._keep(idx, res)
-        substeps = self.dynamics.substeps.copy()
-        substeps[idx] = 0.0  # the step was undone
-        self._measure(substeps=substeps)
-        self._stats["unstable"][idx] = 1.0
+
+    # ------------------------------------------------------------------ statuses
+    def _take_masks(self, mask: AgentMasks) -> None:
+        """The statuses' masks in the pair passes and the neighbour search
+        (:class:`~swarm_envs.envs.sparse_statuses.PhysicsMasks`)."""
+        self._state += 1  # a new state: the neighbours are searched again
+        self._masks.take(mask, self.cfg)
+
+    def remeasure(self, idx: np.ndarray) -> None:
+        """As the dense core's: a pair pass over the swarms ``idx``, then their measure
+        (nothing before the first reset)."""
+        if self._f_passive is not None:
+            super().remeasure(idx)
+
+    # ------------------------------------------------------------------ neighbours
+    @property
+    def _span(self) -> float:
+        """The widest sound swarm, in length units (:data:`MAX_SPAN`)."""
+        return MAX_SPAN * max(self.cutoff, self.cfg.collision_radius, 1.0)
+
+    def _start_knn(self) -> None:
+        """Search the neighbours of ``self.x`` in a worker thread, meanwhile."""
+        k = max(self.cfg.n_neighbors, 1)
+        self._neighbors.start(self.x, self._state, k, self._masks.present, self._span)
+
+    def _knn(self) -> tuple[np.ndarray, np.ndarray]:
+        """Indices and distances ``(B, N, k)`` of each agent's nearest others, nearest
+        first (:meth:`~swarm_envs.envs.sparse_neighbors.NeighborSearch.search`)."""
+        k = max(self.cfg.n_neighbors, 1)
+        return self._neighbors.search(self.x, self._state, k, self._masks.present, self._span)
 
     def _pair_measures(self) -> tuple[np.ndarray | None, np.ndarray, np.ndarray, np.ndarray]:
         """As the dense core's; the energy sums the pair potential over the pairs within
@@ -482,9 +493,9 @@ class SparseSwarmNavCore(SparseStatuses, SparseNeighbors, SwarmNavCore):
         energy = kinetic_energy(self.v, p) + self._potential
         if p.C_g > 0:
             sink = goal_potential(self.x, p, self.goal)
-            if self._present is not None:  # over the agents present
-                sink = np.where(self._present, sink, 0.0)
+            if self._masks.present is not None:  # over the agents present
+                sink = np.where(self._masks.present, sink, 0.0)
             energy = energy + sink.sum(axis=-1)
-        if self._present is not None:  # an agent alone in the physics: 0
+        if self._masks.present is not None:  # an agent alone in the physics: 0
             nearest = np.where(np.isfinite(nearest), nearest, 0.0).astype(self.dtype)
         return near, nearest, self._collisions.copy(), energy.astype(self.dtype, copy=False)

@@ -1,7 +1,7 @@
 """The cut-off core's neighbour search: the k nearest others of each agent, on demand.
 
-:class:`SparseNeighbors` is a part of
-:class:`~swarm_envs.envs.sparse_core.SparseSwarmNavCore` (its state, its statuses). The
+:class:`NeighborSearch` is held by
+:class:`~swarm_envs.envs.sparse_core.SparseSwarmNavCore`. The
 k nearest neighbours (observations, nearest-neighbour distance) come from the cell-list
 structure (:func:`swarm_envs.physics.neighbors.knn`, or among the agents present,
 :func:`swarm_envs.physics.present_neighbors.knn_among`), cached per state and started
@@ -22,7 +22,7 @@ import numpy as np
 from swarm_envs.physics.neighbors import knn
 from swarm_envs.physics.present_neighbors import knn_among
 
-__all__ = ["KNN_AHEAD_MIN_AGENTS", "MAX_SPAN", "SparseNeighbors", "sound_swarms"]
+__all__ = ["KNN_AHEAD_MIN_AGENTS", "MAX_SPAN", "NeighborSearch", "sound_swarms"]
 
 #: From this many agents in a core (B·N), the k-nearest-neighbour search of a new state
 #: runs in a worker thread while the pair pass runs in the caller's (numpy releases the
@@ -68,69 +68,77 @@ def _neighbors(
     return knn_among(x, k, present, radius=radius)
 
 
-class SparseNeighbors:
-    """The neighbour search of :class:`~swarm_envs.envs.sparse_core.SparseSwarmNavCore`
-    (a base class of it; see the module docstring)."""
+class NeighborSearch:
+    """The k nearest others of each agent of a cut-off core's state, on demand (module
+    docstring). A state is named by a key the core bumps whenever ``x`` changes; the
+    result of a key is cached, and a search may start ahead in a worker thread."""
 
-    cfg: Any
-    x: np.ndarray
-    cutoff: float
-    _state: int
-    _present: np.ndarray | None
-    _knn_radius: float | None
-    _knn_cache: tuple[int, np.ndarray, np.ndarray] | None
-    _knn_pending: tuple[int, Future] | None
+    def __init__(self) -> None:
+        self._cache: tuple[int, np.ndarray, np.ndarray] | None = None
+        self._radius: float | None = None  # where the next search starts
+        self._pending: tuple[int, Future] | None = None
 
-    @property
-    def _span(self) -> float:
-        """The widest sound swarm, in length units (:data:`MAX_SPAN`)."""
-        return MAX_SPAN * max(self.cutoff, self.cfg.collision_radius, 1.0)
+    def clear(self) -> None:
+        """Forget the cached result (the next :meth:`search` searches)."""
+        self._cache = None
 
-    def _searchable(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(positions, bad)``: ``x`` with the diverged swarms (``bad``: non-finite, or
-        beyond :data:`MAX_SPAN`) at the origin, which the neighbour search accepts
-        (their distances are replaced by NaN)."""
-        bad = ~sound_swarms(x, None, self._span)
-        if bad.any():
-            x = x.copy()
-            x[bad] = 0.0
-        return x, bad
+    def start(
+        self, x: np.ndarray, key: int, k: int, present: np.ndarray | None, span: float
+    ) -> None:
+        """Search the ``k`` nearest neighbours of ``x`` (state ``key``) in a worker
+        thread, meanwhile (``present``: among those agents only; ``span``:
+        :func:`sound_swarms`)."""
+        x, _ = _searchable(x, span)
+        future = _knn_workers().submit(_neighbors, x, k, present, self._radius)
+        self._pending = (key, future)
 
-    def _start_knn(self) -> None:
-        """Search the k nearest neighbours of ``self.x`` in a worker thread, meanwhile."""
-        k = max(self.cfg.n_neighbors, 1)
-        x, _ = self._searchable(self.x)
-        future = _knn_workers().submit(_neighbors, x, k, self._present, self._knn_radius)
-        self._knn_pending = (self._state, future)
-
-    def _knn(self) -> tuple[np.ndarray, np.ndarray]:
-        """Indices and distances ``(B, N, k)`` of each agent's nearest others, nearest first.
+    def search(
+        self, x: np.ndarray, key: int, k: int, present: np.ndarray | None, span: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Indices and distances ``(B, N, k)`` of each agent's nearest others in ``x``
+        (state ``key``), nearest first.
 
         ``k = min(max(n_neighbors, 1), N − 1)``: the observation's neighbours and, in
         column 0, the nearest neighbour for the NND statistic. Cached per state; the
         search starts from the previous state's 90th percentile of the k-th distance.
-        A diverged swarm (:meth:`_searchable`) gets NaN distances. With the statuses'
-        masks, the nearest present others of each present agent
+        A diverged swarm (beyond ``span`` or not finite) gets NaN distances. With the
+        statuses' masks (``present``), the nearest present others of each present agent
         (:func:`~swarm_envs.physics.present_neighbors.knn_among`: the slots beyond
         them, and those of an agent not present, hold the agent itself at ``inf``).
         """
-        if self._knn_cache is not None and self._knn_cache[0] == self._state:
-            return self._knn_cache[1], self._knn_cache[2]
-        k = max(self.cfg.n_neighbors, 1)
-        x, bad = self._searchable(self.x)
-        pending, self._knn_pending = self._knn_pending, None
-        if pending is not None and pending[0] == self._state:
+        if self._cache is not None and self._cache[0] == key:
+            return self._cache[1], self._cache[2]
+        x, bad = _searchable(x, span)
+        pending, self._pending = self._pending, None
+        if pending is not None and pending[0] == key:
             idx, dist = pending[1].result()
         else:
-            idx, dist = _neighbors(x, k, self._present, self._knn_radius)
+            idx, dist = _neighbors(x, k, present, self._radius)
         if dist.size:
             last = dist[~bad][..., -1]
-            if self._present is not None:
+            if present is not None:
                 last = last[np.isfinite(last)]
             hint = float(np.quantile(last, 0.9)) if last.size else 0.0
-            self._knn_radius = hint if hint > 0 else None
+            self._radius = hint if hint > 0 else None
             if bad.any():
                 dist = dist.copy()
                 dist[bad] = np.nan
-        self._knn_cache = (self._state, idx, dist)
+        self._cache = (key, idx, dist)
         return idx, dist
+
+    def __getstate__(self) -> dict[str, Any]:
+        """The search without its look-ahead in flight (a thread's future)."""
+        state = self.__dict__.copy()
+        state["_pending"] = None  # searched again on demand
+        return state
+
+
+def _searchable(x: np.ndarray, span: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(positions, bad)``: ``x`` with the diverged swarms (``bad``: non-finite, or
+    beyond ``span``) at the origin, which the neighbour search accepts (their distances
+    are replaced by NaN)."""
+    bad = ~sound_swarms(x, None, span)
+    if bad.any():
+        x = x.copy()
+        x[bad] = 0.0
+    return x, bad

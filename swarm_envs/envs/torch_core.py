@@ -15,16 +15,18 @@ step evaluates the pairs once; so is the stable substep ``h*`` of the step-size 
 ``h*`` allows the whole ``dt`` in one substep, the step is that one fused call. Otherwise
 each swarm's substeps but its last run through a second compiled function (update,
 force and ``h*`` only; :func:`~swarm_envs.envs.torch_step.build_substep`), each swarm its
-own count, and the fused function takes the last ones and measures the new state
-(:mod:`swarm_envs.envs.torch_substeps`). The substep counts, the cap ``max_substeps`` and
-the unstable guard (``on_unstable``) are the numpy core's.
+own count, and the fused function takes the last ones and measures the new state. The
+substep counts and the cap ``max_substeps`` are the numpy core's; the unstable guard
+(``on_unstable``), the reward's previous and start rows, the episode end and the reset
+draws are the task layer's (:mod:`swarm_envs.envs.task.layer`), whose reward the fused
+step computes in its graph from the same declarations.
 
 A reset (or assigning ``x``, ``v`` or ``goal``) re-evaluates the same function with the
 integration switched off, so the observations, statistics and carried force always
 describe the current state. A reset of a few swarms (at most
 :attr:`TorchSwarmNavCore.reset_batch`, 1/16 of a batch of 64 or more) evaluates them
 alone, through the same function compiled for that sub-batch: in a VecEnv some swarm
-ends on most steps (:mod:`swarm_envs.envs.torch_resets`).
+ends on most steps, and measuring all of them each time would double the step.
 
 Compile time: the constructor makes the first (compiling) calls of both functions, on
 the all-zero state, and stores their wall time in
@@ -45,8 +47,18 @@ or a copy when substeps follow).
 Agent statuses (:mod:`swarm_envs.envs.torch_statuses`): where the config needs them
 (agents that are removed, frozen, absent or join, or ``observe_status``), the statuses
 are kept on the device and passed to both functions, which apply the numpy core's masks
-(:mod:`swarm_envs.envs.torch_step`); :meth:`TorchSwarmNavCore.set_status` takes new ones
-between steps. Otherwise the functions run without them.
+(:mod:`swarm_envs.envs.torch_step`); ``set_status`` takes new ones between steps.
+Otherwise the functions run without them.
+
+Step-size control on the host: the fused step returns, per swarm, the stable substep
+``h*`` of the new state and ``h*`` where that state is finite, NaN where not
+(``"h_guard"``), and whether that is at least ``dt`` for the whole batch (``"calm"``;
+:data:`~swarm_envs.envs.torch_step.PACKED_KEYS`). That one value, read on the host, says
+both that the step went stable and that the next one takes the whole ``dt`` in one
+substep for every swarm: the common case costs that read. Otherwise the substep function
+plans and takes every swarm's substeps but its last
+(:func:`~swarm_envs.envs.torch_step.plan_substep`; one flag read on the host per
+substep), and the fused function takes the last ones and measures the new state.
 """
 
 from __future__ import annotations
@@ -57,6 +69,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from swarm_envs._array import torch_namespace
 from swarm_envs._runtime.torch_compile import CudaGraphed, MaybeCompiled
 from swarm_envs.envs.common import (
     NON_FINITE_ACTIONS,
@@ -64,21 +77,70 @@ from swarm_envs.envs.common import (
     check_actions,
     check_batch,
     check_dtype,
-    energy_bound,
+    placed_at_rest,
 )
-from swarm_envs.envs.stiffness import StiffnessWatch
-from swarm_envs.envs.task import observation_size
-from swarm_envs.envs.task.episode import episode_end
-from swarm_envs.envs.torch_resets import PARTIAL_RESET_MIN_BATCH, ResetControl, partial_reset_batch
-from swarm_envs.envs.torch_statuses import StatusControl
+from swarm_envs.envs.task import STAT_KEYS, observation_size
+from swarm_envs.envs.task.agent_status import masks
+from swarm_envs.envs.task.layer import Advance, TaskCore, TaskLayer
+from swarm_envs.envs.torch_statuses import DeviceStatuses
 from swarm_envs.envs.torch_step import PACKED_KEYS, build_advance, build_substep
-from swarm_envs.envs.torch_substeps import UNSTABLE, SubstepControl
 
-__all__ = ["PARTIAL_RESET_MIN_BATCH", "TorchSwarmNavCore", "partial_reset_batch"]
+__all__ = ["PARTIAL_RESET_MIN_BATCH", "PackedRecords", "TorchSwarmNavCore", "partial_reset_batch"]
 
 #: Pair evaluations per step (``B·N²``) up to which the compiled CPU step runs on one
 #: thread: below it the threads' synchronisation costs more than they share.
 SINGLE_THREAD_PAIRS = 8192
+
+#: The smallest batch whose resets of a few swarms measure only those (see
+#: :func:`partial_reset_batch`); smaller batches re-measure every swarm on a reset.
+PARTIAL_RESET_MIN_BATCH = 64
+
+_H_STABLE = PACKED_KEYS.index("h_stable")
+_H_GUARD = PACKED_KEYS.index("h_guard")
+_CALM = PACKED_KEYS.index("calm")
+#: The column of the ``unstable`` statistic in the packed row.
+UNSTABLE = STAT_KEYS.index("unstable")
+
+State = tuple[torch.Tensor, torch.Tensor]
+
+
+def partial_reset_batch(batch: int) -> int | None:
+    """Sub-batch size ``R = batch // 16`` for resets of at most R swarms, or ``None``.
+
+    With ``batch ≥ PARTIAL_RESET_MIN_BATCH`` a reset of at most ``R`` swarms runs the
+    fused function on those swarms only (padded to R): 1/16 of a step. Below that size,
+    or for larger resets, every swarm is measured, which costs a whole step.
+    """
+    return batch // 16 if batch >= PARTIAL_RESET_MIN_BATCH else None
+
+
+class PackedRecords:
+    """The task layer's previous and start statistics as the fused step reads them: the
+    packed rows ``(B, P)`` (:data:`~swarm_envs.envs.torch_step.PACKED_KEYS`) on the
+    device (:class:`~swarm_envs.envs.task.layer.Records`). Every update makes new
+    tensors: the old ones may be a CUDA graph's inputs or handed to a step."""
+
+    def __init__(self, prev: torch.Tensor, start: torch.Tensor) -> None:
+        self.prev, self.start = prev, start
+
+    def take(self, measured: torch.Tensor, idx: np.ndarray) -> None:
+        rows = torch.as_tensor(idx, device=measured.device)
+        new = measured[rows]
+        self.prev = self.prev.index_put((rows,), new)
+        self.start = self.start.index_put((rows,), new)
+
+    def follow(self, measured: torch.Tensor) -> None:
+        self.prev = measured  # each step's packed rows are a new tensor
+
+    def remeasured(
+        self, measured: torch.Tensor, before: torch.Tensor, rows: np.ndarray, start: bool
+    ) -> None:
+        # The core measured the others alike (same state, same flags): no row to keep.
+        idx = torch.as_tensor(np.flatnonzero(rows), device=measured.device)
+        new = measured[idx]
+        self.prev = self.prev.index_put((idx,), new)
+        if start:
+            self.start = self.start.index_put((idx,), new)
 
 
 def _torch_dtype(dtype: Any) -> tuple[np.dtype, torch.dtype]:
@@ -98,7 +160,7 @@ def _device(device: Any) -> torch.device:
     return dev
 
 
-class TorchSwarmNavCore(SubstepControl, StatusControl, ResetControl):
+class TorchSwarmNavCore(TaskCore):
     """State and dynamics of ``batch`` independent SwarmNav swarms, in torch.
 
     A :class:`~swarm_envs.envs.protocol.Core` (numpy in, numpy out) for
@@ -124,8 +186,9 @@ class TorchSwarmNavCore(SubstepControl, StatusControl, ResetControl):
     ``x``, ``v``, ``goal`` read as fresh read-only numpy arrays; assigning one of them
     (a whole array) moves it to the device and re-measures the state. ``t`` is the
     numpy step-counter array itself, writable in place as in the numpy core. ``status``:
-    each agent's status ``(B, N)`` int8 as last given to :meth:`set_status` (``None``
-    before).
+    each agent's status ``(B, N)`` int8 as last given to ``set_status`` (``None``
+    before). An :class:`~swarm_envs.envs.protocol.Execution` under its
+    :class:`~swarm_envs.envs.task.layer.TaskLayer` ``task``.
 
     >>> from swarm_envs.config import SwarmConfig
     >>> from swarm_envs.envs.task import STAT_KEYS
@@ -157,14 +220,13 @@ class TorchSwarmNavCore(SubstepControl, StatusControl, ResetControl):
         self.obs_dim = observation_size(cfg)
         self.t = np.zeros(B, np.int64)
         self._columns = StatisticColumns(self.dtype)
-        self._stiffness = StiffnessWatch(cfg, self.batch)
-        self._energy_bound = energy_bound(cfg)  # the unstable guard's (common.energy_bound)
         zeros = self._zeros
         # State component first, (d, B, N): the layout the fused step vectorises.
         self._x, self._v, self._f = zeros(d, B, N), zeros(d, B, N), zeros(d, B, N)
         self._goal = zeros(B, d)
         P = len(PACKED_KEYS)
-        self._prev, self._start = zeros(B, P), zeros(B, P)
+        #: The task above this core; its previous and start rows stay on the device.
+        self.task = TaskLayer(cfg, self.batch, PackedRecords(zeros(B, P), zeros(B, P)))
         self._no_action = zeros(B, N, d)
         self._one_each, self._none_each = self._zeros(B) + 1.0, zeros(B)
         # Every swarm's substep: dt when it takes the step in one, 0 to only measure it.
@@ -179,7 +241,8 @@ class TorchSwarmNavCore(SubstepControl, StatusControl, ResetControl):
         # reset), and the swarms its step truncated as unstable (host indices, or None).
         self._counted = self._none_each
         self._flagged: np.ndarray | None = None
-        self._init_statuses()
+        self._statuses = DeviceStatuses(cfg, self.batch, self.device)
+        self._before: State = (self._x, self._v)  # the state before the last step
         self._compile_request = compile
         self._advance = self._build(self.batch, compile, "TorchSwarmNavCore.step")
         self._substep = self._build(
@@ -293,9 +356,9 @@ class TorchSwarmNavCore(SubstepControl, StatusControl, ResetControl):
             a,
             h,
             self._counted,
-            self._prev,
-            self._start,
-            *self._status_arg(),
+            self.task.records.prev,
+            self.task.records.start,
+            *self._statuses.args(),
         )
 
     def _run(
@@ -354,29 +417,210 @@ class TorchSwarmNavCore(SubstepControl, StatusControl, ResetControl):
             return a.clamp(-1.0, 1.0)
         return self._to_device(check_actions(actions, shape))
 
-    def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
-        """Advance every swarm by one step.
-
-        Args:
-            actions: ``(B, N, d)`` in [−1, 1] (validated by
-                :func:`~swarm_envs.envs.common.check_actions`; a torch tensor is checked
-                the same way on its device).
-
-        Returns:
-            ``(reward (B,), terminated (B,), truncated (B,), stats)`` as numpy arrays,
-            ``stats`` mapping each of ``STAT_KEYS`` to a ``(B,)`` array.
-        """
+    def advance(self, actions: Any) -> Advance:
+        """One step of every swarm (:meth:`Execution.advance
+        <swarm_envs.envs.protocol.Execution.advance>`); ``actions`` ``(B, N, d)`` in
+        [−1, 1], validated by :func:`~swarm_envs.envs.common.check_actions` (a torch
+        tensor is checked the same way on its device). The reward is the fused step's."""
         a = self._actions(actions)
-        before, over, needed = self._integrate(a)
-        self.t += 1
-        stats, bad = self._guard(a, self.stats(), before, over, needed)
-        self._prev = self._packed
+        self._before, over, needed = self._integrate(a)
         reward = self._reward.cpu().numpy().astype(np.float64)
-        terminated, truncated = episode_end(self.cfg, stats["success"], self.t)
-        if bad is not None:
-            reward[bad], terminated[bad], truncated[bad] = 0.0, False, True
-        self._stiffness.observe(stats)
-        return reward, terminated, truncated, stats
+        suspect = over is not None or not self._calm
+        return Advance(self.stats(), self._packed, None, reward, over, needed, suspect)
+
+    def undo(self, idx: np.ndarray, mark: bool) -> dict[str, np.ndarray]:
+        """The swarms ``idx`` back at their state before the step, re-measured
+        (:meth:`Execution.undo <swarm_envs.envs.protocol.Execution.undo>`); a mark
+        stays through re-measures until the next step or reset."""
+        rows = torch.as_tensor(idx, device=self.device)
+        x0, v0 = self._before
+        self._x, self._v = self._x.clone(), self._v.clone()  # out of place, as a reset
+        self._x[:, rows], self._v[:, rows] = x0[:, rows], v0[:, rows]
+        self._counted = self._counted.index_put((rows,), self._none_each[rows])  # undone
+        self._flagged = idx if mark else None
+        self._measure()
+        return self.stats()
+
+    def measured(self) -> torch.Tensor:
+        """The current packed rows ``(B, P)`` on the device (a measure makes new ones)."""
+        return self._packed
+
+    def _host_packed(self, whole: bool = True) -> None:
+        """Copy the packed rows to the host, and note whether every swarm's state is
+        finite and allows the whole ``dt`` in one substep (:attr:`_calm`): the fused
+        step's verdict on the batch when it measured all of it (``whole``), else
+        recomputed from each row's ``h_guard``."""
+        packed = self._packed_host = self._packed.cpu().numpy()
+        if whole:
+            self._calm = bool(packed[0, _CALM])
+        else:  # NaN (a non-finite state) compares False
+            self._calm = bool((packed[:, _H_GUARD] >= np.float64(self.cfg.dt)).all())
+
+    def _integrate(self, a: torch.Tensor) -> tuple[State, np.ndarray | None, np.ndarray]:
+        """Advance every swarm by ``dt`` with actions ``a`` and measure the new state.
+
+        Returns the state before the step (for :meth:`undo`), where a swarm needed more
+        substeps than ``max_substeps`` (``None``: nowhere) and how many it needed.
+        """
+        self._flagged = None
+        before = (self._x, self._v)
+        if self._calm:  # every swarm takes dt in one substep: the fused step alone
+            self._counted = self._one_each
+            self._run(a, self._dt_each)
+            if self._graphed is not None:  # its outputs were overwritten, not its inputs
+                before = self._graphed.inputs[0], self._graphed.inputs[1]
+            return before, None, self._one_needed
+        if self._graphed is not None:  # graph outputs: the last substep overwrites them
+            before = before[0].clone(), before[1].clone()
+        over, needed = self._substeps(a)
+        return before, over, needed
+
+    def _substep_inputs(self, a: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """The substep function's arguments for the first substep of a step with
+        actions ``a``."""
+        remaining, used, needed = self._wide_start  # never written: shared by the steps
+        no_swarm = torch.zeros(self.batch, dtype=torch.bool, device=self.device)
+        h_stable = self._packed[:, _H_STABLE].contiguous()
+        x, v, f, goal = self._x, self._v, self._f, self._goal
+        status = self._statuses.args()
+        return (x, v, f, goal, a, h_stable, remaining, used, no_swarm, needed, *status)
+
+    def _substeps(self, a: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+        """Take the step's substeps, every swarm until its ``dt`` is spent (at most
+        ``max_substeps``): all but each swarm's last through the substep function (with
+        one host read per substep), the last ones in the fused step, which measures
+        the new state. Sets the state and :attr:`_counted`; returns ``(over_cap,
+        needed)`` per swarm on the host, as the numpy core counts them."""
+        inputs = self._substep_inputs(a)
+        x, v, f, goal, _, h_stable, remaining, used, over, needed, *status = inputs
+        for _ in range(self.cfg.max_substeps):
+            x, v, f, h_stable, remaining, used, over, needed, more, last = self._substep(
+                x, v, f, goal, a, h_stable, remaining, used, over, needed, *status
+            )
+            if not bool(more):
+                break
+        else:  # the cap leaves at most max_substeps - 1 substeps before the last
+            raise RuntimeError("substeps left after max_substeps substeps")
+        h, self._counted, counts = last
+        self._x, self._v, self._f = x, v, f
+        self._run(a, h)  # the last substeps (h > 0), and the measure of every swarm
+        over_cap, needed = counts.cpu().numpy()
+        return over_cap > 0, needed
+
+    # ------------------------------------------------------------------ starts
+    def begin(
+        self,
+        idx: np.ndarray,
+        x: np.ndarray,
+        v: np.ndarray,
+        goal: np.ndarray,
+        rng: np.random.Generator,
+    ) -> dict[str, np.ndarray]:
+        """New starts for the swarms ``idx`` (:meth:`Execution.begin
+        <swarm_envs.envs.protocol.Execution.begin>`), moved to the device out of place
+        (the old tensors may share memory with arrays handed out) and measured: alone
+        for a few swarms (at most :attr:`reset_batch`)."""
+        rows = torch.as_tensor(idx, device=self.device)
+        # No step yet for these swarms; the others keep their last step's substeps.
+        self._counted = self._counted.index_put((rows,), self._none_each[rows])
+        self._flagged = None
+        self._x = self._put(self._x, rows, x)
+        self._v = self._put(self._v, rows, v)
+        self._goal = self._goal.index_put((rows,), self._to_device(goal))
+        self._measure_some(rows)
+        return self.stats()
+
+    def _put(self, state: torch.Tensor, rows: torch.Tensor, new: np.ndarray) -> torch.Tensor:
+        """A copy of ``state`` ``(d, B, N)`` with swarms ``rows`` set from ``new`` ``(n, N, d)``."""
+        out = state.clone()
+        out[:, rows] = self._to_device(new).permute(2, 0, 1)
+        return out
+
+    def _measure_some(self, rows: torch.Tensor) -> None:
+        """Measure the swarms ``rows`` again: alone where they are few enough
+        (:meth:`_measure_rows`), else with the whole batch (the others alike)."""
+        if self.reset_batch is not None and rows.shape[0] <= self.reset_batch:
+            self._measure_rows(rows)
+        else:
+            self._measure()
+
+    def _row_args(self, rows: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """The fused function's arguments for swarms ``rows`` only, measuring (no step)."""
+        n = rows.shape[0]
+        records = self.task.records
+        return (
+            self._x[:, rows],
+            self._v[:, rows],
+            self._f[:, rows],
+            self._goal[rows],
+            self._no_action[:n],
+            self._no_step[:n],
+            self._counted[rows],
+            records.prev[rows],
+            records.start[rows],
+            *self._statuses.args(rows),
+        )
+
+    def _measure_rows(self, rows: torch.Tensor) -> None:
+        """:meth:`_measure` for swarms ``rows`` (at most :attr:`reset_batch`) only.
+
+        The rows are padded to ``reset_batch`` with copies of the first; the results of
+        the real ones are written into the force, observations and statistics; the
+        ``unstable`` statistic of every swarm but those :attr:`_flagged` becomes 0, as
+        the measure of the whole batch makes it (a reset clears the flags first).
+        """
+        assert self._advance_part is not None and self.reset_batch is not None
+        n = rows.shape[0]
+        padded = torch.cat([rows, rows[:1].expand(self.reset_batch - n)])
+        _, _, f, obs, packed, _, _ = self._advance_part(*self._row_args(padded))
+        self._f = self._f.clone()
+        self._f[:, rows] = f[:, :n]
+        if self._obs_given or self._obs_shared:  # handed out: leave that memory alone
+            self._obs = self._obs.clone()
+            self._obs_given = self._obs_shared = False
+        self._obs[rows] = obs[:n]
+        self._packed = self._packed.index_put((rows,), packed[:n])  # a new tensor
+        self._packed[:, UNSTABLE] = 0.0
+        if self._flagged is not None:
+            self._packed[torch.as_tensor(self._flagged, device=self.device), UNSTABLE] = 1.0
+        self._host_packed(whole=False)
+
+    # ------------------------------------------------------------------ statuses
+    @property
+    def status(self) -> np.ndarray | None:
+        """Each agent's status ``(B, N)`` int8 as last given (``None`` before)."""
+        return self._statuses.host
+
+    def take_statuses(
+        self, status: np.ndarray, place: np.ndarray | None, at: np.ndarray | None
+    ) -> None:
+        """Checked statuses ``(B, N)`` (:meth:`Execution.take_statuses
+        <swarm_envs.envs.protocol.Execution.take_statuses>`), passed to both functions
+        from now on.
+
+        Raises:
+            ValueError: the config needs no statuses (the core's functions were built
+                without them).
+        """
+        self._statuses.take(status)
+        device = self.device
+        mobile = torch.as_tensor(masks(status).mobile, device=device)
+        where = None if place is None else torch.as_tensor(place, device=device)
+        at_t = None
+        if place is not None:
+            # (d, B, N) stored contiguous, as every state tensor the compiled functions
+            # read: torch.where lays its result out as its inputs are, and a permuted view
+            # would hand them another layout than they were traced for.
+            at_t = self._to_device(np.ascontiguousarray(np.moveaxis(at, -1, 0)))
+        xp = torch_namespace()
+        self._x, self._v = placed_at_rest(
+            self._x, self._v, mobile, where, at_t, xp, component_first=True
+        )
+
+    def remeasure(self, idx: np.ndarray) -> None:
+        """Measure the swarms ``idx`` again (:meth:`Execution.remeasure
+        <swarm_envs.envs.protocol.Execution.remeasure>`; the others' measure is alike)."""
+        self._measure_some(torch.as_tensor(idx, device=self.device))
 
     # ------------------------------------------------------------------ views
     def stats(self) -> dict[str, np.ndarray]:
@@ -477,8 +721,9 @@ class TorchSwarmNavCore(SubstepControl, StatusControl, ResetControl):
             "status": None if self.status is None else self.status.copy(),
             "tensors": {
                 name: getattr(self, name).detach().cpu()
-                for name in ("_x", "_v", "_goal", "_prev", "_start", "_counted", "_status")
+                for name in ("_x", "_v", "_goal", "_counted")
             },
+            "records": (self.task.records.prev.cpu(), self.task.records.start.cpu()),
         }
 
     def __setstate__(self, state: dict[str, Any]) -> None:
@@ -486,7 +731,10 @@ class TorchSwarmNavCore(SubstepControl, StatusControl, ResetControl):
             state["cfg"], state["batch"], state["dtype"], state["device"], state["compile"]
         )
         self.t, self._flagged = state["t"], state["flagged"]
-        self.status = state.get("status")
+        if state.get("status") is not None:
+            self._statuses.take(state["status"])
         for name, tensor in state["tensors"].items():
             setattr(self, name, tensor.to(self.device))
+        prev, start = (tensor.to(self.device) for tensor in state["records"])
+        self.task.records = PackedRecords(prev, start)
         self._measure()

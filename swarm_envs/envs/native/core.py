@@ -8,7 +8,10 @@ computed per swarm in a few kilobytes of scratch memory, the swarms spread over 
 threads. The reward is the shared definition (:func:`swarm_envs.envs.task.reward`)
 applied to the statistics and the effort the C step writes; a statistic the kernel does
 not declare is computed by its shared definition from the state
-(:mod:`swarm_envs.envs.task.statistics`).
+(:mod:`swarm_envs.envs.task.statistics`). The core is an
+:class:`~swarm_envs.envs.protocol.Execution` under its task layer
+(:mod:`swarm_envs.envs.task.layer`): the reset draws, the episode end, the unstable
+guard and the statuses' bookkeeping are the layer's, as on every backend.
 
 State: positions, velocities and the carried passive force live component first,
 ``(d, B, N)``, the layout the kernel vectorises; ``x`` and ``v`` read as ``(B, N, d)``
@@ -30,40 +33,25 @@ from __future__ import annotations
 
 import ctypes
 import sys
-from collections.abc import Iterator, Mapping
 from typing import Any
 
 import numpy as np
 
-from swarm_envs._array import NUMPY, SCALAR
+from swarm_envs._array import NUMPY
 from swarm_envs.envs.common import (
     NON_FINITE_ACTIONS,
     StatisticColumns,
-    SwarmUnstableError,
-    beyond_bound,
     check_action_shape,
     check_batch,
     check_dtype,
-    check_start,
-    draw_starts,
-    energy_bound,
-    unstable_message,
-    unstable_swarms,
+    placed_at_rest,
     wide_dtypes,
 )
 from swarm_envs.envs.native.build import NATIVE_ENV, Library, load_library, resolve_native
 from swarm_envs.envs.native.contract import PACKED_COLUMNS, UNSOUND, step_params, unsupported
-from swarm_envs.envs.stiffness import StiffnessWatch
-from swarm_envs.envs.task import (
-    STAT_KEYS,
-    STATISTICS,
-    Frame,
-    RewardInputs,
-    observation_size,
-    reward,
-)
-from swarm_envs.envs.task.agent_status import keep_measured, masks, status_update
-from swarm_envs.envs.task.episode import episode_end
+from swarm_envs.envs.task import STAT_KEYS, STATISTICS, Frame, observation_size
+from swarm_envs.envs.task.agent_status import masks
+from swarm_envs.envs.task.layer import Advance, HostRecords, TaskCore, TaskLayer
 
 __all__ = ["UNAVAILABLE", "NativeSwarmNavCore"]
 
@@ -75,25 +63,6 @@ _EFFORT = PACKED_COLUMNS.index("effort")
 _OVER_CAP = PACKED_COLUMNS.index("over_cap")
 _NEEDED = PACKED_COLUMNS.index("needed")
 _SUBSTEPS = PACKED_COLUMNS.index("substeps")
-
-
-class _FirstSwarm(Mapping[str, float]):
-    """The statistics of swarm 0 as floats, each read from its ``(B,)`` array when a
-    reward term asks for it (a term reads a few of them)."""
-
-    __slots__ = ("_stats",)
-
-    def __init__(self, stats: Mapping[str, np.ndarray]) -> None:
-        self._stats = stats
-
-    def __getitem__(self, key: str) -> float:
-        return float(self._stats[key][0])
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._stats)
-
-    def __len__(self) -> int:
-        return len(self._stats)
 
 
 class _BufferPool:
@@ -118,7 +87,7 @@ class _BufferPool:
         return {"shape": self.shape, "size": self.size, "buffers": []}
 
 
-class NativeSwarmNavCore:
+class NativeSwarmNavCore(TaskCore):
     """State and dynamics of ``batch`` SwarmNav swarms, stepped in C.
 
     Args:
@@ -153,8 +122,6 @@ class NativeSwarmNavCore:
         B, N, d = self.batch, cfg.n_agents, cfg.dim
         self.obs_dim = observation_size(cfg)
         self.t = np.zeros(B, np.int64)
-        self._stiffness = StiffnessWatch(cfg, self.batch)
-        self._energy_bound = energy_bound(cfg)  # the unstable guard's (common.energy_bound)
         self._wide = wide_dtypes(self.dtype)
         self._columns = StatisticColumns(self.dtype)
         self._x = np.zeros((d, B, N), self.dtype)
@@ -171,8 +138,6 @@ class NativeSwarmNavCore:
         self._obs_given = False
         self._packed = np.zeros((B, len(PACKED_COLUMNS)), self.dtype)
         self._stats: dict[str, np.ndarray] = {}
-        self._prev: dict[str, np.ndarray] = {}
-        self._start: dict[str, np.ndarray] = {}
         #: Each agent's status ``(B, N)`` int8 (agent_status), ``None`` while every agent
         #: is active and always will be (then the kernel applies no masks).
         self._status: np.ndarray | None = None
@@ -188,7 +153,8 @@ class NativeSwarmNavCore:
         )
         self._extra_pairs = any(STATISTICS[i].pairwise for i in self._extra)
         self._measure()
-        self._prev, self._start = self.stats(), self.stats()
+        #: The task above this core: reward, episode end, previous and start statistics.
+        self.task = TaskLayer(cfg, self.batch, HostRecords(self.stats(), self.stats()))
 
     @staticmethod
     def unsupported(cfg: Any) -> str | None:
@@ -319,137 +285,90 @@ class NativeSwarmNavCore:
             members,
         )
 
-    # ------------------------------------------------------------------ reset
-    def reset(self, rng: np.random.Generator, which: np.ndarray | None = None) -> None:
-        """Draw new starts for the swarms in ``which`` (bool mask ``(B,)``; all if None),
-        with :func:`~swarm_envs.envs.common.draw_starts` as every core; a proper subset
-        is re-measured alone, in place."""
-        idx = np.arange(self.batch) if which is None else np.flatnonzero(which)
-        if idx.size == 0:
-            return
-        x, v, goal = draw_starts(self.cfg, rng, idx.size)
-        self.t[idx] = 0
+    # ------------------------------------------------------------------ execution
+    def begin(
+        self,
+        idx: np.ndarray,
+        x: np.ndarray,
+        v: np.ndarray,
+        goal: np.ndarray,
+        rng: np.random.Generator,
+    ) -> dict[str, np.ndarray]:
+        """New starts for the swarms ``idx`` (:meth:`Execution.begin
+        <swarm_envs.envs.protocol.Execution.begin>`); a proper subset is re-measured
+        alone, in place."""
         self._x[:, idx] = x.transpose(2, 0, 1)
         self._v[:, idx] = v.transpose(2, 0, 1)
         self._goal[idx] = goal
         # As the numpy core's statistics after a reset: no step, no substeps.
         self._packed[idx, _SUBSTEPS] = 0.0
         self._measure(None if idx.size == self.batch else idx.astype(np.int64))
-        check_start(self.cfg, self._stats, idx, self.dtype)
-        for key, value in self._stats.items():
-            self._prev[key][idx] = value[idx]
-            self._start[key][idx] = value[idx]
+        return self._stats
 
-    # ------------------------------------------------------------------ agents
-    def set_status(
-        self,
-        status: np.ndarray,
-        place: np.ndarray | None = None,
-        at: np.ndarray | None = None,
-        *,
-        rows: np.ndarray | None = None,
-        start: bool = False,
-    ) -> None:
-        """Give the agents new statuses ``(B, N)`` (agent_status) between steps, as
-        :meth:`SwarmNavCore.set_status <swarm_envs.envs.core.SwarmNavCore.set_status>`.
-
-        ``place`` ``(B, N)`` bool: agents put at ``at`` ``(B, N, d)`` (joining agents).
-        Agents that no longer move and placed agents are at rest. The swarms whose
-        statuses or places changed, and those in ``rows`` ``(B,)``, are measured again
-        (their last step's substep count kept), and their previous statistics become
-        these (``start=True``: their episode's start too). From then on the C step
-        applies the statuses' masks: pairs with an agent not present, updates of agents
-        that do not move, statistics over the members, the observed status flags.
-        """
-        B = self.batch
-        old = self._status
-        shape = (B, self.cfg.n_agents, self.cfg.dim)
-        status, place, rows = status_update(old, status, place, at, rows, shape)
-        if place is not None:
-            self._x[:, place] = np.asarray(at, dtype=self.dtype)[place].T
-            self._v[:, place] = 0.0
-        if old is None:
-            self._status = status.copy()
-        else:
-            old[...] = status  # in place: the kernel's array
-        self._v[:, ~masks(status).mobile] = 0.0
-        if not rows.any():
-            return
-        idx = np.flatnonzero(rows)
-        substeps = self._packed[:, _SUBSTEPS].copy()  # a measure takes none
-        before = self._stats
-        self._measure(None if idx.size == B else idx.astype(np.int64))
-        self._packed[idx, _SUBSTEPS] = substeps[idx]
-        self._stats["substeps"][idx] = substeps[idx]
-        keep_measured(self._stats, before, self._prev, self._start, rows, start)
-
-    # ------------------------------------------------------------------ step
-    def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
-        """Advance every swarm by one step.
-
-        Args:
-            actions: ``(B, N, d)`` in [−1, 1]; the C step checks them (NaN or inf:
-                :class:`ValueError` before anything changes) and clips them.
-
-        Returns:
-            ``(reward (B,), terminated (B,), truncated (B,), stats)`` as in every core;
-            a swarm whose step went unstable under ``on_unstable="truncate"`` is back
-            at its state before the step, with reward 0, ``truncated`` and
-            ``stats["unstable"]`` 1.
-
-        Raises:
-            SwarmUnstableError: a step went unstable (a non-finite state, or more
-                substeps needed than ``max_substeps``) under ``on_unstable="raise"``.
-        """
+    def advance(self, actions: Any) -> Advance:
+        """One C step of every swarm (:meth:`Execution.advance
+        <swarm_envs.envs.protocol.Execution.advance>`): the C step checks the actions
+        (NaN or inf: :class:`ValueError` before anything changes) and clips them; it
+        writes the new state into the spare buffers, which become the state (the state
+        before the step the spare, for :meth:`undo`)."""
         shape = (self.batch, self.cfg.n_agents, self.cfg.dim)
         a = np.ascontiguousarray(check_action_shape(actions, shape), dtype=self.dtype)
         obs = self._pool.get()
         unsound = self._call(a, self._move_all, obs, None, into_spare=True)
         self._swap()
         self._obs, self._obs_given = obs, False
-        self.t += 1
-        self._stats = self._unpack()
-        bad = None
-        if unsound or beyond_bound(self._stats, self._energy_bound):
-            bad = unstable_swarms(self._stats, self._packed[:, _OVER_CAP] > 0, self._energy_bound)
-            if bad.any():
-                self._unstable(bad)
-            else:
-                bad = None
-        stats = self._stats
-        effort = self._packed[:, _EFFORT]
-        xp = NUMPY
-        prev, start = self._prev, self._start
-        if self.batch == 1:  # plain floats: the same definitions, no array overhead
-            xp = SCALAR
-            first = _FirstSwarm(stats), _FirstSwarm(prev), _FirstSwarm(start)
-            inputs = RewardInputs(*first, float(effort[0]), self.cfg.n_agents, xp)
-            r = np.array([reward(self.cfg.reward, inputs)], dtype=np.float64)
-        else:
-            inputs = RewardInputs(stats, prev, start, effort, self.cfg.n_agents, xp)
-            r = np.asarray(reward(self.cfg.reward, inputs), dtype=np.float64)
-        # _unpack made fresh arrays: the caller gets them, the next reward a copy (a reset
-        # writes into the copy).
-        self._prev = {key: value.copy() for key, value in stats.items()}
-        terminated, truncated = episode_end(self.cfg, stats["success"], self.t)
-        if bad is not None:
-            r[bad], terminated[bad], truncated[bad] = 0.0, False, True
-        self._stiffness.observe(stats)
-        return r, terminated, truncated, stats
+        # Fresh arrays: the caller gets them, the task's records a copy.
+        stats = self._stats = self._unpack()
+        packed = self._packed
+        over_cap = packed[:, _OVER_CAP] > 0 if unsound else None
+        return Advance(
+            stats, stats, packed[:, _EFFORT], None, over_cap, packed[:, _NEEDED], unsound
+        )
 
-    def _unstable(self, bad: np.ndarray) -> None:
-        """Raise :class:`~swarm_envs.envs.common.SwarmUnstableError`, or
-        (``on_unstable="truncate"``) put the swarms ``bad`` back to their state before
-        the step (the spare buffers), re-measured, marked ``unstable``."""
-        cfg = self.cfg
-        if cfg.on_unstable == "raise":
-            needed = self._packed[:, _NEEDED].astype(np.float64)
-            raise SwarmUnstableError(unstable_message(cfg, self._stats, bad, needed, self.t))
-        idx = np.flatnonzero(bad)
+    def undo(self, idx: np.ndarray, mark: bool) -> dict[str, np.ndarray]:
+        """The swarms ``idx`` back at their state before the step (the spare buffers),
+        re-measured (:meth:`Execution.undo <swarm_envs.envs.protocol.Execution.undo>`)."""
         x_old, v_old, _ = self._spare
         self._x[:, idx], self._v[:, idx] = x_old[:, idx], v_old[:, idx]
         self._measure(idx.astype(np.int64))  # their force, h*, observations, statistics
-        self._stats["unstable"][idx] = 1.0
+        if mark:
+            self._stats["unstable"][idx] = 1.0
+        return self._stats
+
+    def measured(self) -> dict[str, np.ndarray]:
+        """The current statistics ``{name: (B,)}`` (the core's own; a measure replaces them)."""
+        return self._stats
+
+    # ------------------------------------------------------------------ agents
+    def take_statuses(
+        self, status: np.ndarray, place: np.ndarray | None, at: np.ndarray | None
+    ) -> None:
+        """Checked statuses ``(B, N)`` (:meth:`Execution.take_statuses
+        <swarm_envs.envs.protocol.Execution.take_statuses>`). From then on the C step
+        applies their masks: pairs with an agent not present, updates of agents that do
+        not move, statistics over the members, the observed status flags."""
+        mobile = masks(status).mobile
+        if place is not None:
+            at = np.moveaxis(np.asarray(at, dtype=self.dtype), -1, 0)
+        x, v = placed_at_rest(self._x, self._v, mobile, place, at, NUMPY, component_first=True)
+        self._x[...], self._v[...] = x, v  # in place: the kernel's buffers
+        if self._status is None:
+            self._status = status.copy()
+        else:
+            self._status[...] = status  # in place: the kernel's array
+
+    def remeasure(self, idx: np.ndarray) -> None:
+        """Measure the swarms ``idx`` again, their last step's substep count kept
+        (:meth:`Execution.remeasure <swarm_envs.envs.protocol.Execution.remeasure>`)."""
+        substeps = self._packed[:, _SUBSTEPS].copy()  # a measure takes none
+        self._measure(None if idx.size == self.batch else idx.astype(np.int64))
+        self._packed[idx, _SUBSTEPS] = substeps[idx]
+        self._stats["substeps"][idx] = substeps[idx]
+
+    @property
+    def status(self) -> np.ndarray | None:
+        """Each agent's status ``(B, N)`` int8 as last given (``None`` before)."""
+        return self._status
 
     # ------------------------------------------------------------------ views
     def stats(self) -> dict[str, np.ndarray]:

@@ -196,9 +196,10 @@ def status_update(
     rows: Any,
     shape: tuple[int, int, int],
 ) -> StatusUpdate:
-    """The part of ``set_status`` every core shares (``protocol.StatusCore``): check the
-    arguments against ``shape`` ``(B, N, d)`` and find the swarms whose statuses or places
-    change, or that ``rows`` names (all of them when there were no statuses before).
+    """The check of a ``set_status`` call (``protocol.StatusCore``, made by the task
+    layer, :mod:`swarm_envs.envs.task.layer`): check the arguments against ``shape``
+    ``(B, N, d)`` and find the swarms whose statuses or places change, or that ``rows``
+    names (all of them when there were no statuses before).
 
     Raises:
         ValueError: ``status`` not ``(B, N)`` with values 0 to ``ABSENT``, or
