@@ -183,7 +183,7 @@ def test_other_models_are_refused_with_a_reason_and_run_on_numpy(cfg):
     # discrete rules (zones, turning limits) make float32 and float64 diverge, so they
     # are checked for finite results in both, not against each other.
     # With observe_status a backend without agent statuses may name that first.
-    for backend in ("sparse", "torch", "native"):
+    for backend in ("cutoff", "torch", "native"):
         reason = backends.unsupported(cfg, backend)
         if cfg.dynamics != "social_potential":
             assert reason and ("social_potential" in reason or "statuses" in reason)
@@ -327,7 +327,7 @@ def test_a_new_reward_term_is_one_definition_on_every_backend(monkeypatch):
     base = SwarmConfig(n_agents=6, max_steps=50, reward=WithSpread())
     cfg = dataclasses.replace(base, reward=WithSpread(spread=0.5))
     actions = np.random.default_rng(1).uniform(-1, 1, (3, 6, 2))
-    for backend in ("numpy", "sparse", "torch", "native"):
+    for backend in ("numpy", "cutoff", "torch", "native"):
         if backends.unsupported(base, backend):
             continue
         rewards = []

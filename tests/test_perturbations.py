@@ -730,7 +730,7 @@ def test_actions_of_agents_that_do_not_act_are_zero_and_noise_is_clipped(dtype):
     assert (np.abs(out[2][~idle[2]]) == 1.0).mean() > 0.5  # loud noise: mostly clipped
 
 
-@pytest.mark.parametrize("backend", ["native", "torch", "sparse"])
+@pytest.mark.parametrize("backend", ["native", "torch", "cutoff"])
 def test_every_status_backend_keeps_an_undone_steps_flag_as_numpy_does(monkeypatch, backend):
     # The numpy test above, on each other core that takes statuses: swarm 0's undone,
     # truncated step stays reported while swarm 1 is measured again for its frozen agent.

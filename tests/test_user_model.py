@@ -201,7 +201,7 @@ def test_its_step_size_rule_refuses_a_config_that_needs_more_than_the_cap():
 # --------------------------------------------------------------------------- backends, agents
 
 
-@pytest.mark.parametrize("backend", ["sparse", "torch", "native"])
+@pytest.mark.parametrize("backend", ["cutoff", "torch", "native"])
 def test_the_other_cores_refuse_it_and_the_env_falls_back_to_numpy(monkeypatch, backend):
     cfg = cfg_of()
     reason = backends.unsupported(cfg, backend)

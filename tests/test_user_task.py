@@ -154,7 +154,7 @@ def test_the_user_task_matches_the_reference_on_every_core_that_runs_it(variant,
     assert not problems, f"{variant.name} on {cfg}: {problems}"
 
 
-@pytest.mark.parametrize("variant", [Variant("torch", np.float64), Variant("sparse", np.float64)])
+@pytest.mark.parametrize("variant", [Variant("torch", np.float64), Variant("cutoff", np.float64)])
 def test_the_example_s_own_config_conforms(variant):
     cfg = task_config("aggregation", n_agents=8)
     assert check(variant, cfg) == []
@@ -204,7 +204,7 @@ def own_statistics_task():
 def test_a_task_s_own_statistics_reach_info_and_the_reward(own_statistics_task):
     cfg = task_config("spread_task", n_agents=6)
     assert stat_keys(cfg) == (*STAT_KEYS, "spread_max")
-    for variant in (Variant("numpy", np.float32), Variant("sparse", np.float64)):
+    for variant in (Variant("numpy", np.float32), Variant("cutoff", np.float64)):
         assert check(variant, cfg) == []
     for backend in ("torch", "native"):
         reason = backends.unsupported(cfg, backend)

@@ -36,7 +36,7 @@ class Core(Protocol):
         batch: number of swarms ``B``.
         dtype: the state's numpy dtype (float32 or float64).
         obs_dim: observation size per agent.
-        backend: the backend's name (``"numpy"``, ``"sparse"``, ``"torch"``, ``"native"``).
+        backend: the backend's name (``"numpy"``, ``"cutoff"``, ``"torch"``, ``"native"``).
         t: steps since each swarm's reset, ``(B,)`` int64 (writable in place).
         x, v: positions and velocities ``(B, N, d)``; goal: ``(B, d)``.
     """

@@ -1,6 +1,6 @@
 """SwarmNav for large swarms: the batched core with a cut-off and an O(N) neighbour search.
 
-:class:`SparseSwarmNavCore` has exactly the public interface and semantics of
+:class:`CutoffSwarmNavCore` has exactly the public interface and semantics of
 :class:`~swarm_envs.envs.core.SwarmNavCore` (``reset``, ``step``, ``observe``,
 ``stats``; attributes ``x, v, goal, t, batch, obs_dim, cfg``) for
 ``cfg.dynamics == "social_potential"`` (either integrator), without any ``(B, N, N)``
@@ -63,8 +63,8 @@ parameter set (``SocialPotentialParams.large_swarm()``, ``configs/env/large_swar
 and a bounded start density (``SwarmConfig.init_density``): the paper's sets collapse,
 and the substeps a step needs grow with ``N`` until ``max_substeps``.
 
-Below :data:`SPARSE_MIN_AGENTS` agents per swarm the dense core (``O(N²)`` per step) is
-as fast or faster (and exact); :func:`use_sparse_core` is the selection rule
+Below :data:`CUTOFF_MIN_AGENTS` agents per swarm the dense core (``O(N²)`` per step) is
+as fast or faster (and exact); :func:`use_cutoff_core` is the selection rule
 (``benchmarks/large_swarms.py`` measures the crossover).
 """
 
@@ -92,10 +92,10 @@ from swarm_envs.physics.pair_sums import swarm_rates
 from swarm_envs.physics.present_neighbors import close_pairs_among
 from swarm_envs.physics.social_potential import components, dissipation, dissipation_rate
 
-#: Agents per swarm from which to use :class:`SparseSwarmNavCore`: above the crossover
+#: Agents per swarm from which to use :class:`CutoffSwarmNavCore`: above the crossover
 #: with the dense cores that ``benchmarks/large_swarms.py`` measures (default config at
 #: the start density of N = 10), with a margin.
-SPARSE_MIN_AGENTS = 500
+CUTOFF_MIN_AGENTS = 500
 
 #: Default tolerance per dropped pair force (force units): 1 % of the default ``u_max``.
 DEFAULT_CUTOFF_TOL = 0.03
@@ -108,28 +108,28 @@ DEFAULT_CUTOFF_SPEED = 1.0
 MIN_SEARCH_RADIUS = 0.25
 
 __all__ = [
+    "CUTOFF_MIN_AGENTS",
     "DEFAULT_CUTOFF_SPEED",
     "DEFAULT_CUTOFF_TOL",
     "KNN_AHEAD_MIN_AGENTS",
     "MAX_SPAN",
-    "SPARSE_MIN_AGENTS",
-    "SparseSwarmNavCore",
+    "CutoffSwarmNavCore",
     "StepCounts",
     "density_preserving_radius",
-    "use_sparse_core",
+    "use_cutoff_core",
 ]
 
 
-def use_sparse_core(cfg: SwarmConfig) -> bool:
-    """Whether ``cfg`` should run on :class:`SparseSwarmNavCore` rather than the dense core.
+def use_cutoff_core(cfg: SwarmConfig) -> bool:
+    """Whether ``cfg`` should run on :class:`CutoffSwarmNavCore` rather than the dense core.
 
-    True for the social potential model with at least :data:`SPARSE_MIN_AGENTS` agents.
+    True for the social potential model with at least :data:`CUTOFF_MIN_AGENTS` agents.
 
-    >>> use_sparse_core(SwarmConfig()), use_sparse_core(SwarmConfig(n_agents=100_000))
+    >>> use_cutoff_core(SwarmConfig()), use_cutoff_core(SwarmConfig(n_agents=100_000))
     (False, True)
     """
     dynamics = getattr(cfg, "dynamics", "social_potential")
-    return dynamics == "social_potential" and cfg.n_agents >= SPARSE_MIN_AGENTS
+    return dynamics == "social_potential" and cfg.n_agents >= CUTOFF_MIN_AGENTS
 
 
 def density_preserving_radius(
@@ -186,7 +186,7 @@ class _Pass(NamedTuple):
     pair_damping: np.ndarray | None = None  # (b,) the damping rate's pair part, times m
 
 
-class SparseSwarmNavCore(SwarmNavCore):
+class CutoffSwarmNavCore(SwarmNavCore):
     """State and dynamics of ``batch`` independent SwarmNav swarms, for large ``N``.
 
     A drop-in for :class:`~swarm_envs.envs.core.SwarmNavCore` (same methods, same
@@ -212,7 +212,7 @@ class SparseSwarmNavCore(SwarmNavCore):
 
     >>> from swarm_envs.config import SwarmConfig
     >>> from swarm_envs.envs.core import STAT_KEYS
-    >>> core = SparseSwarmNavCore(SwarmConfig(n_agents=4), batch=2)
+    >>> core = CutoffSwarmNavCore(SwarmConfig(n_agents=4), batch=2)
     >>> core.reset(np.random.default_rng(0))
     >>> reward, terminated, truncated, stats = core.step(np.zeros((2, 4, 2)))
     >>> core.observe().shape, reward.shape, sorted(stats) == sorted(STAT_KEYS)
@@ -221,7 +221,7 @@ class SparseSwarmNavCore(SwarmNavCore):
     [1.0, 1.0]
     """
 
-    backend = "sparse"
+    backend = "cutoff"
 
     def __init__(
         self,
@@ -233,12 +233,12 @@ class SparseSwarmNavCore(SwarmNavCore):
     ) -> None:
         reason = self.unsupported(cfg)
         if reason is not None:
-            raise ValueError(f"SparseSwarmNavCore: {reason}")
+            raise ValueError(f"CutoffSwarmNavCore: {reason}")
         super().__init__(cfg, batch, dtype)
         self.cutoff_tol = check_real(
-            "SparseSwarmNavCore", "cutoff_tol", cutoff_tol, low=0.0, low_inclusive=False
+            "CutoffSwarmNavCore", "cutoff_tol", cutoff_tol, low=0.0, low_inclusive=False
         )
-        self.cutoff_speed = check_real("SparseSwarmNavCore", "cutoff_speed", cutoff_speed, low=0.0)
+        self.cutoff_speed = check_real("CutoffSwarmNavCore", "cutoff_speed", cutoff_speed, low=0.0)
         B = self.batch
         self.dynamics = StepCounts(B)  # type: ignore[assignment]
         self._cutoff_key: tuple[Any, ...] | None = None
@@ -386,7 +386,7 @@ class SparseSwarmNavCore(SwarmNavCore):
         """One step of ``dt`` in the substeps of the step-size control (module docstring)."""
         cfg = self.cfg
         if self._f_passive is None:
-            raise ValueError("SparseSwarmNavCore.step called before reset")
+            raise ValueError("CutoffSwarmNavCore.step called before reset")
         B, cap, m = self.batch, cfg.max_substeps, cfg.physics.m
         verlet = cfg.integrator == "velocity_verlet"
         goal = self._physics_goal()
@@ -499,3 +499,9 @@ class SparseSwarmNavCore(SwarmNavCore):
         if self._masks.present is not None:  # an agent alone in the physics: 0
             nearest = np.where(np.isfinite(nearest), nearest, 0.0).astype(self.dtype)
         return near, nearest, self._collisions.copy(), energy.astype(self.dtype, copy=False)
+
+
+#: The former names (the backend was called ``"sparse"``).
+SparseSwarmNavCore = CutoffSwarmNavCore
+SPARSE_MIN_AGENTS = CUTOFF_MIN_AGENTS
+use_sparse_core = use_cutoff_core

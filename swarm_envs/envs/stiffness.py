@@ -101,7 +101,7 @@ def stiff_message(cfg: Any, stats: dict[str, np.ndarray], b: int, mean: float, s
         )
         remedy = (
             "an H-stable parameter set (SocialPotentialParams.large_swarm()), a less dense "
-            "start (init_density), " + remedy + ", or, for large N, backend='sparse' or "
+            "start (init_density), " + remedy + ", or, for large N, backend='cutoff' or "
             "'torch' (each substep cheaper)"
         )
     return f"stiff swarm: {cause}. To speed it up: {remedy}. (Said once per config.)"
