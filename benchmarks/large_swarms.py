@@ -36,7 +36,7 @@ the cut-off core wins.
 
 ``--regime``: instead of the timing table, the regime table of ``docs/large_swarms.md``:
 for both parameter sets (``--regime-physics``), N = 10 … ``--max-n`` (or ``--sizes``;
-the dense core below :data:`~swarm_envs.envs.sparse_core.CUTOFF_MIN_AGENTS`, the
+the dense core below :data:`~swarm_envs.envs.cores.cutoff.core.CUTOFF_MIN_AGENTS`, the
 cut-off core from there), the passive swarm (zero actions) for ``--regime-steps`` steps of
 ``dt = 0.1``: its state at the end (as above), the mean and largest substeps per step,
 the seconds per step, and the outcome: a run that raises ``SwarmUnstableError``
@@ -52,7 +52,7 @@ k nearest neighbours) with the numpy cell list and with ``scipy.spatial.cKDTree`
 steps of zero or random actions, next to the bound of
 :func:`swarm_envs.physics.cutoff.force_error_bound` at the measured density and
 relative speed. ``--cutoff-tol``: the cut-off core's tolerance (default
-:data:`~swarm_envs.envs.sparse_core.DEFAULT_CUTOFF_TOL`).
+:data:`~swarm_envs.envs.cores.cutoff.core.DEFAULT_CUTOFF_TOL`).
 """
 
 from __future__ import annotations
@@ -72,8 +72,12 @@ import numpy as np
 from swarm_envs import tune_allocator
 from swarm_envs.config import SwarmConfig, load_swarm_config
 from swarm_envs.envs.common import SwarmUnstableError
-from swarm_envs.envs.core import SwarmNavCore
-from swarm_envs.envs.sparse_core import CUTOFF_MIN_AGENTS, DEFAULT_CUTOFF_TOL, CutoffSwarmNavCore
+from swarm_envs.envs.cores.cutoff.core import (
+    CUTOFF_MIN_AGENTS,
+    DEFAULT_CUTOFF_TOL,
+    CutoffSwarmNavCore,
+)
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.physics import compiled_pairs, forces
 from swarm_envs.physics.cutoff import force_error_bound, sparse_forces
 from swarm_envs.physics.neighbors import CELL_MARGIN, REACH, CellList, knn, radius_pairs

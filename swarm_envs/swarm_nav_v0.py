@@ -18,8 +18,8 @@ from pettingzoo.utils import wrappers
 from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from pettingzoo.utils.env import AECEnv
 
-from swarm_envs.envs.inputs import check_agent_action
-from swarm_envs.envs.swarm_nav import SwarmNavParallelEnv
+from swarm_envs.envs.adapters.inputs import check_agent_action
+from swarm_envs.envs.adapters.swarm_nav import SwarmNavParallelEnv
 
 
 class _CheckedParallelToAEC(parallel_to_aec_wrapper):
@@ -64,10 +64,10 @@ def env(**kwargs: Any) -> AECEnv:
 def vec_env(n_swarms: int = 1, **kwargs: Any):
     """A batched SB3 ``VecEnv`` with ``n_swarms × n_agents`` slots (one shared policy).
 
-    See :class:`swarm_envs.envs.vec_env.SwarmNavVecEnv`. Imported lazily (it needs SB3,
+    See :class:`swarm_envs.envs.adapters.vec_env.SwarmNavVecEnv`. Imported lazily (it needs SB3,
     and so torch).
     """
-    from swarm_envs.envs.vec_env import SwarmNavVecEnv
+    from swarm_envs.envs.adapters.vec_env import SwarmNavVecEnv
 
     return SwarmNavVecEnv(n_swarms, **kwargs)
 

@@ -264,8 +264,8 @@ def _register_gymnasium(spec: TaskSpec) -> None:
         return
     register(
         id=spec.env_id,
-        entry_point="swarm_envs.envs.swarm_nav:SwarmNavEnv",
-        vector_entry_point="swarm_envs.envs.gym_vector:SwarmNavVectorEnv",
+        entry_point="swarm_envs.envs.adapters.swarm_nav:SwarmNavEnv",
+        vector_entry_point="swarm_envs.envs.adapters.gym_vector:SwarmNavVectorEnv",
         kwargs=task,
     )
 

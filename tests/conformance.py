@@ -29,7 +29,7 @@ from hypothesis import strategies as st
 
 from swarm_envs.config import DYNAMICS, INTEGRATORS, SwarmConfig, config_from_mapping
 from swarm_envs.envs import backends
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.perturbed import PerturbedCore
 from swarm_envs.envs.task import ranked_neighbors, stat_keys
 from swarm_envs.envs.task.agent_status import ABSENT, ACTIVE, FAILED, FROZEN, masks

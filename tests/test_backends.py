@@ -22,8 +22,8 @@ from swarm_envs.envs.backends import (
     select_backend,
     unsupported,
 )
-from swarm_envs.envs.core import SwarmNavCore
-from swarm_envs.envs.sparse_core import CutoffSwarmNavCore
+from swarm_envs.envs.cores.cutoff.core import CutoffSwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 
 
 def test_auto_picks_by_model_size_and_batch(monkeypatch):
@@ -90,7 +90,7 @@ def test_impossible_backend_choices_are_value_errors(kwargs, match):
 
 def test_the_former_name_sparse_is_the_cutoff_backend():
     """``backend="sparse"`` (the cut-off backend's former name) is accepted, with a
-    DeprecationWarning, and the config holds ``"cutoff"``; the class's old name too."""
+    DeprecationWarning, and the config holds ``"cutoff"``."""
     with pytest.warns(DeprecationWarning, match="'sparse' is deprecated"):
         cfg = SwarmConfig(n_agents=CUTOFF_MIN_AGENTS, backend="sparse")
     assert cfg.backend == "cutoff" and select_backend(cfg) == "cutoff"
@@ -98,10 +98,6 @@ def test_the_former_name_sparse_is_the_cutoff_backend():
     with pytest.warns(DeprecationWarning):
         loaded = load_swarm_config(None, {"backend": "sparse"})
     assert loaded == SwarmConfig(backend="cutoff")
-    from swarm_envs.envs import sparse_core
-
-    assert sparse_core.SparseSwarmNavCore is CutoffSwarmNavCore
-    assert sparse_core.SPARSE_MIN_AGENTS == CUTOFF_MIN_AGENTS
 
 
 def test_every_core_implements_the_protocol():

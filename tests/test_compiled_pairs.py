@@ -9,7 +9,7 @@ import pytest
 from test_cutoff import direct_pair_sums
 
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs.sparse_core import CutoffSwarmNavCore
+from swarm_envs.envs.cores.cutoff.core import CutoffSwarmNavCore
 from swarm_envs.physics import SocialPotentialParams, compiled_pairs
 from swarm_envs.physics.cutoff import PairAccumulator, PairSums
 from swarm_envs.physics.neighbors import CELL_MARGIN, REACH, CellList, knn

@@ -34,7 +34,7 @@ from hypothesis import HealthCheck, given, settings
 from swarm_envs import swarm_nav_v0
 from swarm_envs.config import DYNAMICS, RewardWeights, SwarmConfig
 from swarm_envs.envs import backends
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.task import REWARD_TERMS
 from swarm_envs.perturbations import Perturbations
 from swarm_envs.physics import SocialPotentialParams
@@ -227,7 +227,7 @@ BROKEN_CONFIG = SwarmConfig(n_agents=12, n_neighbors=4, collision_radius=0.6, go
 
 def test_a_perturbed_reward_term_in_one_backend_is_caught(monkeypatch):
     # The torch core's execution of the reward with the collision term doubled.
-    from swarm_envs.envs import torch_step
+    from swarm_envs.envs.cores.torch import step as torch_step
     from swarm_envs.envs.task import reward as shared_reward
 
     def broken(weights, inputs):

@@ -9,16 +9,17 @@ import numpy as np
 import pytest
 
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs import sparse_core
 from swarm_envs.envs.common import SwarmUnstableError
-from swarm_envs.envs.core import OBS_BOUND, STAT_KEYS, SwarmNavCore
-from swarm_envs.envs.sparse_core import (
+from swarm_envs.envs.cores.cutoff import core as cutoff_core
+from swarm_envs.envs.cores.cutoff.core import (
     CUTOFF_MIN_AGENTS,
     DEFAULT_CUTOFF_SPEED,
     DEFAULT_CUTOFF_TOL,
     CutoffSwarmNavCore,
     density_preserving_radius,
 )
+from swarm_envs.envs.cores.numpy import SwarmNavCore
+from swarm_envs.envs.task import OBS_BOUND, STAT_KEYS
 from swarm_envs.physics import SocialPotentialParams, forces
 from swarm_envs.physics.cutoff import cutoff_radius, force_error_bound
 
@@ -260,7 +261,7 @@ def test_look_ahead_neighbour_search_changes_nothing(monkeypatch) -> None:
     actions = np.random.default_rng(1).uniform(-1, 1, (2, 60, 2))
 
     def run(threshold: int) -> tuple[list, CutoffSwarmNavCore]:
-        monkeypatch.setattr(sparse_core, "KNN_AHEAD_MIN_AGENTS", threshold)
+        monkeypatch.setattr(cutoff_core, "KNN_AHEAD_MIN_AGENTS", threshold)
         core = CutoffSwarmNavCore(cfg, batch=2)
         rng = np.random.default_rng(0)
         core.reset(rng)

@@ -22,8 +22,9 @@ import pytest
 from helpers import assert_same_status_rollout, status_perturbations, status_rollout
 
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs import backends, sparse_core
-from swarm_envs.envs.sparse_core import CUTOFF_MIN_AGENTS, CutoffSwarmNavCore
+from swarm_envs.envs import backends
+from swarm_envs.envs.cores.cutoff import core as cutoff_core
+from swarm_envs.envs.cores.cutoff.core import CUTOFF_MIN_AGENTS, CutoffSwarmNavCore
 from swarm_envs.envs.task import STAT_KEYS
 from swarm_envs.envs.task.agent_status import ABSENT, ACTIVE, FAILED, FROZEN
 from swarm_envs.perturbations import Perturbations
@@ -100,7 +101,7 @@ def test_rollouts_with_statuses_match_the_numpy_core(kind, shape, observe_status
 def test_the_look_ahead_search_takes_the_statuses(monkeypatch):
     # The neighbour search that runs in a worker thread during the last pair pass
     # (from KNN_AHEAD_MIN_AGENTS agents on) searches among the present agents too.
-    monkeypatch.setattr(sparse_core, "KNN_AHEAD_MIN_AGENTS", 1)
+    monkeypatch.setattr(cutoff_core, "KNN_AHEAD_MIN_AGENTS", 1)
     got, _ = _rollout(_config("joining", "2d", True), "cutoff")
     _assert_same_rollout(got, _reference("joining", "2d", True)[0])
 

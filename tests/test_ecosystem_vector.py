@@ -16,8 +16,8 @@ import pytest
 from gymnasium.vector import AutoresetMode
 
 from swarm_envs import ENV_ID, swarm_nav_v0
-from swarm_envs.envs.gym_vector import SwarmNavVectorEnv
-from swarm_envs.envs.vec_env import SlotEpisodesWarning
+from swarm_envs.envs.adapters.gym_vector import SwarmNavVectorEnv
+from swarm_envs.envs.adapters.vec_env import SlotEpisodesWarning
 
 SMALL: dict[str, Any] = {"n_agents": 5, "max_steps": 6}
 

@@ -33,7 +33,7 @@ from hypothesis import strategies as st
 
 from swarm_envs import SwarmUnstableError
 from swarm_envs.config import INTEGRATORS, SwarmConfig
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.task.observation import OBS_BOUND
 from swarm_envs.perturbations import Perturbations
 
@@ -82,7 +82,7 @@ def _status_cores(name: str, variant: Variant, compiled: bool | None) -> tuple:
             ours = variant.make(cfg).inner  # the core itself: the test gives the statuses
         else:
             from swarm_envs._runtime.torch_compile import compile_support
-            from swarm_envs.envs.torch_core import TorchSwarmNavCore
+            from swarm_envs.envs.cores.torch.core import TorchSwarmNavCore
 
             if compiled and compile_support("cpu") is not None:
                 pytest.skip(f"torch.compile unavailable: {compile_support('cpu')}")

@@ -20,8 +20,8 @@ import pytest
 
 from swarm_envs import swarm_nav_v0
 from swarm_envs.config import SwarmConfig
+from swarm_envs.envs.adapters.swarm_nav import SwarmNavEnv
 from swarm_envs.envs.backends import unsupported
-from swarm_envs.envs.swarm_nav import SwarmNavEnv
 from swarm_envs.physics import LagrangianParams
 
 torch = pytest.importorskip("torch")

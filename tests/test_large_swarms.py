@@ -10,12 +10,12 @@ import pytest
 
 from swarm_envs.config import SwarmConfig, load_swarm_config
 from swarm_envs.envs.common import draw_starts
-from swarm_envs.envs.core import SwarmNavCore
-from swarm_envs.envs.sparse_core import (
+from swarm_envs.envs.cores.cutoff.core import (
     CutoffSwarmNavCore,
     density_preserving_radius,
     use_cutoff_core,
 )
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.physics import SocialPotentialParams
 
 PRESET = SocialPotentialParams.large_swarm()

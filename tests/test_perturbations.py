@@ -20,7 +20,7 @@ import yaml
 from swarm_envs import metrics, swarm_nav_v0
 from swarm_envs.config import SwarmConfig, as_dict, config_from_mapping
 from swarm_envs.envs.backends import make_core
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.task import layer as layer_module  # draws every core's starts
 from swarm_envs.envs.task.agent_status import (
     ABSENT,

@@ -14,7 +14,7 @@ from helpers import CORE_TOL, assert_same_status_rollout, status_perturbations, 
 
 from swarm_envs.config import SwarmConfig, load_swarm_config
 from swarm_envs.envs.backends import unsupported
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.native import native_support
 from swarm_envs.physics import SocialPotentialParams, energy, forces, pair_geometry, simulate
 from swarm_envs.physics.integrators import STEP_SAFETY, euler_update, stable_substep
@@ -281,7 +281,7 @@ def _active_config(**kw) -> SwarmConfig:
 
 def test_the_torch_core_matches_the_numpy_core():
     pytest.importorskip("torch")
-    from swarm_envs.envs.torch_core import TorchSwarmNavCore
+    from swarm_envs.envs.cores.torch.core import TorchSwarmNavCore
 
     cfg = _active_config()
     assert TorchSwarmNavCore.unsupported(cfg) is None
@@ -293,7 +293,7 @@ def test_the_torch_core_matches_the_numpy_core():
 
 @pytest.mark.parametrize("integrator", ["semi_implicit_euler", "velocity_verlet"])
 def test_the_cutoff_core_matches_the_numpy_core(integrator):
-    from swarm_envs.envs.sparse_core import CutoffSwarmNavCore
+    from swarm_envs.envs.cores.cutoff.core import CutoffSwarmNavCore
 
     cfg = _active_config(integrator=integrator)
     assert CutoffSwarmNavCore.unsupported(cfg) is None
@@ -433,7 +433,7 @@ def test_the_cutoff_core_plans_verlet_substeps_at_the_state_velocities(name):
     # With self-propulsion the damping rate depends on the velocities: the stable
     # substep of the state after a Verlet step is the one at its velocities, as the
     # dense core has it, not at the force pass's extrapolated ones.
-    from swarm_envs.envs.sparse_core import CutoffSwarmNavCore
+    from swarm_envs.envs.cores.cutoff.core import CutoffSwarmNavCore
 
     cfg = dataclasses.replace(C_CONFIGS[name], integrator="velocity_verlet", max_steps=50)
     cores = [SwarmNavCore(cfg, batch=3)]

@@ -19,7 +19,7 @@ from agents import MillController, analytic_name, make_controller
 from swarm_envs import metrics, swarm_informed_v0, swarm_mill_v0, swarm_nav_v0
 from swarm_envs.config import SwarmConfig, load_swarm_config
 from swarm_envs.envs.backends import make_core, unsupported
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.task.episode import episode_end
 from swarm_envs.envs.task.informed import draw_informed
 from swarm_envs.envs.task.observation import block_size, observation_size, own_size

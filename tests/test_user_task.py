@@ -22,7 +22,7 @@ from pettingzoo.test import parallel_api_test
 from swarm_envs import metrics
 from swarm_envs.config import RewardWeights, SwarmConfig, config_from_mapping, load_swarm_config
 from swarm_envs.envs import backends
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.task import REWARD_TERMS, STAT_KEYS, RewardTerm, Statistic, stat_keys
 from swarm_envs.plugins import PLUGINS_ENV, load_plugin
 from swarm_envs.tasks import TASKS, TaskSpec, register_task, task_config, task_names
@@ -122,7 +122,7 @@ def test_the_registry_refuses_clashes_naming_them():
 
 
 def test_the_env_docstring_lists_the_registered_terms_statistics_and_ends():
-    from swarm_envs.envs.swarm_nav import SwarmNavEnv, SwarmNavParallelEnv
+    from swarm_envs.envs.adapters.swarm_nav import SwarmNavEnv, SwarmNavParallelEnv
     from swarm_envs.envs.task import STATISTICS
     from swarm_envs.tasks import task_spec
 

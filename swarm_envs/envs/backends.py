@@ -8,14 +8,14 @@ float tolerance (the cut-off core up to the force error of its cut-off,
 ===========  =========================================================================
 backend      what it is
 ===========  =========================================================================
-``numpy``    :class:`~swarm_envs.envs.core.SwarmNavCore`: dense ``(B, N, N)`` pair
+``numpy``    :class:`~swarm_envs.envs.cores.numpy.SwarmNavCore`: dense ``(B, N, N)`` pair
              arrays; every ``dynamics`` and integrator. The reference.
-``cutoff``   :class:`~swarm_envs.envs.sparse_core.CutoffSwarmNavCore`: a cut-off
+``cutoff``   :class:`~swarm_envs.envs.cores.cutoff.core.CutoffSwarmNavCore`: a cut-off
              radius and an O(N) cell list (social potential). Large swarms.
 ``native``   :class:`~swarm_envs.envs.native.NativeSwarmNavCore`: the step in C, built
              at first use with the system C compiler (social potential, semi-implicit
              Euler, CPU).
-``torch``    :class:`~swarm_envs.envs.torch_core.TorchSwarmNavCore`: the step as one
+``torch``    :class:`~swarm_envs.envs.cores.torch.core.TorchSwarmNavCore`: the step as one
              torch function, compiled where possible; CPU or ``device="cuda"`` (social
              potential, semi-implicit Euler).
 ===========  =========================================================================
@@ -39,9 +39,9 @@ from typing import Any
 import numpy as np
 
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.cores.cutoff.core import CUTOFF_MIN_AGENTS, CutoffSwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.protocol import Core
-from swarm_envs.envs.sparse_core import CUTOFF_MIN_AGENTS, CutoffSwarmNavCore
 from swarm_envs.envs.step_control import check_step_control
 from swarm_envs.models import model_spec, models_on
 
@@ -71,7 +71,7 @@ def _core_class(backend: str) -> Any:
         from swarm_envs.envs.native import NativeSwarmNavCore
 
         return NativeSwarmNavCore
-    from swarm_envs.envs.torch_core import TorchSwarmNavCore
+    from swarm_envs.envs.cores.torch.core import TorchSwarmNavCore
 
     return TorchSwarmNavCore
 

@@ -19,15 +19,15 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from swarm_envs.config import SwarmConfig, check_keywords, load_swarm_config
-from swarm_envs.envs.adapter_parts import Rendering, SwarmState
-from swarm_envs.envs.backends import make_core
-from swarm_envs.envs.inputs import (
+from swarm_envs.envs.adapters.inputs import (
     as_action,
     check_reset_options,
     check_seed,
     check_start_fits,
     stack_agent_actions,
 )
+from swarm_envs.envs.adapters.swarm_view import Rendering, SwarmState
+from swarm_envs.envs.backends import make_core
 from swarm_envs.envs.task import OBS_BOUND
 from swarm_envs.envs.task.agent_status import ACTIVE
 
@@ -266,8 +266,9 @@ def make_config(
     (the caller's own keyword arguments, named in the message with ``owner``) raises
     :class:`~swarm_envs.config.UnknownKeyError` (a ``TypeError`` and a ``ValueError``).
     Beyond the config's own checks, a Lagrangian start radius at which random starts
-    cannot keep the bins apart is refused here (:func:`~swarm_envs.envs.inputs.check_start_fits`),
-    so every env refuses it when built.
+    cannot keep the bins apart is refused here
+    (:func:`~swarm_envs.envs.adapters.inputs.check_start_fits`), so every env refuses it
+    when built.
     """
     overrides = dict(overrides or {})
     check_keywords(overrides, owner, keywords)

@@ -1,7 +1,8 @@
 """The SwarmNav step as one torch function: the shared definitions on torch tensors.
 
-:func:`build_advance` returns the function :class:`~swarm_envs.envs.torch_core.TorchSwarmNavCore`
-runs (through ``torch.compile`` where it can, plain otherwise; see
+:func:`build_advance` returns the function
+:class:`~swarm_envs.envs.cores.torch.core.TorchSwarmNavCore` runs (through ``torch.compile``
+where it can, plain otherwise; see
 :mod:`swarm_envs._runtime.torch_compile`). It calls the same definitions as the numpy
 core, on tensors: the Euler update and the pair law of :mod:`swarm_envs.physics`, and the
 statistics, observation and reward of :mod:`swarm_envs.envs.task`. What is torch's own

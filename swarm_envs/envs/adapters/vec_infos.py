@@ -1,4 +1,4 @@
-"""The infos of :class:`~swarm_envs.envs.vec_env.SwarmNavVecEnv`: views, recycled.
+"""The infos of :class:`~swarm_envs.envs.adapters.vec_env.SwarmNavVecEnv`: views, recycled.
 
 At 1,024 swarms × 32 agents a step has 32,768 slots, and SB3 wants an info mapping per
 slot. Fresh dicts would cost more than the step itself, and not only to build: every

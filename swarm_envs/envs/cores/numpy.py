@@ -27,25 +27,19 @@ import numpy as np
 from swarm_envs._array import NUMPY
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.common import (
-    NON_FINITE_ACTIONS,
-    check_action_shape,
     check_actions,
     check_batch,
     check_dtype,
-    draw_starts,
     placed_at_rest,
     wide_dtypes,
 )
 from swarm_envs.envs.dynamics import make_dynamics
 from swarm_envs.envs.task import (
-    OBS_BOUND,
-    STAT_KEYS,
     Frame,
     observation,
     observation_size,
     ranked_neighbors,
     statistics,
-    success_count,
 )
 from swarm_envs.envs.task.agent_status import AgentMasks, masks
 from swarm_envs.envs.task.informed import draw_informed
@@ -53,18 +47,7 @@ from swarm_envs.envs.task.layer import Advance, HostRecords, TaskCore, TaskLayer
 from swarm_envs.physics import PairGeometry, pair_geometry
 from swarm_envs.physics.social_potential import present_geometry
 
-__all__ = [
-    "NON_FINITE_ACTIONS",
-    "OBS_BOUND",
-    "STAT_KEYS",
-    "SwarmNavCore",
-    "check_action_shape",
-    "check_actions",
-    "check_batch",
-    "draw_starts",
-    "observation_size",
-    "success_count",
-]
+__all__ = ["SwarmNavCore"]
 
 
 class SwarmNavCore(TaskCore):

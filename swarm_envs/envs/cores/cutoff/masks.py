@@ -1,6 +1,6 @@
 """The agent statuses' masks in the cut-off core's physics.
 
-:class:`PhysicsMasks` is held by :class:`~swarm_envs.envs.sparse_core.CutoffSwarmNavCore`:
+:class:`PhysicsMasks` is held by :class:`~swarm_envs.envs.cores.cutoff.core.CutoffSwarmNavCore`:
 where the config needs the masks (``perturbations.needs_masks``), the core leaves the
 agents not present out of its cell lists (they are neither sources nor receivers of a
 pair term or rate, not counted in a collision, nobody's neighbour:

@@ -19,14 +19,14 @@ under its older name.
 
 Infos: the swarm's statistics (:data:`swarm_envs.envs.task.STAT_KEYS`) are in the info
 of the swarm's first slot (``b·N``) only, as a :class:`SwarmInfo`; the slots of a
-swarm that just ended get :class:`~swarm_envs.envs.infos.TerminalInfo` infos (with
+swarm that just ended get :class:`~swarm_envs.envs.adapters.vec_infos.TerminalInfo` infos (with
 the statistics in the first); every other slot's info is an empty
-:class:`~swarm_envs.envs.infos.QuietInfo`. All are ``dict`` subclasses (``json.dumps``
+:class:`~swarm_envs.envs.adapters.vec_infos.QuietInfo`. All are ``dict`` subclasses (``json.dumps``
 takes them; their values are read from the step's arrays on access), writable (a write
 to a statistics or terminal info copies its values into the dict itself). None of them
 is built per step: fresh dicts for 32k slots would cost more than the fused step (see
-:mod:`swarm_envs.envs.infos`). Copies of them (``copy.copy``, ``copy.deepcopy``,
-pickling) are plain dicts, and the list (:class:`~swarm_envs.envs.infos.InfoList`)
+:mod:`swarm_envs.envs.adapters.vec_infos`). Copies of them (``copy.copy``, ``copy.deepcopy``,
+pickling) are plain dicts, and the list (:class:`~swarm_envs.envs.adapters.vec_infos.InfoList`)
 deep-copies and pickles as a plain list with a dict of its own per slot.
 :attr:`SwarmNavVecEnv.last_stats` holds the statistics as ``(B,)`` arrays.
 
@@ -68,9 +68,9 @@ from gymnasium import spaces
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
-from swarm_envs.envs.backends import make_core, resolve_backend
-from swarm_envs.envs.common import check_dtype
-from swarm_envs.envs.infos import (  # noqa: F401  (SwarmInfo: re-exported)
+from swarm_envs.envs.adapters.inputs import as_action, check_seed, check_tensor_action, is_tensor
+from swarm_envs.envs.adapters.swarm_nav import make_config
+from swarm_envs.envs.adapters.vec_infos import (  # noqa: F401  (SwarmInfo: re-exported)
     InfoList,
     QuietInfos,
     SwarmInfo,
@@ -78,9 +78,9 @@ from swarm_envs.envs.infos import (  # noqa: F401  (SwarmInfo: re-exported)
     TerminalInfoPool,
     TerminalRecord,
 )
-from swarm_envs.envs.inputs import as_action, check_seed, check_tensor_action, is_tensor
+from swarm_envs.envs.backends import make_core, resolve_backend
+from swarm_envs.envs.common import check_dtype
 from swarm_envs.envs.protocol import Core as SwarmNavCore
-from swarm_envs.envs.swarm_nav import make_config
 from swarm_envs.envs.task import OBS_BOUND
 from swarm_envs.envs.task.agent_status import ACTIVE
 

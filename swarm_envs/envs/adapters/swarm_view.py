@@ -3,8 +3,8 @@
 :class:`SwarmState` gives the one swarm's state as fresh arrays (``positions``,
 ``velocities``, ``goal``, ``active``, ``status``); :class:`Rendering` draws frames on
 demand, loading the drawing libraries on first use. Both are base classes of
-:class:`~swarm_envs.envs.swarm_nav.SwarmNavParallelEnv` and
-:class:`~swarm_envs.envs.swarm_nav.SwarmNavEnv`.
+:class:`~swarm_envs.envs.adapters.swarm_nav.SwarmNavParallelEnv` and
+:class:`~swarm_envs.envs.adapters.swarm_nav.SwarmNavEnv`.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 :class:`TorchSwarmNavCore` implements :class:`~swarm_envs.envs.protocol.Core` for the
 social potential model with the semi-implicit Euler integrator. Its step is the torch
-function of :func:`swarm_envs.envs.torch_step.build_advance`: the shared definitions of
+function of :func:`swarm_envs.envs.cores.torch.step.build_advance`: the shared definitions of
 the physics and the task evaluated on tensors, compiled by ``torch.compile`` into a
 handful of fused loops where a compiler is available (TorchInductor: C++ on the CPU,
 Triton on CUDA), plain torch otherwise (:mod:`swarm_envs._runtime.torch_compile`). The
@@ -14,7 +14,7 @@ step evaluates the pairs once; so is the stable substep ``h*`` of the step-size 
 (computed in the same pass; :mod:`swarm_envs.physics.integrators`). When every swarm's
 ``h*`` allows the whole ``dt`` in one substep, the step is that one fused call. Otherwise
 each swarm's substeps but its last run through a second compiled function (update,
-force and ``h*`` only; :func:`~swarm_envs.envs.torch_step.build_substep`), each swarm its
+force and ``h*`` only; :func:`~swarm_envs.envs.cores.torch.step.build_substep`), each swarm its
 own count, and the fused function takes the last ones and measures the new state. The
 substep counts and the cap ``max_substeps`` are the numpy core's; the unstable guard
 (``on_unstable``), the reward's previous and start rows, the episode end and the reset
@@ -44,20 +44,20 @@ The substep function runs compiled but not captured (its count varies from step 
 step), and the state before a step is kept for the unstable guard (the graph's inputs,
 or a copy when substeps follow).
 
-Agent statuses (:mod:`swarm_envs.envs.torch_statuses`): where the config needs them
+Agent statuses (:mod:`swarm_envs.envs.cores.torch.statuses`): where the config needs them
 (agents that are removed, frozen, absent or join, or ``observe_status``), the statuses
 are kept on the device and passed to both functions, which apply the numpy core's masks
-(:mod:`swarm_envs.envs.torch_step`); ``set_status`` takes new ones between steps.
+(:mod:`swarm_envs.envs.cores.torch.step`); ``set_status`` takes new ones between steps.
 Otherwise the functions run without them.
 
 Step-size control on the host: the fused step returns, per swarm, the stable substep
 ``h*`` of the new state and ``h*`` where that state is finite, NaN where not
 (``"h_guard"``), and whether that is at least ``dt`` for the whole batch (``"calm"``;
-:data:`~swarm_envs.envs.torch_step.PACKED_KEYS`). That one value, read on the host, says
+:data:`~swarm_envs.envs.cores.torch.step.PACKED_KEYS`). That one value, read on the host, says
 both that the step went stable and that the next one takes the whole ``dt`` in one
 substep for every swarm: the common case costs that read. Otherwise the substep function
 plans and takes every swarm's substeps but its last
-(:func:`~swarm_envs.envs.torch_step.plan_substep`; one flag read on the host per
+(:func:`~swarm_envs.envs.cores.torch.step.plan_substep`; one flag read on the host per
 substep), and the fused function takes the last ones and measures the new state.
 """
 
@@ -79,11 +79,11 @@ from swarm_envs.envs.common import (
     check_dtype,
     placed_at_rest,
 )
+from swarm_envs.envs.cores.torch.statuses import DeviceStatuses
+from swarm_envs.envs.cores.torch.step import PACKED_KEYS, build_advance, build_substep
 from swarm_envs.envs.task import STAT_KEYS, observation_size
 from swarm_envs.envs.task.agent_status import masks
 from swarm_envs.envs.task.layer import Advance, TaskCore, TaskLayer
-from swarm_envs.envs.torch_statuses import DeviceStatuses
-from swarm_envs.envs.torch_step import PACKED_KEYS, build_advance, build_substep
 
 __all__ = ["PARTIAL_RESET_MIN_BATCH", "PackedRecords", "TorchSwarmNavCore", "partial_reset_batch"]
 
@@ -116,7 +116,7 @@ def partial_reset_batch(batch: int) -> int | None:
 
 class PackedRecords:
     """The task layer's previous and start statistics as the fused step reads them: the
-    packed rows ``(B, P)`` (:data:`~swarm_envs.envs.torch_step.PACKED_KEYS`) on the
+    packed rows ``(B, P)`` (:data:`~swarm_envs.envs.cores.torch.step.PACKED_KEYS`) on the
     device (:class:`~swarm_envs.envs.task.layer.Records`). Every update makes new
     tensors: the old ones may be a CUDA graph's inputs or handed to a step."""
 

@@ -4,7 +4,7 @@
 :class:`SwarmNavVectorEnv` (the registered ``vector_entry_point``): sub-env ``i`` is
 swarm ``i`` of one batched core, with the single env's spaces batched (observation
 ``(B, N·obs_dim)`` float32, action ``(B, N·d)`` in [−1, 1]; agent-major, as
-:class:`~swarm_envs.envs.swarm_nav.SwarmNavEnv`). ``vectorization_mode="sync"`` or
+:class:`~swarm_envs.envs.adapters.swarm_nav.SwarmNavEnv`). ``vectorization_mode="sync"`` or
 ``"async"`` still builds B single envs instead.
 
 Autoreset: ``metadata["autoreset_mode"]`` is ``AutoresetMode.NEXT_STEP``, Gymnasium's
@@ -39,10 +39,10 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from swarm_envs.envs.adapters.inputs import as_action, check_seed
+from swarm_envs.envs.adapters.swarm_nav import make_config
 from swarm_envs.envs.backends import make_core
 from swarm_envs.envs.common import check_dtype
-from swarm_envs.envs.inputs import as_action, check_seed
-from swarm_envs.envs.swarm_nav import make_config
 from swarm_envs.envs.task import OBS_BOUND
 
 __all__ = ["SwarmNavVectorEnv"]
@@ -51,7 +51,7 @@ __all__ = ["SwarmNavVectorEnv"]
 class SwarmNavVectorEnv(VectorEnv):
     """``num_envs`` SwarmNav swarms as one Gymnasium ``VectorEnv`` (one swarm per sub-env).
 
-    Keyword arguments as :class:`~swarm_envs.envs.swarm_nav.SwarmNavEnv` (``config``,
+    Keyword arguments as :class:`~swarm_envs.envs.adapters.swarm_nav.SwarmNavEnv` (``config``,
     every field of the config), plus ``dtype`` of the state. ``render_mode`` is
     ``None`` or ``"rgb_array"`` (:meth:`render` gives one frame per sub-env).
     """

@@ -1,7 +1,7 @@
 """SwarmNav for large swarms: the batched core with a cut-off and an O(N) neighbour search.
 
 :class:`CutoffSwarmNavCore` has exactly the public interface and semantics of
-:class:`~swarm_envs.envs.core.SwarmNavCore` (``reset``, ``step``, ``observe``,
+:class:`~swarm_envs.envs.cores.numpy.SwarmNavCore` (``reset``, ``step``, ``observe``,
 ``stats``; attributes ``x, v, goal, t, batch, obs_dim, cfg``) for
 ``cfg.dynamics == "social_potential"`` (either integrator), without any ``(B, N, N)``
 array. One step:
@@ -33,7 +33,7 @@ array. One step:
    state and started from the previous step's distances; from
    :data:`KNN_AHEAD_MIN_AGENTS` agents the search starts in a worker thread as soon as
    the step's last positions are known, while the last pair pass runs
-   (:mod:`swarm_envs.envs.sparse_neighbors`);
+   (:mod:`swarm_envs.envs.cores.cutoff.neighbors`);
 5. the dense core's guard: a swarm whose state is no longer finite, or that needed more
    substeps than ``max_substeps``, raises
    :class:`~swarm_envs.envs.common.SwarmUnstableError` (``on_unstable="raise"``) or is
@@ -43,7 +43,7 @@ array. One step:
 
 Agent statuses (removed, frozen, absent and joining agents, ``observe_status``) come
 through ``set_status`` (the task layer's), with the dense core's rules
-(:mod:`swarm_envs.envs.sparse_statuses`): the agents not present are left out of the
+(:mod:`swarm_envs.envs.cores.cutoff.masks`): the agents not present are left out of the
 pair passes and the neighbour search, the agents that do not move have zero total force
 and stay put at rest.
 
@@ -75,14 +75,14 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs.core import SwarmNavCore
-from swarm_envs.envs.sparse_neighbors import (
+from swarm_envs.envs.cores.cutoff.masks import PhysicsMasks
+from swarm_envs.envs.cores.cutoff.neighbors import (
     KNN_AHEAD_MIN_AGENTS,
     MAX_SPAN,
     NeighborSearch,
     sound_swarms,
 )
-from swarm_envs.envs.sparse_statuses import PhysicsMasks
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.task.agent_status import AgentMasks
 from swarm_envs.physics import compiled_pairs, goal_force, goal_potential, kinetic_energy
 from swarm_envs.physics._validation import check_real
@@ -160,7 +160,7 @@ def density_preserving_radius(
 
 class StepCounts:
     """The step-size control's account of a core's last step, per swarm ``(B,)``: what
-    :meth:`SwarmNavCore.step <swarm_envs.envs.core.SwarmNavCore.step>` reads from its
+    :meth:`SwarmNavCore.step <swarm_envs.envs.cores.numpy.SwarmNavCore.step>` reads from its
     ``dynamics`` (``substeps`` taken, ``over_cap``: needed more than ``max_substeps``,
     ``needed``: how many at least)."""
 
@@ -189,11 +189,11 @@ class _Pass(NamedTuple):
 class CutoffSwarmNavCore(SwarmNavCore):
     """State and dynamics of ``batch`` independent SwarmNav swarms, for large ``N``.
 
-    A drop-in for :class:`~swarm_envs.envs.core.SwarmNavCore` (same methods, same
+    A drop-in for :class:`~swarm_envs.envs.cores.numpy.SwarmNavCore` (same methods, same
     random draws, same step-size control and guard, same results up to the cut-off; see
     the module docstring). It overrides only the physics hooks (``_after_reset``,
     ``_advance``, ``_restored``, ``_pair_measures``) and how the statuses' masks enter
-    its physics (:class:`~swarm_envs.envs.sparse_statuses.PhysicsMasks`); the
+    its physics (:class:`~swarm_envs.envs.cores.cutoff.masks.PhysicsMasks`); the
     statistics and the observations are the dense core's, the reset draws, the reward
     and the guard its task layer's.
 
@@ -211,7 +211,7 @@ class CutoffSwarmNavCore(SwarmNavCore):
         dynamics: the :class:`StepCounts` of the last step.
 
     >>> from swarm_envs.config import SwarmConfig
-    >>> from swarm_envs.envs.core import STAT_KEYS
+    >>> from swarm_envs.envs.task import STAT_KEYS
     >>> core = CutoffSwarmNavCore(SwarmConfig(n_agents=4), batch=2)
     >>> core.reset(np.random.default_rng(0))
     >>> reward, terminated, truncated, stats = core.step(np.zeros((2, 4, 2)))
@@ -454,7 +454,7 @@ class CutoffSwarmNavCore(SwarmNavCore):
     # ------------------------------------------------------------------ statuses
     def _take_masks(self, mask: AgentMasks) -> None:
         """The statuses' masks in the pair passes and the neighbour search
-        (:class:`~swarm_envs.envs.sparse_statuses.PhysicsMasks`)."""
+        (:class:`~swarm_envs.envs.cores.cutoff.masks.PhysicsMasks`)."""
         self._state += 1  # a new state: the neighbours are searched again
         self._masks.take(mask, self.cfg)
 
@@ -477,7 +477,7 @@ class CutoffSwarmNavCore(SwarmNavCore):
 
     def _knn(self) -> tuple[np.ndarray, np.ndarray]:
         """Indices and distances ``(B, N, k)`` of each agent's nearest others, nearest
-        first (:meth:`~swarm_envs.envs.sparse_neighbors.NeighborSearch.search`)."""
+        first (:meth:`~swarm_envs.envs.cores.cutoff.neighbors.NeighborSearch.search`)."""
         k = max(self.cfg.n_neighbors, 1)
         return self._neighbors.search(self.x, self._state, k, self._masks.present, self._span)
 
