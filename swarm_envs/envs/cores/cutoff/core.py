@@ -499,9 +499,3 @@ class CutoffSwarmNavCore(SwarmNavCore):
         if self._masks.present is not None:  # an agent alone in the physics: 0
             nearest = np.where(np.isfinite(nearest), nearest, 0.0).astype(self.dtype)
         return near, nearest, self._collisions.copy(), energy.astype(self.dtype, copy=False)
-
-
-#: The former names (the backend was called ``"sparse"``).
-SparseSwarmNavCore = CutoffSwarmNavCore
-SPARSE_MIN_AGENTS = CUTOFF_MIN_AGENTS
-use_sparse_core = use_cutoff_core
