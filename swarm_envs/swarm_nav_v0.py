@@ -51,13 +51,14 @@ def parallel_env(**kwargs: Any) -> SwarmNavParallelEnv:
 
 
 def raw_env(**kwargs: Any) -> AECEnv:
-    """The AEC env from :func:`parallel_env`, as PettingZoo's ``parallel_to_aec`` makes it
-    (with its order-enforcing wrapper), checking each action as it is given."""
-    return wrappers.OrderEnforcingWrapper(_CheckedParallelToAEC(parallel_env(**kwargs)))
+    """The bare AEC env (PettingZoo's convention): :func:`parallel_env` converted as
+    PettingZoo's ``parallel_to_aec`` does, checking each action as it is given, without
+    wrappers."""
+    return _CheckedParallelToAEC(parallel_env(**kwargs))
 
 
 def env(**kwargs: Any) -> AECEnv:
-    """The AEC env with PettingZoo's order-enforcing wrapper."""
+    """The AEC env: :func:`raw_env` in PettingZoo's order-enforcing wrapper (once)."""
     return wrappers.OrderEnforcingWrapper(raw_env(**kwargs))
 
 

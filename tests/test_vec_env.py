@@ -466,8 +466,7 @@ def test_ppo_trains_on_the_vec_env_with_nan_checks():
 
 
 def test_quiet_slots_are_empty_writable_infos_and_swarm_infos_read_the_step():
-    from swarm_envs.envs.adapters.vec_env import SwarmInfo
-    from swarm_envs.envs.adapters.vec_infos import QuietInfo
+    from swarm_envs.envs.adapters.vec_infos import QuietInfo, SwarmInfo
 
     venv = swarm_nav_v0.vec_env(2, n_agents=3, max_steps=50)
     venv.reset()

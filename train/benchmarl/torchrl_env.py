@@ -30,8 +30,7 @@ from typing import Any
 import numpy as np
 
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs.adapters.inputs import as_action
-from swarm_envs.envs.adapters.swarm_nav import make_config
+from swarm_envs.envs.adapters.inputs import as_action, make_config
 from swarm_envs.envs.backends import make_core
 from swarm_envs.envs.task import OBS_BOUND
 from swarm_envs.envs.task.agent_status import ACTIVE

@@ -39,8 +39,7 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from swarm_envs.envs.adapters.inputs import as_action, check_seed
-from swarm_envs.envs.adapters.swarm_nav import make_config
+from swarm_envs.envs.adapters.inputs import as_action, check_seed, make_config
 from swarm_envs.envs.backends import make_core
 from swarm_envs.envs.common import check_dtype
 from swarm_envs.envs.task import OBS_BOUND

@@ -9,7 +9,7 @@ declarations (:func:`env_doc_sections`), so that they are written once.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import gymnasium
@@ -18,12 +18,11 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
-from swarm_envs.config import SwarmConfig, check_keywords, load_swarm_config
 from swarm_envs.envs.adapters.inputs import (
     as_action,
     check_reset_options,
     check_seed,
-    check_start_fits,
+    make_config,
     stack_agent_actions,
 )
 from swarm_envs.envs.adapters.swarm_view import Rendering, SwarmState
@@ -251,30 +250,6 @@ def _indented(text: str) -> str:
 SWARM_NAV_DOC = _SWARM_NAV_DOC
 for _key, _text in env_doc_sections().items():
     SWARM_NAV_DOC = SWARM_NAV_DOC.replace("{" + _key + "}", _indented(_text))
-
-
-def make_config(
-    config: str | None = None,
-    overrides: Mapping[str, Any] | None = None,
-    *,
-    owner: str = "the SwarmNav env",
-    keywords: Sequence[str] = ("config",),
-) -> SwarmConfig:
-    """Merge a YAML config (optional) and keyword overrides into a validated config.
-
-    An override that is neither a :class:`SwarmConfig` field nor one of ``keywords``
-    (the caller's own keyword arguments, named in the message with ``owner``) raises
-    :class:`~swarm_envs.config.UnknownKeyError` (a ``TypeError`` and a ``ValueError``).
-    Beyond the config's own checks, a Lagrangian start radius at which random starts
-    cannot keep the bins apart is refused here
-    (:func:`~swarm_envs.envs.adapters.inputs.check_start_fits`), so every env refuses it
-    when built.
-    """
-    overrides = dict(overrides or {})
-    check_keywords(overrides, owner, keywords)
-    cfg = load_swarm_config(config, overrides)
-    check_start_fits(cfg)
-    return cfg
 
 
 #: The info keys that ``info_kinematics=True`` adds (float32, in world units).

@@ -18,16 +18,18 @@ the ``episode`` infos without a Monitor warning. ``swarm_episode`` is the same d
 under its older name.
 
 Infos: the swarm's statistics (:data:`swarm_envs.envs.task.STAT_KEYS`) are in the info
-of the swarm's first slot (``b·N``) only, as a :class:`SwarmInfo`; the slots of a
-swarm that just ended get :class:`~swarm_envs.envs.adapters.vec_infos.TerminalInfo` infos (with
-the statistics in the first); every other slot's info is an empty
-:class:`~swarm_envs.envs.adapters.vec_infos.QuietInfo`. All are ``dict`` subclasses (``json.dumps``
-takes them; their values are read from the step's arrays on access), writable (a write
-to a statistics or terminal info copies its values into the dict itself). None of them
-is built per step: fresh dicts for 32k slots would cost more than the fused step (see
-:mod:`swarm_envs.envs.adapters.vec_infos`). Copies of them (``copy.copy``, ``copy.deepcopy``,
-pickling) are plain dicts, and the list (:class:`~swarm_envs.envs.adapters.vec_infos.InfoList`)
-deep-copies and pickles as a plain list with a dict of its own per slot.
+of the swarm's first slot (``b·N``) only, as a
+:class:`~swarm_envs.envs.adapters.vec_infos.SwarmInfo`; the slots of a swarm that just
+ended get :class:`~swarm_envs.envs.adapters.vec_infos.TerminalInfo` infos (with the
+statistics in the first); every other slot's info is an empty
+:class:`~swarm_envs.envs.adapters.vec_infos.QuietInfo`. All are ``dict`` subclasses
+(``json.dumps`` takes them; their values are read from the step's arrays on access),
+writable (a write to a statistics or terminal info copies its values into the dict
+itself). None of them is built per step: fresh dicts for 32k slots would cost more than
+the fused step (see :mod:`swarm_envs.envs.adapters.vec_infos`). Copies of them
+(``copy.copy``, ``copy.deepcopy``, pickling) are plain dicts, and the list
+(:class:`~swarm_envs.envs.adapters.vec_infos.InfoList`) deep-copies and pickles as a
+plain list with a dict of its own per slot.
 :attr:`SwarmNavVecEnv.last_stats` holds the statistics as ``(B,)`` arrays.
 
 The step runs on the backend ``auto`` picks (``backend=`` overrides; see
@@ -68,12 +70,16 @@ from gymnasium import spaces
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
-from swarm_envs.envs.adapters.inputs import as_action, check_seed, check_tensor_action, is_tensor
-from swarm_envs.envs.adapters.swarm_nav import make_config
-from swarm_envs.envs.adapters.vec_infos import (  # noqa: F401  (SwarmInfo: re-exported)
+from swarm_envs.envs.adapters.inputs import (
+    as_action,
+    check_seed,
+    check_tensor_action,
+    is_tensor,
+    make_config,
+)
+from swarm_envs.envs.adapters.vec_infos import (
     InfoList,
     QuietInfos,
-    SwarmInfo,
     SwarmInfoPool,
     TerminalInfoPool,
     TerminalRecord,
@@ -202,7 +208,7 @@ class SwarmNavVecEnv(VecEnv):
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state["_pool"] = None  # threads do not pickle; recreated on first use
-        return state  # the info pools pickle as their sizes (see infos.py)
+        return state  # the info pools pickle as their sizes (see vec_infos.py)
 
     # ------------------------------------------------------------------ VecEnv API
     def reset(self) -> np.ndarray:
@@ -275,7 +281,7 @@ class SwarmNavVecEnv(VecEnv):
         self.episode_returns += reward
         self.episode_lengths += 1
         done = terminated | truncated
-        # Every slot's quiet info, the first slot of each swarm its SwarmInfo (infos.py).
+        # Every slot's quiet info, the first slot of each swarm its SwarmInfo (vec_infos.py).
         infos = self._quiet_infos.infos()
         infos.put(slice(None, None, N), self._swarm_infos.infos(stats))  # read on access
         was_active = self._active
