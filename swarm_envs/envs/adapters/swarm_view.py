@@ -15,7 +15,7 @@ import gymnasium
 import numpy as np
 
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs.protocol import Core as SwarmNavCore
+from swarm_envs.envs.protocol import Core
 from swarm_envs.envs.task.agent_status import ACTIVE
 
 __all__ = ["Rendering", "SwarmState"]
@@ -29,7 +29,7 @@ class SwarmState:
     keep the last state after an episode ends, until the next ``reset()``.
     """
 
-    core: SwarmNavCore
+    core: Core
     cfg: SwarmConfig
     _has_state: bool = False
 
@@ -88,7 +88,7 @@ class SwarmState:
 class Rendering:
     """Lazy rendering shared by both adapters (drawing libraries load on first use)."""
 
-    core: SwarmNavCore
+    core: Core
     render_mode: str | None
     _renderer: Any = None
 

@@ -86,7 +86,7 @@ from swarm_envs.envs.adapters.vec_infos import (
 )
 from swarm_envs.envs.backends import make_core, resolve_backend
 from swarm_envs.envs.common import check_dtype
-from swarm_envs.envs.protocol import Core as SwarmNavCore
+from swarm_envs.envs.protocol import Core
 from swarm_envs.envs.task import OBS_BOUND
 from swarm_envs.envs.task.agent_status import ACTIVE
 
@@ -180,13 +180,13 @@ class SwarmNavVecEnv(VecEnv):
         return int(n_threads)
 
     @property
-    def core(self) -> SwarmNavCore:
+    def core(self) -> Core:
         """The single core (``n_threads == 1``); with several threads use :attr:`cores`."""
         if len(self.cores) != 1:
             raise AttributeError(f"this vec_env runs {len(self.cores)} cores; use .cores")
         return self.cores[0]
 
-    def _map(self, fn: Callable[[SwarmNavCore, slice], Any]) -> list[Any]:
+    def _map(self, fn: Callable[[Core, slice], Any]) -> list[Any]:
         """``fn(core, swarm_slice)`` for every core: in worker threads when there are several.
 
         numpy releases the GIL inside its array loops, so the cores' steps overlap.
@@ -263,7 +263,7 @@ class SwarmNavVecEnv(VecEnv):
         actions, self._actions = self._actions, None
         a = actions.reshape(B, N, d)
 
-        def step(core: SwarmNavCore, sl: slice) -> tuple:
+        def step(core: Core, sl: slice) -> tuple:
             reward, terminated, truncated, stats = core.step(a[sl])
             # A core with swarms to reset observes after the reset, in step_wait.
             ended = terminated.any() or truncated.any()
@@ -387,7 +387,7 @@ class SwarmNavVecEnv(VecEnv):
         self.episode_returns[done] = 0.0
         self.episode_lengths[done] = 0
 
-    def _cores_with(self, done: np.ndarray) -> list[tuple[SwarmNavCore, slice]]:
+    def _cores_with(self, done: np.ndarray) -> list[tuple[Core, slice]]:
         """The cores (with their slices) that step at least one swarm of ``done``."""
         return [
             (core, sl) for core, sl in zip(self.cores, self._slices, strict=True) if done[sl].any()
