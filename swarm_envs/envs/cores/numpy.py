@@ -59,6 +59,7 @@ class SwarmNavCore(TaskCore):
     :class:`~swarm_envs.envs.task.layer.TaskLayer` ``task``, which gives it ``reset``,
     ``step`` and ``set_status``.
 
+    >>> from swarm_envs.envs.task import STAT_KEYS
     >>> core = SwarmNavCore(SwarmConfig(n_agents=4), batch=2)
     >>> core.reset(np.random.default_rng(0))
     >>> reward, terminated, truncated, stats = core.step(np.zeros((2, 4, 2)))
