@@ -39,7 +39,7 @@ FINITE_KEYS = ("energy", "expanse", "mean_goal_distance")
 SPEED_MARGIN = 2.0
 
 
-def speed_bound(cfg: Any) -> float:
+def speed_bound(cfg: SwarmConfig) -> float:
     """A bound on every agent's speed in the social potential model: ``inf`` where none
     is derived (other models, or no dissipation at all).
 
@@ -65,7 +65,7 @@ def speed_bound(cfg: Any) -> float:
     return max(cfg.init_speed, terminal)
 
 
-def energy_bound(cfg: Any) -> float:
+def energy_bound(cfg: SwarmConfig) -> float:
     """The bound the guard holds the ``energy`` statistic to: ``|φ| ≤ ½ m N (2S)² +
     N(N − 1)/2 (C_r + C_a) + N C_g`` for the speed bound ``S`` (:func:`speed_bound`,
     with :data:`SPEED_MARGIN`), each pair's potential at most ``C_r + C_a`` and each
@@ -100,7 +100,9 @@ def unstable_swarms(
     return bad
 
 
-def check_start(cfg: Any, stats: dict[str, np.ndarray], idx: np.ndarray, dtype: Any) -> None:
+def check_start(
+    cfg: SwarmConfig, stats: dict[str, np.ndarray], idx: np.ndarray, dtype: Any
+) -> None:
     """Raise :class:`SwarmUnstableError` if a new start (swarms ``idx``) is not finite in
     the state's ``dtype`` (a start too large for it: its speeds, distances or energy)."""
     bad = np.zeros(next(iter(stats.values())).shape, dtype=bool)
@@ -115,7 +117,7 @@ def check_start(cfg: Any, stats: dict[str, np.ndarray], idx: np.ndarray, dtype: 
 
 
 def unstable_message(
-    cfg: Any, stats: dict[str, np.ndarray], bad: np.ndarray, needed: np.ndarray, step: Any
+    cfg: SwarmConfig, stats: dict[str, np.ndarray], bad: np.ndarray, needed: np.ndarray, step: Any
 ) -> str:
     """The :class:`SwarmUnstableError` message for the first unstable swarm of ``bad``."""
     b = int(np.flatnonzero(bad)[0])
@@ -194,7 +196,7 @@ def check_dtype(dtype: Any) -> np.dtype:
 
 
 def draw_starts(
-    cfg: Any, rng: np.random.Generator, n: int
+    cfg: SwarmConfig, rng: np.random.Generator, n: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``n`` new starts ``(x (n, N, d), v (n, N, d), goal (n, d))``, float64: the task's
     start law (its spec's ``start``) where it has one, else :func:`uniform_starts`."""
@@ -203,7 +205,7 @@ def draw_starts(
 
 
 def uniform_starts(
-    cfg: Any, rng: np.random.Generator, n: int
+    cfg: SwarmConfig, rng: np.random.Generator, n: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The default start law: ``n`` starts ``(x, v, goal)``, float64.
 
@@ -290,7 +292,7 @@ def placed_at_rest(
     return x, xp.astype(xp.where(spread(still), 0.0, v), v)
 
 
-def wide_dtypes(dtype: np.dtype, cfg: Any = None) -> dict[str, np.dtype]:
+def wide_dtypes(dtype: np.dtype, cfg: SwarmConfig | None = None) -> dict[str, np.dtype]:
     """The dtype of each statistic a core reports (those of ``cfg``'s task; without
     ``cfg`` the common ones): float64 for the ``wide`` ones (counts, fractions, flags),
     ``dtype`` for the rest."""

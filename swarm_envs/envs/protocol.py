@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 import numpy as np
 
 if TYPE_CHECKING:
+    from swarm_envs.config import SwarmConfig
     from swarm_envs.envs.task.layer import Advance, TaskLayer
 
 __all__ = ["Core", "Execution", "StatusCore", "StepResult"]
@@ -41,12 +42,16 @@ class Core(Protocol):
         x, v: positions and velocities ``(B, N, d)``; goal: ``(B, d)``.
     """
 
-    cfg: Any
+    cfg: SwarmConfig
     batch: int
     dtype: np.dtype
     obs_dim: int
-    backend: str
-    t: np.ndarray
+
+    @property
+    def backend(self) -> str: ...
+
+    @property
+    def t(self) -> np.ndarray: ...
 
     @property
     def x(self) -> np.ndarray: ...

@@ -179,9 +179,10 @@ class SubstepBudget:
         return self.remaining[rows] == 0
 
 
-def euler_update(x: Any, v: Any, accel: Any, dt: float, m: float) -> tuple[Any, Any]:
+def euler_update(x: Any, v: Any, accel: Any, dt: Any, m: float) -> tuple[Any, Any]:
     """The semi-implicit Euler update with the force ``accel`` (passive + control):
-    ``v' = v + dt · accel/m``, ``x' = x + dt v'``. numpy arrays or torch tensors."""
+    ``v' = v + dt · accel/m``, ``x' = x + dt v'``. numpy arrays or torch tensors; ``dt``
+    a number, or an array of steps that broadcasts against ``x`` (one per swarm)."""
     if m != 1.0:
         accel = accel / m
     v_new = v + dt * accel

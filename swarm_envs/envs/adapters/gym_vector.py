@@ -55,7 +55,8 @@ class SwarmNavVectorEnv(VectorEnv):
     ``None`` or ``"rgb_array"`` (:meth:`render` gives one frame per sub-env).
     """
 
-    metadata: ClassVar[dict[str, Any]] = {
+    # A class constant; gymnasium annotates it as an instance variable of VectorEnv.
+    metadata: ClassVar[dict[str, Any]] = {  # type: ignore[misc]
         "render_modes": ["rgb_array"],
         "render_fps": 20,
         "autoreset_mode": AutoresetMode.NEXT_STEP,
@@ -119,6 +120,7 @@ class SwarmNavVectorEnv(VectorEnv):
                 )
             return [check_seed(s) for s in seed]
         first = check_seed(seed)
+        assert first is not None  # seed is not None here
         return [first + i for i in range(B)]
 
     def _reset_swarms(self, which: np.ndarray) -> None:
@@ -203,7 +205,8 @@ class SwarmNavVectorEnv(VectorEnv):
         obs = self.core.observe().reshape(B, -1)
         return obs, reward, terminated, truncated, self._infos(stats)
 
-    def render(self) -> tuple[np.ndarray, ...] | None:
+    # gymnasium types the frames with a type variable that no concrete frame type matches.
+    def render(self) -> tuple[np.ndarray, ...] | None:  # type: ignore[override]
         """``rgb_array``: one uint8 ``(H, W, 3)`` frame per sub-env; else ``None``."""
         if self.render_mode is None:
             return None

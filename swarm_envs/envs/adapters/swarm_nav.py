@@ -427,12 +427,18 @@ class SwarmNavParallelEnv(SwarmState, Rendering, ParallelEnv):
         return self.core.observe()[0].reshape(-1)
 
 
-class SwarmNavEnv(SwarmState, Rendering, gymnasium.Env):
+# gymnasium types Env.render's frames with a type variable that no concrete frame type
+# (Rendering.render's array) matches.
+class SwarmNavEnv(SwarmState, Rendering, gymnasium.Env):  # type: ignore[misc]
     __doc__ = "Gymnasium SwarmNav with one central controller for the whole swarm.\n" + (
         SWARM_NAV_DOC
     )
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": list(RENDER_MODES), "render_fps": 20}
+    # A class constant; gymnasium annotates it as an instance variable of Env.
+    metadata: ClassVar[dict[str, Any]] = {  # type: ignore[misc]
+        "render_modes": list(RENDER_MODES),
+        "render_fps": 20,
+    }
 
     #: The constructor's own keyword arguments, besides the config fields.
     KEYWORDS: ClassVar[tuple[str, ...]] = ("config", "render_mode", "info_kinematics")
@@ -490,7 +496,7 @@ class SwarmNavEnv(SwarmState, Rendering, gymnasium.Env):
             )
         n, d = self.cfg.n_agents, self.cfg.dim
         # The rule of docs/inputs.md; the core refuses NaN/inf and clips.
-        a = as_action(action, self.action_space.shape).reshape(1, n, d)
+        a = as_action(action, (n * d,)).reshape(1, n, d)
         reward, terminated, truncated, stats = self.core.step(a)
         self._needs_reset = bool(terminated[0] or truncated[0])
         obs = self._observe()

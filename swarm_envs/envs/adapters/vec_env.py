@@ -235,9 +235,12 @@ class SwarmNavVecEnv(VecEnv):
 
     def _statuses(self) -> np.ndarray | None:
         """Which agents act now ``(B, N)`` (``None``: the cores have no statuses)."""
-        parts = [getattr(core, "status", None) for core in self.cores]
-        if parts[0] is None:
-            return None
+        parts = []
+        for core in self.cores:
+            status = getattr(core, "status", None)
+            if status is None:  # every core alike: one config
+                return None
+            parts.append(status)
         return np.concatenate(parts, axis=0) == ACTIVE
 
     def seed(self, seed: int | None = None) -> Sequence[int | None]:

@@ -114,7 +114,6 @@ __all__ = [
     "KNN_AHEAD_MIN_AGENTS",
     "MAX_SPAN",
     "CutoffSwarmNavCore",
-    "StepCounts",
     "density_preserving_radius",
     "use_cutoff_core",
 ]
@@ -158,22 +157,6 @@ def density_preserving_radius(
     return radius * (n_agents / agents) ** (1.0 / dim)
 
 
-class StepCounts:
-    """The step-size control's account of a core's last step, per swarm ``(B,)``: what
-    :meth:`SwarmNavCore.step <swarm_envs.envs.cores.numpy.SwarmNavCore.step>` reads from its
-    ``dynamics`` (``substeps`` taken, ``over_cap``: needed more than ``max_substeps``,
-    ``needed``: how many at least)."""
-
-    def __init__(self, batch: int) -> None:
-        self.substeps = np.zeros(batch)
-        self.over_cap = np.zeros(batch, dtype=bool)
-        self.needed = np.zeros(batch)
-
-    def record(self, used: np.ndarray, over: np.ndarray, needed: np.ndarray) -> None:
-        """Store the counts of a step."""
-        self.substeps, self.over_cap, self.needed = used, over, needed
-
-
 class _Pass(NamedTuple):
     """What one pair pass gives for the swarms it covered."""
 
@@ -208,7 +191,11 @@ class CutoffSwarmNavCore(SwarmNavCore):
     Attributes:
         cutoff: the cut-off radius ``r_c`` (from ``cfg.physics``, ``cutoff_tol`` and
             ``cutoff_speed``; recomputed if ``cfg`` is replaced).
-        dynamics: the :class:`StepCounts` of the last step.
+        dynamics: the model's adapter
+            (:class:`~swarm_envs.envs.dynamics.SocialPotentialDynamics`), which this
+            core does not step (it advances the physics itself); it holds the step-size
+            control's account of the last step, as the dense core reads it
+            (``substeps``, ``over_cap``, ``needed``).
 
     >>> from swarm_envs.config import SwarmConfig
     >>> from swarm_envs.envs.task import STAT_KEYS
@@ -240,7 +227,6 @@ class CutoffSwarmNavCore(SwarmNavCore):
         )
         self.cutoff_speed = check_real("CutoffSwarmNavCore", "cutoff_speed", cutoff_speed, low=0.0)
         B = self.batch
-        self.dynamics = StepCounts(B)  # type: ignore[assignment]
         self._cutoff_key: tuple[Any, ...] | None = None
         self._cutoff = 0.0
         self._f_passive: np.ndarray | None = None  # passive force carried to the next substep
@@ -439,7 +425,8 @@ class CutoffSwarmNavCore(SwarmNavCore):
         self.x, self.v, self._f_passive = x, v, f
         if not moved:
             self._state += 1
-        self.dynamics.record(budget.used, budget.over, budget.needed)
+        counts = self.dynamics
+        counts.substeps, counts.over_cap, counts.needed = budget.used, budget.over, budget.needed
 
     def _restored(self, idx: np.ndarray) -> None:
         """The carried force, rates and measures of the swarms ``idx`` whose ``x, v`` were

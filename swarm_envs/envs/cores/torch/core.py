@@ -71,6 +71,7 @@ import torch
 
 from swarm_envs._array import torch_namespace
 from swarm_envs._runtime.torch_compile import CudaGraphed, MaybeCompiled
+from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.common import (
     NON_FINITE_ACTIONS,
     StatisticColumns,
@@ -203,7 +204,7 @@ class TorchSwarmNavCore(TaskCore):
 
     def __init__(
         self,
-        cfg: Any,
+        cfg: SwarmConfig,
         batch: int = 1,
         dtype: Any = np.float32,
         device: Any = "cpu",
@@ -232,11 +233,14 @@ class TorchSwarmNavCore(TaskCore):
         # Every swarm's substep: dt when it takes the step in one, 0 to only measure it.
         self._dt_each, self._no_step = zeros(B) + cfg.dt, zeros(B)
         self._one_needed = np.ones(B)
-        wide = dict(dtype=torch.float64, device=self.device)
+        wide, device = torch.float64, self.device
         # A step's first time left, substeps taken and needed (float64; distinct tensors:
         # the compiled substep function is specialised on which arguments alias).
-        self._wide_start = (torch.full((B,), cfg.dt, **wide), zeros(B).to(**wide))
-        self._wide_start += (zeros(B).to(**wide),)
+        self._wide_start = (
+            torch.full((B,), cfg.dt, dtype=wide, device=device),
+            torch.zeros(B, dtype=wide, device=device),
+            torch.zeros(B, dtype=wide, device=device),
+        )
         # The substeps statistic of the current state (the last step's count, 0 after a
         # reset), and the swarms its step truncated as unstable (host indices, or None).
         self._counted = self._none_each
@@ -275,7 +279,7 @@ class TorchSwarmNavCore(TaskCore):
             self._advance_part.warmup(*self._row_args(rows))
 
     @staticmethod
-    def unsupported(cfg: Any) -> str | None:
+    def unsupported(cfg: SwarmConfig) -> str | None:
         """Why this core cannot run ``cfg`` (``None`` if it can)."""
         if cfg.dynamics != "social_potential":
             return f"supports dynamics='social_potential' only, got {cfg.dynamics!r}"
@@ -608,6 +612,7 @@ class TorchSwarmNavCore(TaskCore):
         where = None if place is None else torch.as_tensor(place, device=device)
         at_t = None
         if place is not None:
+            assert at is not None  # status_update gives the places with the agents placed
             # (d, B, N) stored contiguous, as every state tensor the compiled functions
             # read: torch.where lays its result out as its inputs are, and a permuted view
             # would hand them another layout than they were traced for.

@@ -11,10 +11,13 @@ episode is the task layer's (:mod:`swarm_envs.envs.task.layer`).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
+
+if TYPE_CHECKING:
+    from swarm_envs.config import SwarmConfig
 
 __all__ = ["DeviceStatuses"]
 
@@ -28,7 +31,7 @@ class DeviceStatuses:
         tensor: the same on the device (every agent active before).
     """
 
-    def __init__(self, cfg: Any, batch: int, device: torch.device) -> None:
+    def __init__(self, cfg: SwarmConfig, batch: int, device: torch.device) -> None:
         self.enabled = bool(cfg.needs_statuses)
         self.host: np.ndarray | None = None
         self.tensor = torch.zeros((batch, cfg.n_agents), dtype=torch.int8, device=device)
