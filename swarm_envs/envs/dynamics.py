@@ -53,10 +53,10 @@ from swarm_envs.physics.lagrangian import (
 from swarm_envs.physics.piecewise import interaction_forces, random_force
 from swarm_envs.physics.social_potential import (
     components,
-    dissipation,
     goal_terms,
     pair_rates,
     pair_terms,
+    passive_components,
     present_geometry,
 )
 from swarm_envs.physics.zone import (
@@ -219,12 +219,9 @@ class SocialPotentialDynamics(Dynamics):
     def _passive(self, x, v, goal, geometry) -> np.ndarray:
         """The passive force at ``(x, v)`` (semi-implicit Euler's carried force)."""
         p = self.cfg.physics
-        fs, _ = pair_terms(geometry, v, p, energy=False)
-        fs = dissipation(fs, components(v), p)
-        if goal is not None:
-            sink, _, _ = goal_terms(x, p, goal)
-            fs = [fc + gc for fc, gc in zip(fs, sink, strict=True)]
-        return np.stack(fs, axis=-1)
+        pair_forces, _ = pair_terms(geometry, v, p, energy=False)
+        sink = None if goal is None else goal_terms(x, p, goal)[0]
+        return np.stack(passive_components(pair_forces, components(v), p, sink), axis=-1)
 
     def step(self, x, v, goal, control):
         cfg = self.cfg
@@ -275,17 +272,18 @@ class SocialPotentialDynamics(Dynamics):
         self._h_stable = self._rates(geometry, v)
         if self._verlet:
             return energy(x, v, p, goal if p.C_g > 0 else None, geometry=geometry)
-        fs, pairs = pair_terms(geometry, v, p)
-        fs = dissipation(fs, components(v), p)
+        pair_forces, pairs = pair_terms(geometry, v, p)
         phi = kinetic_energy(v, p) + pairs
+        sink = None
         if p.C_g > 0:
             sink, potential, _ = goal_terms(x, p, goal)
             if self.present is not None:
                 potential = np.where(self.present, potential, 0.0)
             phi = phi + potential.sum(axis=-1)
-            if self.cfg.goal_in_physics:
-                fs = [fc + gc for fc, gc in zip(fs, sink, strict=True)]
-        self._force = np.stack(fs, axis=-1)
+        passive = passive_components(
+            pair_forces, components(v), p, sink if self.cfg.goal_in_physics else None
+        )
+        self._force = np.stack(passive, axis=-1)
         return phi
 
 
