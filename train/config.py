@@ -256,8 +256,10 @@ def load_run_plugins(plugins: Any, base: str | Path | None = None) -> tuple[str,
             raise ValueError(f"plugins must be a list of .py files or module names, got {ref!r}")
         module = load_plugin(ref, base)
         path = getattr(module, "__file__", None)
-        relative = base is not None and not Path(ref).is_file() and path is not None
-        out.append(str(Path(path).resolve()) if relative else ref)
+        if base is not None and path is not None and not Path(ref).is_file():
+            out.append(str(Path(path).resolve()))  # found relative to base
+        else:
+            out.append(ref)
     return tuple(out)
 
 

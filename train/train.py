@@ -121,9 +121,9 @@ def make_training_env(tc: TrainConfig) -> VecEnv:
     def make_one() -> gym.Env:
         return gym.make(tc.env_id, config=tc.env_config, **tc.env)
 
-    venv = DummyVecEnv([make_one for _ in range(tc.n_swarms)])
-    venv.seed(tc.seed)
-    return VecMonitor(venv)
+    envs = DummyVecEnv([make_one for _ in range(tc.n_swarms)])
+    envs.seed(tc.seed)
+    return VecMonitor(envs)
 
 
 @functools.cache
