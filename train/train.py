@@ -78,7 +78,7 @@ from train.checkpoints import (
     save_checkpoint,
     write_atomic,
 )
-from train.config import TrainConfig, algorithm_class
+from train.config import POLICY, TrainConfig, algorithm_class
 from train.evaluate.policies import TRAINED_ENV, trained_env_record
 from train.interrupt import StopRequest, TrainingInterrupted, stop_on_signals
 from train.outdir import RUN_FILES, check_out_dir, prepare_out_dir
@@ -172,7 +172,7 @@ def build_model(tc: TrainConfig, venv: VecEnv, tensorboard_log: str | None = Non
     if tc.residual is not None and tc.algo == "PPO":
         policy_kwargs["log_std_init"] = tc.residual_log_std
     model = cls(
-        "MlpPolicy",
+        POLICY,
         venv,
         seed=tc.seed,
         device=tc.device,
