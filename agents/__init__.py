@@ -52,6 +52,7 @@ from agents.naterop import GoalForceController, InformedIndividualController
 from agents.pd import SaturatedPDController
 from agents.trivial import RandomController, ZeroController
 from agents.vanualailai_sharma import LyapunovTargetController
+from swarm_envs.config import SwarmConfig
 from swarm_envs.models import SHIPPED, model_spec
 
 #: Names of the built-in policies, as ``swarm-eval --policies`` accepts them (plus
@@ -123,7 +124,7 @@ def analytic_name(env: Any) -> str:
     return name
 
 
-def _analytic_or_none(cfg: Any) -> str | None:
+def _analytic_or_none(cfg: SwarmConfig) -> str | None:
     """The task's own analytic controller, else the model's (``None``: neither has one)."""
     return TASK_ANALYTIC.get(cfg.task, model_spec(cfg.dynamics).baseline)
 

@@ -29,8 +29,16 @@ from typing import Any
 import numpy as np
 
 from swarm_envs import metrics
+from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.common import uniform_starts
-from swarm_envs.envs.task import REWARD_TERMS, ObservationFeature, RewardTerm
+from swarm_envs.envs.task import (
+    REWARD_TERMS,
+    FeatureInputs,
+    Frame,
+    ObservationFeature,
+    RewardInputs,
+    RewardTerm,
+)
 from swarm_envs.swarm_nav_v0 import task_functions
 from swarm_envs.tasks import TaskSpec, register_task
 
@@ -40,19 +48,19 @@ TARGET_EXPANSE = 1.0
 SEPARATION = 8.0
 
 
-def contraction(r: Any) -> Any:
+def contraction(r: RewardInputs) -> Any:
     """``(E_{t−1} − E_t) / E_0``: this step's reduction of the expanse, over its start."""
     start = r.xp.clip(r.start["expanse"], 1e-6, None)
     return (r.prev["expanse"] - r.stats["expanse"]) / start
 
 
-def gathered(f: Any, cfg: Any, xp: Any) -> Any:
+def gathered(f: Frame, cfg: SwarmConfig, xp: Any) -> Any:
     """1.0 where the members' expanse is at most :data:`TARGET_EXPANSE`."""
     expanse = metrics.expanse(f.x, f.members)
     return xp.astype(expanse <= TARGET_EXPANSE, f.x[..., 0, 0])
 
 
-def centroid_offset(s: Any, cfg: Any, xp: Any) -> Any:
+def centroid_offset(s: FeatureInputs, cfg: SwarmConfig, xp: Any) -> Any:
     """Each agent's offset to the members' centroid, ``(r_c − r_i) / obs_goal_scale``."""
     if s.members is None:
         centre = xp.mean_agents(s.x)
@@ -64,7 +72,9 @@ def centroid_offset(s: Any, cfg: Any, xp: Any) -> Any:
     return (centre[:, None, :] - s.x) / cfg.obs_goal_scale
 
 
-def two_groups(cfg: Any, rng: np.random.Generator, n: int) -> tuple[Any, Any, Any]:
+def two_groups(
+    cfg: SwarmConfig, rng: np.random.Generator, n: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The start law: the default start disc's agents split in two halves whose discs lie
     :data:`SEPARATION` apart along a random direction; the goal (unused) at the origin."""
     x, v, _ = uniform_starts(cfg, rng, n)

@@ -44,9 +44,10 @@ from typing import Any
 
 import numpy as np
 
+from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.dynamics import Dynamics
 from swarm_envs.models import ModelSpec, register_model
-from swarm_envs.physics import goal_force
+from swarm_envs.physics import PairGeometry, goal_force
 from swarm_envs.physics.integrators import euler_update, stable_substep, substep_plan
 
 
@@ -124,7 +125,7 @@ def simulate_cucker_smale(
     return xs, vs
 
 
-def cucker_smale_substeps(cfg: Any) -> int:
+def cucker_smale_substeps(cfg: SwarmConfig) -> int:
     """The step-size rule: the substeps of ``dt`` that keep semi-implicit Euler stable
     for the damping rate ``γ = 2K/m`` and, where the goal sink acts passively, its
     curvature ``ω² = C_g/(l_g² m)``."""
@@ -135,7 +136,7 @@ def cucker_smale_substeps(cfg: Any) -> int:
     return int(n)
 
 
-def check_config(cfg: Any) -> None:
+def check_config(cfg: SwarmConfig) -> None:
     """What the model requires of the rest of the config: its one integrator."""
     if cfg.integrator != "semi_implicit_euler":
         raise ValueError(
@@ -149,11 +150,17 @@ class CuckerSmaleDynamics(Dynamics):
     sink (with ``goal_in_physics``) and the control ``u``, each a semi-implicit Euler
     update; the energy statistic is the velocity disagreement ``Γ``."""
 
-    def __init__(self, cfg: Any, batch: int, dtype: np.dtype) -> None:
+    def __init__(self, cfg: SwarmConfig, batch: int, dtype: np.dtype) -> None:
         super().__init__(cfg, batch, dtype)
         self._n = self.fixed_substeps()
 
-    def step(self, x, v, goal, control):
+    def step(
+        self,
+        x: np.ndarray,
+        v: np.ndarray,
+        goal: np.ndarray | None,
+        control: np.ndarray | None,
+    ) -> tuple[np.ndarray, np.ndarray, None]:
         p, h = self.cfg.dynamics_params, self.cfg.dt / self._n
         for _ in range(self._n):
             f = alignment_force(x, v, p)
@@ -164,7 +171,9 @@ class CuckerSmaleDynamics(Dynamics):
             x, v = euler_update(x, v, f.astype(self.dtype, copy=False), h, p.m)
         return x, v, None
 
-    def measure(self, x, v, goal, geometry):
+    def measure(
+        self, x: np.ndarray, v: np.ndarray, goal: np.ndarray, geometry: PairGeometry
+    ) -> np.ndarray:
         return velocity_disagreement(v, self.cfg.dynamics_params)
 
 

@@ -400,7 +400,7 @@ class SwarmConfig:
                 f"{owner}.perturbations: removed, frozen, absent and joining agents need "
                 f"integrator='semi_implicit_euler', got {self.integrator!r}"
             )
-        reals = {
+        reals: dict[str, dict[str, Any]] = {
             "dt": dict(low=0.0, low_inclusive=False),
             "init_radius": dict(low=0.0),
             "init_speed": dict(low=0.0),

@@ -74,13 +74,12 @@ def config_from_mapping(cls: type[T], data: Mapping[str, Any] | T, *, path: str 
         where = path or cls.__name__
         raise ValueError(f"config section '{where}' must be a mapping, got {type(data).__name__}")
     prepare = getattr(cls, "from_config_mapping", None)
-    if prepare is not None:
-        data = prepare(data)
+    section: Mapping[str, Any] = data if prepare is None else prepare(data)
     by_name = {f.name: f for f in _fields(cls)}
     names = set(by_name)
     hints = _field_types(cls)
     kwargs: dict[str, Any] = {}
-    for key, value in data.items():
+    for key, value in section.items():
         dotted = f"{path}.{key}" if path else str(key)
         if key not in names:
             raise ValueError(

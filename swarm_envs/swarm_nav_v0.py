@@ -12,7 +12,7 @@ Every API here follows one input rule for actions and seeds (``docs/inputs.md``)
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pettingzoo.utils import wrappers
 from pettingzoo.utils.conversions import parallel_to_aec_wrapper
@@ -20,6 +20,9 @@ from pettingzoo.utils.env import AECEnv
 
 from swarm_envs.envs.adapters.inputs import check_agent_action
 from swarm_envs.envs.adapters.swarm_nav import SwarmNavParallelEnv
+
+if TYPE_CHECKING:
+    from swarm_envs.envs.adapters.vec_env import SwarmNavVecEnv
 
 
 class _CheckedParallelToAEC(parallel_to_aec_wrapper):
@@ -62,7 +65,7 @@ def env(**kwargs: Any) -> AECEnv:
     return wrappers.OrderEnforcingWrapper(raw_env(**kwargs))
 
 
-def vec_env(n_swarms: int = 1, **kwargs: Any):
+def vec_env(n_swarms: int = 1, **kwargs: Any) -> SwarmNavVecEnv:
     """A batched SB3 ``VecEnv`` with ``n_swarms × n_agents`` slots (one shared policy).
 
     See :class:`swarm_envs.envs.adapters.vec_env.SwarmNavVecEnv`. Imported lazily (it needs SB3,
@@ -104,7 +107,7 @@ def task_functions(task: str, module: str) -> tuple[Callable[..., Any], ...]:
     def task_env(**kwargs: Any) -> AECEnv:
         return env(**for_task(task, module, kwargs))
 
-    def task_vec_env(n_swarms: int = 1, **kwargs: Any):
+    def task_vec_env(n_swarms: int = 1, **kwargs: Any) -> SwarmNavVecEnv:
         return vec_env(n_swarms, **for_task(task, module, kwargs))
 
     made = (task_parallel_env, task_raw_env, task_env, task_vec_env)

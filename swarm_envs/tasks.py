@@ -65,9 +65,11 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     import numpy as np
 
+    from swarm_envs._array import ArrayNamespace
+    from swarm_envs.config import SwarmConfig
     from swarm_envs.envs.task.observation import ObservationFeature
     from swarm_envs.envs.task.reward import RewardTerm
-    from swarm_envs.envs.task.statistics import Statistic
+    from swarm_envs.envs.task.statistics import Frame, Statistic
 
 #: The speed (a fraction of the cruise speed ``v₀``) above which the members within the
 #: arrival radius count as milling: the mill task succeeds while they circle the goal at
@@ -77,8 +79,12 @@ MILL_SUCCESS_SPEED = 0.5
 #: A task's name: a Python identifier (it is a config value and a reward-section key).
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
-StartLaw = Callable[[Any, "np.random.Generator", int], tuple[Any, Any, Any]]
+StartLaw = Callable[["SwarmConfig", "np.random.Generator", int], tuple[Any, Any, Any]]
 """``start(cfg, rng, n) -> (x (n, N, d), v (n, N, d), goal (n, d))``, float64 arrays."""
+
+SuccessRule = Callable[["Frame", "SwarmConfig", "ArrayNamespace"], Any]
+"""``success(frame, cfg, xp) -> (B,)``: 1.0 where the task succeeds, else 0.0, over the
+array namespace ``xp`` (:mod:`swarm_envs._array`)."""
 
 
 @dataclass(frozen=True)
@@ -120,12 +126,12 @@ class TaskSpec:
     reward_terms: tuple[RewardTerm, ...]
     statistics: tuple[Statistic, ...] = ()
     features: tuple[ObservationFeature, ...] = ()
-    success: Callable[..., Any] | None = None
+    success: SuccessRule | None = None
     success_doc: str | None = None
     terminates_on_success: bool = True
     start: StartLaw | None = None
     informed: bool = False
-    check: Callable[[Any], str | None] | None = None
+    check: Callable[[SwarmConfig], str | None] | None = None
     defaults: Mapping[str, Any] = field(default_factory=dict)
     env_id: str | None = None
     module: str | None = None
@@ -142,9 +148,9 @@ class TaskSpec:
         if not self.reward_terms:
             raise ValueError(f"{owner}.reward_terms must name at least one term")
         for attr, kind in (("reward_terms", "RewardTerm"), ("statistics", "Statistic")):
-            names = [getattr(item, "name", None) for item in getattr(self, attr)]
             if any(type(item).__name__ != kind for item in getattr(self, attr)):
                 raise ValueError(f"{owner}.{attr} must hold {kind}s")
+            names: list[str] = [item.name for item in getattr(self, attr)]
             repeated = sorted({n for n in names if names.count(n) > 1})
             if repeated:
                 raise ValueError(f"{owner}.{attr}: names given twice: {', '.join(repeated)}")
@@ -237,7 +243,7 @@ def _register(spec: TaskSpec, replace: bool) -> None:
         )
     _check_terms(spec)
     if spec.env_id is not None:
-        _register_gymnasium(spec)
+        _register_gymnasium(spec.name, spec.env_id)
     _REGISTRY[spec.name] = spec
     _collect_terms()
 
@@ -251,19 +257,18 @@ def _collect_terms() -> None:
                 _TERMS.setdefault(term.name, term)
 
 
-def _register_gymnasium(spec: TaskSpec) -> None:
+def _register_gymnasium(name: str, env_id: str) -> None:
     from gymnasium.envs.registration import register, registry
 
-    task = {} if spec.name == "navigation" else {"task": spec.name}
-    if spec.env_id in registry:
-        if dict(registry[spec.env_id].kwargs) != task:
+    task = {} if name == "navigation" else {"task": name}
+    if env_id in registry:
+        if dict(registry[env_id].kwargs) != task:
             raise ValueError(
-                f"task {spec.name!r}: the Gymnasium id {spec.env_id!r} is registered for "
-                "another environment"
+                f"task {name!r}: the Gymnasium id {env_id!r} is registered for another environment"
             )
         return
     register(
-        id=spec.env_id,
+        id=env_id,
         entry_point="swarm_envs.envs.adapters.swarm_nav:SwarmNavEnv",
         vector_entry_point="swarm_envs.envs.adapters.gym_vector:SwarmNavVectorEnv",
         kwargs=task,
@@ -362,7 +367,7 @@ def with_task_defaults(data: Mapping[str, Any]) -> dict[str, Any]:
     return _merge(task_defaults(task), data)
 
 
-def task_config(task: str, **overrides: Any) -> Any:
+def task_config(task: str, **overrides: Any) -> SwarmConfig:
     """A :class:`~swarm_envs.config.SwarmConfig` for ``task`` with its defaults, then
     ``overrides`` (config keys; a partial section changes only the keys it names).
 
@@ -392,7 +397,7 @@ def informed_count(fraction: float, n_agents: int) -> int:
 #: Gymnasium id and the defaults (:func:`task_defaults`) of each. Views of the registry,
 #: made on first access (:func:`__getattr__`).
 TASKS: tuple[str, ...]
-TASK_IDS: dict[str, str | None]
+TASK_IDS: dict[str, str]
 TASK_DEFAULTS: dict[str, dict[str, Any]]
 
 
@@ -409,7 +414,7 @@ def __getattr__(name: str) -> Any:
         if name == "TASKS":
             return tuple(s.name for s in specs)
         if name == "TASK_IDS":
-            return {s.name: s.env_id for s in specs}
+            return {s.name: s.env_id for s in specs if s.env_id is not None}
         return {s.name: task_defaults(s.name) for s in specs}
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
@@ -420,6 +425,7 @@ __all__ = [
     "TASK_DEFAULTS",
     "TASK_IDS",
     "StartLaw",
+    "SuccessRule",
     "TaskSpec",
     "informed_count",
     "register_task",

@@ -335,6 +335,18 @@ def test_residual_needs_shared_mode_and_a_known_baseline():
         load_train_config("configs/train/central.yaml", {"residual": "pd"})
 
 
+def test_critic_warmup_needs_an_actor_critic_algorithm():
+    # SAC's critics are Q-functions: there is no value function to warm up alone, so
+    # the config is refused before anything is built, naming both keys.
+    from train.config import load_train_config
+
+    warm = {"residual": "pd", "residual_warmup": 1000}
+    with pytest.raises(ValueError, match=r"residual_warmup = 1000 .* algo 'SAC'"):
+        load_train_config("configs/train/sac_shared.yaml", warm)
+    assert load_train_config("configs/train/sac_shared.yaml", {"residual": "pd"}).algo == "SAC"
+    assert load_train_config("configs/train/demo.yaml", warm).residual_warmup == 1000
+
+
 def test_benchmark_baselines_only_trains_nothing(tmp_path):
     import json
 

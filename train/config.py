@@ -37,6 +37,8 @@ if TYPE_CHECKING:
     from stable_baselines3.common.base_class import BaseAlgorithm
 
 ALGOS = ("PPO", "SAC")
+#: The SB3 policy every run builds (its class per algorithm: ``policy_aliases``).
+POLICY = "MlpPolicy"
 #: Keys a resumed run may change (``swarm-train --resume DIR key=value``): the total
 #: (to extend a run) and the checkpoint cadence; none of them changes what is learned.
 RESUME_KEYS = ("total_timesteps", "checkpoint_freq", "checkpoint_seconds", "checkpoint_keep")
@@ -56,6 +58,16 @@ def algorithm_class(name: str) -> type[BaseAlgorithm]:
     if name not in ALGOS:
         raise ValueError(f"algo must be one of {ALGOS}, got {name!r}")
     return getattr(stable_baselines3, name)
+
+
+def actor_critic(cls: type[BaseAlgorithm]) -> bool:
+    """Whether ``cls``'s :data:`POLICY` is an actor-critic policy (PPO's: one actor and
+    one value function, what :class:`train.residual.CriticWarmup` warms up), not SAC's
+    actor with Q-functions."""
+    from stable_baselines3.common.policies import ActorCriticPolicy
+
+    policy = cls.policy_aliases.get(POLICY)
+    return isinstance(policy, type) and issubclass(policy, ActorCriticPolicy)
 
 
 class RunConfig:
@@ -137,7 +149,8 @@ class TrainConfig(RunConfig):
     (the exploration noise around the baseline's action; SB3's default is 0)."""
     residual_warmup: int = 0
     """With ``residual``: timesteps at the start during which only the value function
-    learns (:class:`train.residual.CriticWarmup`); the policy stays the baseline's."""
+    learns (:class:`train.residual.CriticWarmup`); the policy stays the baseline's. An
+    actor-critic algorithm's (PPO); refused with SAC, whose critics are Q-functions."""
     eval_freq: int = 0
     """Evaluate against the analytic controller every this many timesteps (0 = never)."""
     eval_episodes: int = 10
@@ -222,6 +235,12 @@ class TrainConfig(RunConfig):
             if self.mode != "shared":
                 raise ValueError(f"residual needs mode 'shared', got mode {self.mode!r}")
             check_baseline_name(self.residual)
+        if self.residual_warmup > 0 and not actor_critic(cls):
+            raise ValueError(
+                f"residual_warmup = {self.residual_warmup} trains the value function alone "
+                f"first, which needs an actor-critic policy (algo PPO); algo {self.algo!r} "
+                "has none: set residual_warmup to 0 or algo to PPO"
+            )
         if isinstance(self.residual_log_std, bool) or not isinstance(
             self.residual_log_std, int | float
         ):
@@ -256,8 +275,10 @@ def load_run_plugins(plugins: Any, base: str | Path | None = None) -> tuple[str,
             raise ValueError(f"plugins must be a list of .py files or module names, got {ref!r}")
         module = load_plugin(ref, base)
         path = getattr(module, "__file__", None)
-        relative = base is not None and not Path(ref).is_file() and path is not None
-        out.append(str(Path(path).resolve()) if relative else ref)
+        if base is not None and path is not None and not Path(ref).is_file():
+            out.append(str(Path(path).resolve()))  # found relative to base
+        else:
+            out.append(ref)
     return tuple(out)
 
 

@@ -78,7 +78,7 @@ from train.checkpoints import (
     save_checkpoint,
     write_atomic,
 )
-from train.config import TrainConfig, algorithm_class
+from train.config import POLICY, TrainConfig, algorithm_class
 from train.evaluate.policies import TRAINED_ENV, trained_env_record
 from train.interrupt import StopRequest, TrainingInterrupted, stop_on_signals
 from train.outdir import RUN_FILES, check_out_dir, prepare_out_dir
@@ -121,9 +121,9 @@ def make_training_env(tc: TrainConfig) -> VecEnv:
     def make_one() -> gym.Env:
         return gym.make(tc.env_id, config=tc.env_config, **tc.env)
 
-    venv = DummyVecEnv([make_one for _ in range(tc.n_swarms)])
-    venv.seed(tc.seed)
-    return VecMonitor(venv)
+    envs = DummyVecEnv([make_one for _ in range(tc.n_swarms)])
+    envs.seed(tc.seed)
+    return VecMonitor(envs)
 
 
 @functools.cache
@@ -172,7 +172,7 @@ def build_model(tc: TrainConfig, venv: VecEnv, tensorboard_log: str | None = Non
     if tc.residual is not None and tc.algo == "PPO":
         policy_kwargs["log_std_init"] = tc.residual_log_std
     model = cls(
-        "MlpPolicy",
+        POLICY,
         venv,
         seed=tc.seed,
         device=tc.device,

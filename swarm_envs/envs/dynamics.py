@@ -53,10 +53,10 @@ from swarm_envs.physics.lagrangian import (
 from swarm_envs.physics.piecewise import interaction_forces, random_force
 from swarm_envs.physics.social_potential import (
     components,
-    dissipation,
     goal_terms,
     pair_rates,
     pair_terms,
+    passive_components,
     present_geometry,
 )
 from swarm_envs.physics.zone import (
@@ -188,7 +188,14 @@ class SocialPotentialDynamics(Dynamics):
     def _physics_goal(self, goal: np.ndarray) -> np.ndarray | None:
         return goal if self._sink else None
 
-    def reset(self, x, v, goal, idx, rng) -> None:
+    def reset(
+        self,
+        x: np.ndarray,
+        v: np.ndarray,
+        goal: np.ndarray,
+        idx: np.ndarray,
+        rng: np.random.Generator,
+    ) -> None:
         if self._verlet:
             f = forces(x, v, self.cfg.physics, self._physics_goal(goal))
             if self._force is None:
@@ -196,7 +203,7 @@ class SocialPotentialDynamics(Dynamics):
             else:
                 self._force[idx] = f[idx]
 
-    def restore(self, x, v, goal, idx) -> None:
+    def restore(self, x: np.ndarray, v: np.ndarray, goal: np.ndarray, idx: np.ndarray) -> None:
         if self._verlet:
             assert self._force is not None
             g = self._physics_goal(goal)
@@ -216,17 +223,22 @@ class SocialPotentialDynamics(Dynamics):
         omega2, gamma = pair_rates(geometry, self.cfg.physics, sink=self._sink, v=v)
         return stable_substep(omega2, gamma, integrator=self.cfg.integrator)
 
-    def _passive(self, x, v, goal, geometry) -> np.ndarray:
+    def _passive(
+        self, x: np.ndarray, v: np.ndarray, goal: np.ndarray | None, geometry: PairGeometry
+    ) -> np.ndarray:
         """The passive force at ``(x, v)`` (semi-implicit Euler's carried force)."""
         p = self.cfg.physics
-        fs, _ = pair_terms(geometry, v, p, energy=False)
-        fs = dissipation(fs, components(v), p)
-        if goal is not None:
-            sink, _, _ = goal_terms(x, p, goal)
-            fs = [fc + gc for fc, gc in zip(fs, sink, strict=True)]
-        return np.stack(fs, axis=-1)
+        pair_forces, _ = pair_terms(geometry, v, p, energy=False)
+        sink = None if goal is None else goal_terms(x, p, goal)[0]
+        return np.stack(passive_components(pair_forces, components(v), p, sink), axis=-1)
 
-    def step(self, x, v, goal, control):
+    def step(
+        self,
+        x: np.ndarray,
+        v: np.ndarray,
+        goal: np.ndarray | None,
+        control: np.ndarray | None,
+    ) -> tuple[np.ndarray, np.ndarray, PairGeometry | None]:
         cfg = self.cfg
         assert self._force is not None
         goal = goal if self._sink else None
@@ -270,22 +282,25 @@ class SocialPotentialDynamics(Dynamics):
                 self._force[rows] = self._passive(xr, vr, None if goal is None else goal[rows], geo)
             self._h_stable[rows] = self._rates(geo, vr)
 
-    def measure(self, x, v, goal, geometry):
+    def measure(
+        self, x: np.ndarray, v: np.ndarray, goal: np.ndarray, geometry: PairGeometry
+    ) -> np.ndarray:
         p = self.cfg.physics
         self._h_stable = self._rates(geometry, v)
         if self._verlet:
             return energy(x, v, p, goal if p.C_g > 0 else None, geometry=geometry)
-        fs, pairs = pair_terms(geometry, v, p)
-        fs = dissipation(fs, components(v), p)
+        pair_forces, pairs = pair_terms(geometry, v, p)
         phi = kinetic_energy(v, p) + pairs
+        sink = None
         if p.C_g > 0:
             sink, potential, _ = goal_terms(x, p, goal)
             if self.present is not None:
                 potential = np.where(self.present, potential, 0.0)
             phi = phi + potential.sum(axis=-1)
-            if self.cfg.goal_in_physics:
-                fs = [fc + gc for fc, gc in zip(fs, sink, strict=True)]
-        self._force = np.stack(fs, axis=-1)
+        passive = passive_components(
+            pair_forces, components(v), p, sink if self.cfg.goal_in_physics else None
+        )
+        self._force = np.stack(passive, axis=-1)
         return phi
 
 
@@ -304,7 +319,14 @@ class ZoneDynamics(Dynamics):
         )
         self.informed = np.zeros(shape, dtype=bool)
 
-    def reset(self, x, v, goal, idx, rng) -> None:
+    def reset(
+        self,
+        x: np.ndarray,
+        v: np.ndarray,
+        goal: np.ndarray,
+        idx: np.ndarray,
+        rng: np.random.Generator,
+    ) -> None:
         cfg, p = self.cfg, self.cfg.zone
         shape = (idx.size, cfg.n_agents)
         if p.param_spread > 0:
@@ -321,7 +343,13 @@ class ZoneDynamics(Dynamics):
         heading = np.where(moving, speed / np.where(moving, norm, 1.0), random)
         v[idx] = self.agent_params.speed[idx][..., None] * heading
 
-    def step(self, x, v, goal, control):
+    def step(
+        self,
+        x: np.ndarray,
+        v: np.ndarray,
+        goal: np.ndarray | None,
+        control: np.ndarray | None,
+    ) -> tuple[np.ndarray, np.ndarray, PairGeometry | None]:
         speed = self.agent_params.speed[..., None]
         heading = v / speed
         x, heading = zone_step(
@@ -352,11 +380,24 @@ class PiecewiseDynamics(Dynamics):
         self._noise_rng: np.random.Generator | None = None
         self._n = self.fixed_substeps()  # piecewise_substeps, its step-size rule
 
-    def reset(self, x, v, goal, idx, rng) -> None:
+    def reset(
+        self,
+        x: np.ndarray,
+        v: np.ndarray,
+        goal: np.ndarray,
+        idx: np.ndarray,
+        rng: np.random.Generator,
+    ) -> None:
         if self.cfg.piecewise.sigma > 0 and (self._noise_rng is None or idx.size == self.batch):
             self._noise_rng = np.random.default_rng(rng.integers(2**63))
 
-    def step(self, x, v, goal, control):
+    def step(
+        self,
+        x: np.ndarray,
+        v: np.ndarray,
+        goal: np.ndarray | None,
+        control: np.ndarray | None,
+    ) -> tuple[np.ndarray, np.ndarray, PairGeometry | None]:
         cfg, p = self.cfg, self.cfg.piecewise
         h = cfg.dt / self._n
         noise = None  # the random force, drawn once per step and held over its substeps
@@ -364,6 +405,7 @@ class PiecewiseDynamics(Dynamics):
             f = interaction_forces(x, p)
             if p.sigma > 0:
                 if noise is None:
+                    assert self._noise_rng is not None  # drawn at the first reset
                     noise = random_force(self._noise_rng, x.shape, p, f.dtype)
                 f += noise
             if p.beta > 0:
@@ -376,7 +418,9 @@ class PiecewiseDynamics(Dynamics):
             x = x + h * v
         return x, v, None
 
-    def measure(self, x, v, goal, geometry):
+    def measure(
+        self, x: np.ndarray, v: np.ndarray, goal: np.ndarray, geometry: PairGeometry
+    ) -> np.ndarray:
         return 0.5 * self.cfg.piecewise.m * np.einsum("bik,bik->b", v, v)
 
 
@@ -394,7 +438,14 @@ class LagrangianDynamics(Dynamics):
     def _centre(self, goal: np.ndarray) -> np.ndarray | None:
         return goal if self.cfg.goal_in_physics else None
 
-    def reset(self, x, v, goal, idx, rng) -> None:
+    def reset(
+        self,
+        x: np.ndarray,
+        v: np.ndarray,
+        goal: np.ndarray,
+        idx: np.ndarray,
+        rng: np.random.Generator,
+    ) -> None:
         cfg, p = self.cfg, self.cfg.lagrangian
         if cfg.n_agents > 1:
             bad = idx[~(pair_clearance(x[idx], p) > 0).all(axis=(-2, -1))]
@@ -412,7 +463,13 @@ class LagrangianDynamics(Dynamics):
         v[idx] = lagrangian_velocity(x[idx], p, self._centre(goal[idx]))
         self._substep[idx] = cfg.dt
 
-    def step(self, x, v, goal, control):
+    def step(
+        self,
+        x: np.ndarray,
+        v: np.ndarray,
+        goal: np.ndarray | None,
+        control: np.ndarray | None,
+    ) -> tuple[np.ndarray, np.ndarray, PairGeometry | None]:
         frame = lagrangian_frame(
             x,
             self.cfg.lagrangian,
@@ -427,7 +484,9 @@ class LagrangianDynamics(Dynamics):
         self._count(frame.substeps, frame.over_cap, needed)
         return frame.x, frame.v.astype(self.dtype, copy=False), None
 
-    def measure(self, x, v, goal, geometry):
+    def measure(
+        self, x: np.ndarray, v: np.ndarray, goal: np.ndarray, geometry: PairGeometry
+    ) -> np.ndarray:
         return lagrangian_value(x, self.cfg.lagrangian, self._centre(goal))
 
 

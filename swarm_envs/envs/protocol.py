@@ -122,6 +122,7 @@ class Execution(StatusCore, Protocol):
     """
 
     task: TaskLayer
+    t: np.ndarray  # the task layer counts the steps
 
     def begin(
         self,

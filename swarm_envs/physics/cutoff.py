@@ -97,10 +97,10 @@ from swarm_envs.physics.pair_sums import (
 from swarm_envs.physics.social_potential import (
     SocialPotentialParams,
     components,
-    dissipation,
-    goal_force,
     goal_potential,
+    goal_terms,
     kinetic_energy,
+    passive_components,
 )
 
 _BALL_VOLUME = {2: math.pi, 3: 4.0 * math.pi / 3.0}
@@ -308,11 +308,12 @@ def sparse_forces(
     x, v, xf, i, j = _flat_pairs(x, v, i, j)
     assert v is not None
     out = pair_sums(xf, v.reshape(xf.shape), params, i, j).force.reshape(x.shape)
-    out[...] = np.stack(dissipation(components(out), components(v), params), axis=-1)
+    sink = None
     if goal is not None:
         goal = check_goal(goal, x)
         if params.C_g > 0:
-            out += goal_force(x, params, goal)
+            sink = goal_terms(x, params, goal)[0]
+    out[...] = np.stack(passive_components(components(out), components(v), params, sink), axis=-1)
     return out
 
 

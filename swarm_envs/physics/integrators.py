@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -59,6 +59,9 @@ from swarm_envs.physics.social_potential import (
     forces,
     pair_geometry,
 )
+
+if TYPE_CHECKING:
+    import torch
 
 INTEGRATORS = ("semi_implicit_euler", "velocity_verlet")
 
@@ -179,10 +182,13 @@ class SubstepBudget:
         return self.remaining[rows] == 0
 
 
-def euler_update(x: Any, v: Any, accel: Any, dt: Any, m: float) -> tuple[Any, Any]:
+def euler_update(
+    x: Any, v: Any, accel: Any, dt: float | np.ndarray | torch.Tensor, m: float
+) -> tuple[Any, Any]:
     """The semi-implicit Euler update with the force ``accel`` (passive + control):
     ``v' = v + dt · accel/m``, ``x' = x + dt v'``. numpy arrays or torch tensors; ``dt``
-    a number, or an array of steps that broadcasts against ``x`` (one per swarm)."""
+    one step length, or an array of them broadcastable to ``x`` (each swarm's own
+    substep, ``(B, 1, 1)``)."""
     if m != 1.0:
         accel = accel / m
     v_new = v + dt * accel
@@ -219,11 +225,14 @@ def verlet_step(
     f: np.ndarray,
     params: SocialPotentialParams,
     *,
-    dt: float,
+    dt: float | np.ndarray,
     goal: np.ndarray | None = None,
     control: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, PairGeometry]:
     """One velocity-Verlet step; ``f`` is the passive force carried from the last step.
+
+    ``dt`` is one step length, or an array of them broadcastable to ``x`` (each swarm's
+    own substep, ``(B, 1, 1)``).
 
     The control ``u`` is held over the step (both half-kicks). Returns
     ``(x', v', f', geometry')`` where ``f'`` is the passive force at ``x'`` and the

@@ -452,6 +452,27 @@ def dissipation(fs: list[Array], vs: list[Array], params: SocialPotentialParams)
     return fs
 
 
+def passive_components(
+    pair_forces: list[Array],
+    vs: list[Array],
+    params: SocialPotentialParams,
+    sink: list[Array] | None = None,
+) -> list[Array]:
+    """The passive force per component, assembled once for every core: the pair forces
+    (Morse and alignment, eqs. 9–13, however a core summed them: dense, cut-off or in
+    compiled pair sums) with the dissipation (:func:`dissipation`) and, where given, the
+    goal sink's force components (eq. 19, ``goal_terms(...)[0]``).
+
+    >>> p = SocialPotentialParams(beta=0.5)
+    >>> [float(f) for f in passive_components([1.0, 0.0], [2.0, 0.0], p, sink=[0.0, 3.0])]
+    [0.0, 3.0]
+    """
+    fs = dissipation(pair_forces, vs, params)
+    if sink is not None:
+        fs = [fc + gc for fc, gc in zip(fs, sink, strict=True)]
+    return fs
+
+
 def dissipation_rate(vs: list[Array] | None, params: SocialPotentialParams) -> Any:
     """The largest damping rate (times the mass) of :func:`dissipation`, per swarm.
 
@@ -610,14 +631,13 @@ def forces(
     xp = namespace(x)
     p = params
     geo = pair_geometry(x) if geometry is None else geometry
-    fs, _ = pair_terms(geo, v, p, energy=False)
-    fs = dissipation(fs, components(v), p)
+    sink = None
     if goal is not None:
         goal = check_goal(goal, x)
         if p.C_g > 0:
-            fg = goal_terms(x, p, goal)[0]
-            fs = [fc + gc for fc, gc in zip(fs, fg, strict=True)]
-    return xp.stack(fs, axis=-1)
+            sink = goal_terms(x, p, goal)[0]
+    pair_forces, _ = pair_terms(geo, v, p, energy=False)
+    return xp.stack(passive_components(pair_forces, components(v), p, sink), axis=-1)
 
 
 def kinetic_energy(v: Array, params: SocialPotentialParams) -> Array:

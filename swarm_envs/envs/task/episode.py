@@ -9,12 +9,17 @@ reports each step whether the swarm mills there. Every task truncates after
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+if TYPE_CHECKING:
+    from swarm_envs.config import SwarmConfig
 
-def episode_end(task: Any, success: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+
+def episode_end(
+    task: SwarmConfig, success: np.ndarray, t: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """``(terminated, truncated)`` ``(B,)`` bool from this step's ``success`` ``(B,)``
     and each swarm's step count ``t`` ``(B,)`` (``task``: the ``SwarmConfig``).
 

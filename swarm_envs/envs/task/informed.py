@@ -9,14 +9,17 @@ flag and its neighbours' (:mod:`~swarm_envs.envs.task.observation`).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from swarm_envs.tasks import informed_count
 
+if TYPE_CHECKING:
+    from swarm_envs.config import SwarmConfig
 
-def draw_informed(task: Any, rng: np.random.Generator, n_swarms: int) -> np.ndarray:
+
+def draw_informed(task: SwarmConfig, rng: np.random.Generator, n_swarms: int) -> np.ndarray:
     """Which agents of ``n_swarms`` new swarms are informed, ``(n, N)`` bool.
 
     Per swarm, in this order: the fraction (only for a range), then one permutation of

@@ -50,6 +50,7 @@ from swarm_envs.envs.task.episode import episode_end
 from swarm_envs.envs.task.reward import RewardInputs, reward
 
 if TYPE_CHECKING:
+    from swarm_envs.config import SwarmConfig
     from swarm_envs.envs.protocol import Execution, StepResult
 
 __all__ = ["Advance", "HostRecords", "Records", "TaskCore", "TaskLayer"]
@@ -156,7 +157,7 @@ class TaskLayer:
         records: the :class:`Records`.
     """
 
-    def __init__(self, cfg: Any, batch: int, records: Records) -> None:
+    def __init__(self, cfg: SwarmConfig, batch: int, records: Records) -> None:
         self.cfg = cfg
         self.batch = batch
         self.records = records

@@ -40,10 +40,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 from swarm_envs._array import ArrayNamespace
 from swarm_envs.envs.task.agent_status import ACTIVE, FAILED, FROZEN
+
+if TYPE_CHECKING:
+    from swarm_envs.config import SwarmConfig
 
 Array = Any
 
@@ -96,11 +99,11 @@ class ObservationFeature:
 
     name: str
     doc: str
-    value: Callable[[FeatureInputs, Any, ArrayNamespace], Any]
-    width: int | Callable[[Any], int] = 1
+    value: Callable[[FeatureInputs, SwarmConfig, ArrayNamespace], Array]
+    width: int | Callable[[SwarmConfig], int] = 1
     neighbors: bool = False
 
-    def size(self, task: Any) -> int:
+    def size(self, task: SwarmConfig) -> int:
         """The entries per agent for config ``task``."""
         return int(self.width(task) if callable(self.width) else self.width)
 
@@ -114,22 +117,22 @@ INFORMED_FLAG = ObservationFeature(
 )
 
 
-def _features(task: Any) -> tuple[ObservationFeature, ...]:
+def _features(task: SwarmConfig) -> tuple[ObservationFeature, ...]:
     spec = getattr(task, "task_spec", None)
     return () if spec is None else spec.features
 
 
-def _informs(task: Any) -> bool:
+def _informs(task: SwarmConfig) -> bool:
     return bool(getattr(task, "informs_agents", False))
 
 
-def own_size(task: Any) -> int:
+def own_size(task: SwarmConfig) -> int:
     """Entries of the agent's own features: ``2d`` (goal offset, velocity), then its
     task's features (one, its informed flag, with ``task="informed"``)."""
     return 2 * task.dim + sum(f.size(task) for f in _features(task))
 
 
-def block_size(task: Any) -> int:
+def block_size(task: SwarmConfig) -> int:
     """Entries per neighbour slot: ``2d + 1`` (offset, velocity, mask), one more with
     ``observe_status``, then the task's ``neighbors`` features (one with
     ``task="informed"``)."""
@@ -137,13 +140,13 @@ def block_size(task: Any) -> int:
     return 2 * task.dim + 1 + int(getattr(task, "observe_status", False)) + own
 
 
-def observation_size(task: Any) -> int:
+def observation_size(task: SwarmConfig) -> int:
     """``own + k · block``: the agent's own features (:func:`own_size`), then k
     neighbour slots (:func:`block_size`)."""
     return own_size(task) + task.n_neighbors * block_size(task)
 
 
-def layout(task: Any) -> str:
+def layout(task: SwarmConfig) -> str:
     """:data:`LAYOUT`, with ``,status`` ending each neighbour block under
     ``observe_status``, and the task's features by name (the informed flags with
     ``task="informed"``)."""
@@ -155,7 +158,7 @@ def layout(task: Any) -> str:
     return f"{own};{block}"
 
 
-def ranked_neighbors(task: Any) -> int:
+def ranked_neighbors(task: SwarmConfig) -> int:
     """How many nearest neighbours a core ranks: ``min(max(k, 1), N − 1)`` (at least
     one, for the nearest-neighbour distance; 0 when ``N = 1``)."""
     return min(max(task.n_neighbors, 1), task.n_agents - 1)
@@ -166,7 +169,7 @@ def observation(
     v: Array,
     goal: Array,
     near: Array | None,
-    task: Any,
+    task: SwarmConfig,
     xp: ArrayNamespace,
     status: Array | None = None,
     informed: Array | None = None,

@@ -8,15 +8,18 @@ shipped success rules; :mod:`swarm_envs.tasks` registers them first, in this ord
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import TYPE_CHECKING
 
 from swarm_envs.envs.task.observation import INFORMED_FLAG
-from swarm_envs.envs.task.reward import REWARD_TERMS
+from swarm_envs.envs.task.reward import REWARD_TERMS, RewardTerm
 from swarm_envs.envs.task.statistics import mill_success
 from swarm_envs.tasks import MILL_SUCCESS_SPEED, TaskSpec
 
+if TYPE_CHECKING:
+    from swarm_envs.config import SwarmConfig
 
-def _mill_needs(cfg: Any) -> str | None:
+
+def _mill_needs(cfg: SwarmConfig) -> str | None:
     if cfg.dynamics != "social_potential" or cfg.physics.alpha <= 0:
         return (
             "runs on the self-propelled social potential: it needs "
@@ -26,7 +29,7 @@ def _mill_needs(cfg: Any) -> str | None:
     return None
 
 
-def _reweighted(**weights: float) -> tuple[Any, ...]:
+def _reweighted(**weights: float) -> tuple[RewardTerm, ...]:
     """:data:`REWARD_TERMS` with other default weights for the terms named."""
     return tuple(
         dataclasses.replace(t, weight=weights[t.name]) if t.name in weights else t

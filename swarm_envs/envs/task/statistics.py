@@ -18,11 +18,14 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 from swarm_envs import metrics
 from swarm_envs._array import ArrayNamespace
 from swarm_envs.tasks import MILL_SUCCESS_SPEED
+
+if TYPE_CHECKING:
+    from swarm_envs.config import SwarmConfig
 
 Array = Any
 
@@ -68,7 +71,7 @@ class Statistic:
 
     name: str
     doc: str
-    value: Callable[[Frame, Any, ArrayNamespace], Array]
+    value: Callable[[Frame, SwarmConfig, ArrayNamespace], Array]
     wide: bool = False
     pairwise: bool = True
     """Whether it may read the frame's pair measures (``nearest_distance``,
@@ -90,27 +93,32 @@ def success_count(n_agents: int, success_fraction: float) -> int:
     return n_agents + 1  # pragma: no cover - success_fraction ≤ 1 always reaches c = N
 
 
-def _arrived_count(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
+def _arrived_count(f: Frame, task: SwarmConfig, xp: ArrayNamespace) -> Array:
     arrived = f.goal_distance <= task.arrival_radius
     if f.members is not None:
         arrived = arrived & f.members
     return xp.sum(xp.astype(arrived, f.goal_distance), axis=-1)
 
 
-def _member_count(f: Frame, task: Any, xp: ArrayNamespace) -> Array | int:
+def _members(members: Array, f: Frame, xp: ArrayNamespace) -> Array:
+    """The count of the members ``members`` ``(B, N)`` per swarm, in the state's dtype."""
+    return xp.sum(xp.astype(members, f.goal_distance), axis=-1)
+
+
+def _member_count(f: Frame, task: SwarmConfig, xp: ArrayNamespace) -> Array | int:
     if f.members is None:
         return task.n_agents
-    return xp.sum(xp.astype(f.members, f.goal_distance), axis=-1)
+    return _members(f.members, f, xp)
 
 
 def _mean(values: Array, f: Frame, xp: ArrayNamespace) -> Array:
     """The mean of per-agent values ``(B, N)`` over the members."""
     if f.members is None:
         return xp.mean(values, axis=-1)
-    return xp.sum(xp.where(f.members, values, 0.0), axis=-1) / _member_count(f, None, xp)
+    return xp.sum(xp.where(f.members, values, 0.0), axis=-1) / _members(f.members, f, xp)
 
 
-def _centroid_distance(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
+def _centroid_distance(f: Frame, task: SwarmConfig, xp: ArrayNamespace) -> Array:
     if f.members is None:
         centre = xp.mean_agents(f.x)
     else:
@@ -119,7 +127,7 @@ def _centroid_distance(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
     return xp.norm(centre - f.goal)
 
 
-def arrival_success(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
+def arrival_success(f: Frame, task: SwarmConfig, xp: ArrayNamespace) -> Array:
     """1.0 where at least ``success_fraction`` of the members are within the arrival
     radius of the goal, else 0.0 (the default success rule of a task)."""
     if f.members is None:
@@ -130,12 +138,12 @@ def arrival_success(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
     return xp.astype(fraction >= task.success_fraction - 1e-9, f.goal_distance)
 
 
-def _goal_angular_momentum(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
+def _goal_angular_momentum(f: Frame, task: SwarmConfig, xp: ArrayNamespace) -> Array:
     r = f.x - f.goal[:, None, :]
     return metrics.mean_cross_about_goal(r, f.v, None, f.members, xp)
 
 
-def _mill_speed(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
+def _mill_speed(f: Frame, task: SwarmConfig, xp: ArrayNamespace) -> Array:
     # metrics.tangential_speed's weights, from the distances the frame holds
     dist = f.goal_distance
     inside = (dist > 0) & (dist <= task.arrival_radius)
@@ -147,14 +155,14 @@ def _mill_speed(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
 MIN_CRUISE_SPEED = 1e-30
 
 
-def mill_speed_scale(task: Any) -> float:
+def mill_speed_scale(task: SwarmConfig) -> float:
     """The speed ``mill_order`` divides by: the cruise speed ``v₀``, at least
     :data:`MIN_CRUISE_SPEED`; 0 without self-propulsion (then ``mill_order`` is 0)."""
     v0 = task.physics.cruise_speed
     return max(v0, MIN_CRUISE_SPEED) if v0 > 0 else 0.0
 
 
-def _mill_order(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
+def _mill_order(f: Frame, task: SwarmConfig, xp: ArrayNamespace) -> Array:
     """``min(mill_speed / v₀, 1)``; 0 without self-propulsion (no ``v₀``)."""
     v0 = mill_speed_scale(task)
     if v0 <= 0:
@@ -162,14 +170,14 @@ def _mill_order(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
     return xp.clip(_mill_speed(f, task, xp) / v0, None, 1.0)
 
 
-def mill_success(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
+def mill_success(f: Frame, task: SwarmConfig, xp: ArrayNamespace) -> Array:
     """The mill task's success: :func:`arrival_success`, while the members within the
     arrival radius also circle the goal at ``mill_order ≥ MILL_SUCCESS_SPEED``."""
     arrived = arrival_success(f, task, xp)
     return arrived * xp.astype(_mill_order(f, task, xp) >= MILL_SUCCESS_SPEED, arrived)
 
 
-def _task_success(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
+def _task_success(f: Frame, task: SwarmConfig, xp: ArrayNamespace) -> Array:
     """The success rule of ``task``'s spec; :func:`arrival_success` where it has none
     (or ``task`` is not a config with a task)."""
     spec = getattr(task, "task_spec", None)
@@ -177,7 +185,7 @@ def _task_success(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
     return (rule or arrival_success)(f, task, xp)
 
 
-def _substeps(f: Frame, task: Any, xp: ArrayNamespace) -> Array:
+def _substeps(f: Frame, task: SwarmConfig, xp: ArrayNamespace) -> Array:
     if f.substeps is None:
         return xp.zeros(f.energy.shape, like=f.energy)
     return f.substeps
@@ -272,19 +280,20 @@ STATISTICS: tuple[Statistic, ...] = (
 STAT_KEYS: tuple[str, ...] = tuple(s.name for s in STATISTICS)
 
 
-def task_statistics(task: Any) -> tuple[Statistic, ...]:
-    """Every statistic a config reports: :data:`STATISTICS`, then its task's own."""
+def task_statistics(task: SwarmConfig | None) -> tuple[Statistic, ...]:
+    """Every statistic a config reports: :data:`STATISTICS`, then its task's own
+    (``None``: :data:`STATISTICS`)."""
     spec = getattr(task, "task_spec", None)
     return STATISTICS if spec is None or not spec.statistics else STATISTICS + spec.statistics
 
 
-def stat_keys(task: Any) -> tuple[str, ...]:
+def stat_keys(task: SwarmConfig | None) -> tuple[str, ...]:
     """The names of :func:`task_statistics`, in order (``STAT_KEYS`` for the package's
     tasks)."""
     return tuple(s.name for s in task_statistics(task))
 
 
-def statistics(frame: Frame, task: Any, xp: ArrayNamespace) -> dict[str, Array]:
+def statistics(frame: Frame, task: SwarmConfig, xp: ArrayNamespace) -> dict[str, Array]:
     """Every statistic of ``task`` (:func:`task_statistics`) for ``frame``, as
     ``{name: (B,)}``."""
     return {s.name: s.value(frame, task, xp) for s in task_statistics(task)}

@@ -84,13 +84,18 @@ from swarm_envs.envs.cores.cutoff.neighbors import (
 )
 from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.task.agent_status import AgentMasks
-from swarm_envs.physics import compiled_pairs, goal_force, goal_potential, kinetic_energy
+from swarm_envs.physics import compiled_pairs, goal_potential, kinetic_energy
 from swarm_envs.physics._validation import check_real
 from swarm_envs.physics.cutoff import cutoff_radius
 from swarm_envs.physics.integrators import SubstepBudget, euler_update, stable_substep
 from swarm_envs.physics.pair_sums import swarm_rates
 from swarm_envs.physics.present_neighbors import close_pairs_among
-from swarm_envs.physics.social_potential import components, dissipation, dissipation_rate
+from swarm_envs.physics.social_potential import (
+    components,
+    dissipation_rate,
+    goal_terms,
+    passive_components,
+)
 
 #: Agents per swarm from which to use :class:`CutoffSwarmNavCore`: above the crossover
 #: with the dense cores that ``benchmarks/large_swarms.py`` measures (default config at
@@ -320,9 +325,9 @@ class CutoffSwarmNavCore(SwarmNavCore):
             still = self._masks.still[where]
             collisions -= close_pairs_among(x, still, cfg.collision_radius, radius)
         force = force.reshape(b, N, d)
-        force[...] = np.stack(dissipation(components(force), components(velocity), p), axis=-1)
-        if goal is not None:
-            force += goal_force(x, p, goal)
+        sink = None if goal is None else goal_terms(x, p, goal)[0]
+        passive = passive_components(components(force), components(velocity), p, sink)
+        force[...] = np.stack(passive, axis=-1)
         omega2, gamma = swarm_rates(
             kappa.reshape(b, N), damping.reshape(b, N), p, sink=goal is not None, v=velocity
         )

@@ -53,11 +53,11 @@ from swarm_envs.physics import kinetic_energy
 from swarm_envs.physics.integrators import euler_update, stable_substep, substep_plan
 from swarm_envs.physics.social_potential import (
     PairGeometry,
-    dissipation,
     goal_terms,
     pair_geometry,
     pair_rates,
     pair_terms,
+    passive_components,
     present_geometry,
 )
 
@@ -148,11 +148,9 @@ def _passive(
     (:func:`~swarm_envs.physics.social_potential.goal_terms`), for the numpy core's
     semi-implicit Euler force."""
     p = cfg.physics
-    fs, pairs = pair_terms(geo, vs, p, energy=energy)
-    fs = dissipation(fs, vs, p)
+    pair_forces, pairs = pair_terms(geo, vs, p, energy=energy)
     sink, potential, goal_distance = goal_terms(xs, p, goal)
-    if cfg.passive_sink:
-        fs = [fc + gc for fc, gc in zip(fs, sink, strict=True)]
+    fs = passive_components(pair_forces, vs, p, sink if cfg.passive_sink else None)
     return fs, pairs, potential, goal_distance
 
 
