@@ -39,7 +39,7 @@ import numpy as np
 from gymnasium import spaces
 
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs.core import OBS_BOUND, observation_size
+from swarm_envs.envs.task import OBS_BOUND, observation_size
 
 __all__ = ["Controller", "swarm_config_of"]
 

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from agents.base import Controller
-from swarm_envs.envs.core import OBS_BOUND
+from swarm_envs.envs.task import OBS_BOUND
 from swarm_envs.physics import goal_force
 
 __all__ = ["PotentialFieldController"]

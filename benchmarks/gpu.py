@@ -32,7 +32,7 @@ import torch
 
 from swarm_envs._runtime.torch_compile import SocialPotentialStepper
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs.torch_core import TorchSwarmNavCore
+from swarm_envs.envs.cores.torch.core import TorchSwarmNavCore
 from swarm_envs.physics import SocialPotentialParams, random_swarm
 
 

@@ -1,4 +1,4 @@
-"""Large swarms: seconds per SwarmNav step vs N (dense core against sparse core, and the
+"""Large swarms: seconds per SwarmNav step vs N (dense core against cut-off core, and the
 crossover N), with the physical state of every timed run; and the regime table.
 
 Usage: ``python benchmarks/large_swarms.py [--dim 2] [--physics large_swarm]
@@ -6,7 +6,7 @@ Usage: ``python benchmarks/large_swarms.py [--dim 2] [--physics large_swarm]
 [--accuracy 2000] [--cutoff-tol 0.03] [--regime [--regime-steps 100] [--regime-wall 900]
 [--regime-dims 2,3] [--regime-physics navigation,large_swarm]]``
 
-The sparse core's pair pass is compiled with numba where it imports
+The cut-off core's pair pass is compiled with numba where it imports
 (:mod:`swarm_envs.physics.compiled_pairs`); ``SWARM_ENVS_NUMBA=0`` times the numpy pass
 instead. The header says which ran, and how many threads numba uses.
 
@@ -23,7 +23,7 @@ env adapter does), for one swarm (B = 1, float64) with random actions drawn once
 ``--settle`` untimed steps (default 1, the warm-up; the first steps of a random start
 can need more substeps than the settled swarm); on a shared machine the medians are
 what a run sees. Beside the time,
-each row reports the physical state of the sparse run at its end: the mean
+each row reports the physical state of the cut-off run at its end: the mean
 nearest-neighbour distance, the expanse (mean distance to the centroid), the energy
 drift per agent since the reset (``(E − E_0)/N``; dissipation makes it negative, a
 diverging integration positive) and the substeps per step; a run that raises
@@ -32,12 +32,12 @@ diverging integration positive) and the substeps per step; a run that raises
 Rows: N = 100 … ``--max-n``; the dense core only up to ``--dense-max`` (its ``(N, N)``
 temporaries need about ``12 · 8 N²`` bytes). The crossover is then bisected
 (geometrically) between the largest N where the dense core wins and the smallest where
-the sparse core wins.
+the cut-off core wins.
 
 ``--regime``: instead of the timing table, the regime table of ``docs/large_swarms.md``:
 for both parameter sets (``--regime-physics``), N = 10 … ``--max-n`` (or ``--sizes``;
-the dense core below :data:`~swarm_envs.envs.sparse_core.SPARSE_MIN_AGENTS`, the sparse
-core from there), the passive swarm (zero actions) for ``--regime-steps`` steps of
+the dense core below :data:`~swarm_envs.envs.cores.cutoff.core.CUTOFF_MIN_AGENTS`, the
+cut-off core from there), the passive swarm (zero actions) for ``--regime-steps`` steps of
 ``dt = 0.1``: its state at the end (as above), the mean and largest substeps per step,
 the seconds per step, and the outcome: a run that raises ``SwarmUnstableError``
 (``on_unstable="raise"``, the default) is reported with the step and the message, one
@@ -51,8 +51,8 @@ k nearest neighbours) with the numpy cell list and with ``scipy.spatial.cKDTree`
 ``--accuracy N``: the per-agent force error of the cut-off at N agents after 1 and 20
 steps of zero or random actions, next to the bound of
 :func:`swarm_envs.physics.cutoff.force_error_bound` at the measured density and
-relative speed. ``--cutoff-tol``: the sparse core's tolerance (default
-:data:`~swarm_envs.envs.sparse_core.DEFAULT_CUTOFF_TOL`).
+relative speed. ``--cutoff-tol``: the cut-off core's tolerance (default
+:data:`~swarm_envs.envs.cores.cutoff.core.DEFAULT_CUTOFF_TOL`).
 """
 
 from __future__ import annotations
@@ -72,13 +72,17 @@ import numpy as np
 from swarm_envs import tune_allocator
 from swarm_envs.config import SwarmConfig, load_swarm_config
 from swarm_envs.envs.common import SwarmUnstableError
-from swarm_envs.envs.core import SwarmNavCore
-from swarm_envs.envs.sparse_core import DEFAULT_CUTOFF_TOL, SPARSE_MIN_AGENTS, SparseSwarmNavCore
+from swarm_envs.envs.cores.cutoff.core import (
+    CUTOFF_MIN_AGENTS,
+    DEFAULT_CUTOFF_TOL,
+    CutoffSwarmNavCore,
+)
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.physics import compiled_pairs, forces
 from swarm_envs.physics.cutoff import force_error_bound, sparse_forces
 from swarm_envs.physics.neighbors import CELL_MARGIN, REACH, CellList, knn, radius_pairs
 
-Core = type[SwarmNavCore] | type[SparseSwarmNavCore]
+Core = type[SwarmNavCore] | type[CutoffSwarmNavCore]
 
 #: The parameter sets a run can use (``--physics``).
 PHYSICS = ("navigation", "large_swarm")
@@ -94,8 +98,8 @@ def config(n: int, dim: int, physics: str = "navigation") -> SwarmConfig:
     return SwarmConfig(n_agents=n, dim=dim, init_density=density, max_steps=10**9)
 
 
-#: Keyword arguments of every SparseSwarmNavCore built here (set from the command line).
-SPARSE_KWARGS: dict[str, float] = {}
+#: Keyword arguments of every CutoffSwarmNavCore built here (set from the command line).
+CUTOFF_KWARGS: dict[str, float] = {}
 
 
 class RunState(NamedTuple):
@@ -120,7 +124,7 @@ class RunState(NamedTuple):
 
 def make_core(core_cls: Core, cfg: SwarmConfig) -> SwarmNavCore:
     """A core of ``core_cls`` for ``cfg``, reset with seed 0."""
-    kwargs = SPARSE_KWARGS if core_cls is SparseSwarmNavCore else {}
+    kwargs = CUTOFF_KWARGS if core_cls is CutoffSwarmNavCore else {}
     core = core_cls(cfg, **kwargs)
     core.reset(np.random.default_rng(0))
     return core
@@ -200,7 +204,7 @@ def neighbour_work(n: int, dim: int, repeats: int, physics: str) -> tuple[float,
     Returns ``(cell list, cKDTree or None, pairs)``.
     """
     cfg = config(n, dim, physics)
-    core = make_core(SparseSwarmNavCore, cfg)
+    core = make_core(CutoffSwarmNavCore, cfg)
     x = core.x[0]
     r_c, k = core.cutoff, max(cfg.n_neighbors, 1)
 
@@ -226,13 +230,13 @@ def neighbour_work(n: int, dim: int, repeats: int, physics: str) -> tuple[float,
 
 
 def crossover(dim: int, lo: int, hi: int, repeats: int, physics: str) -> int:
-    """Bisect (geometrically) the N where the sparse core starts to win, in ``(lo, hi]``."""
+    """Bisect (geometrically) the N where the cut-off core starts to win, in ``(lo, hi]``."""
     while hi > lo * 1.15 and hi - lo > 8:
         mid = round(math.sqrt(lo * hi))
         dense = time_step(SwarmNavCore, mid, dim, repeats, physics)[0]
-        sparse = time_step(SparseSwarmNavCore, mid, dim, repeats, physics)[0]
-        print(f"  bisect N = {mid}: dense {dense * 1e3:.2f} ms, sparse {sparse * 1e3:.2f} ms")
-        if sparse < dense:
+        cut = time_step(CutoffSwarmNavCore, mid, dim, repeats, physics)[0]
+        print(f"  bisect N = {mid}: dense {dense * 1e3:.2f} ms, cut-off {cut * 1e3:.2f} ms")
+        if cut < dense:
             hi = mid
         else:
             lo = mid
@@ -243,7 +247,7 @@ def accuracy(n: int, dim: int, cutoff_tol: float, physics: str) -> None:
     """Largest per-agent force error of the cut-off vs its bound, at N agents."""
     cfg = config(n, dim, physics)
     for policy in ("zero", "random"):
-        core = SparseSwarmNavCore(cfg, cutoff_tol=cutoff_tol)
+        core = CutoffSwarmNavCore(cfg, cutoff_tol=cutoff_tol)
         core.reset(np.random.default_rng(0))
         rng = np.random.default_rng(1)
         for steps in (1, 20):
@@ -282,7 +286,7 @@ def regime(
     """The regime table (see the module docstring)."""
     print(
         f"passive swarms (zero actions), {steps} steps of dt = 0.1 from the reset (seed 0); "
-        f"dense core below N = {SPARSE_MIN_AGENTS}, sparse core from there"
+        f"dense core below N = {CUTOFF_MIN_AGENTS}, cut-off core from there"
     )
     print()
     head = "| physics | d | N | start radius | NND | expanse | (E − E0)/N | substeps/step "
@@ -294,7 +298,7 @@ def regime(
         for dim in dims:
             for n in sizes:
                 cfg = config(n, dim, physics)
-                cls = SparseSwarmNavCore if n >= SPARSE_MIN_AGENTS else SwarmNavCore
+                cls = CutoffSwarmNavCore if n >= CUTOFF_MIN_AGENTS else SwarmNavCore
                 times, state = run_steps(make_core(cls, cfg), None, steps, wall)
                 per_step = statistics.median(times) if times else math.nan
                 line = f"| {physics} | {dim} | {n:,} | {cfg.start_radius:.1f} | {state.cells()}"
@@ -312,16 +316,16 @@ def header(args: argparse.Namespace) -> None:
         pair_pass += f"{numba.config.NUMBA_NUM_THREADS} threads)"
     else:
         pair_pass = "numpy (numba missing, or SWARM_ENVS_NUMBA=0)"
-    print(f"sparse pair pass: {pair_pass}")
+    print(f"cut-off pair pass: {pair_pass}")
     for physics in PHYSICS:
-        probe = SparseSwarmNavCore(config(10, args.dim, physics), **SPARSE_KWARGS)
+        probe = CutoffSwarmNavCore(config(10, args.dim, physics), **CUTOFF_KWARGS)
         p = probe.cfg.physics
         print(
             f"{physics}: C·l² = {p.h_stability:.3g}, C·l³ = {p.h_stability_3d:.3g}; cut-off "
             f"r_c = {probe.cutoff:.3f} (cutoff_tol {probe.cutoff_tol}, cutoff_speed "
             f"{probe.cutoff_speed}); init_density {probe.cfg.init_density:.3g} (d = {args.dim})"
         )
-    print(f"SPARSE_MIN_AGENTS = {SPARSE_MIN_AGENTS}")
+    print(f"CUTOFF_MIN_AGENTS = {CUTOFF_MIN_AGENTS}")
     print()
 
 
@@ -343,7 +347,7 @@ def main() -> None:
     parser.add_argument("--regime-physics", default=",".join(PHYSICS))
     parser.add_argument("--regime-wall", type=float, default=900.0)
     args = parser.parse_args()
-    SPARSE_KWARGS["cutoff_tol"] = args.cutoff_tol
+    CUTOFF_KWARGS["cutoff_tol"] = args.cutoff_tol
     SETTLE[0] = max(1, args.settle)
     header(args)
     if args.regime:
@@ -355,11 +359,11 @@ def main() -> None:
     dim, reps, physics = args.dim, args.repeats, args.physics
     print(
         f"timing: physics {physics}, d = {dim}, {SETTLE[0]} untimed steps, then {reps} timed; "
-        "the state columns are the sparse run's (substeps/step over all its steps)"
+        "the state columns are the cut-off run's (substeps/step over all its steps)"
     )
     print()
-    head = "| N | start radius | dense s/step (median) | sparse s/step (median) | dense best | "
-    head += "sparse best | dense / sparse | NND | expanse | (E − E0)/N | substeps/step |"
+    head = "| N | start radius | dense s/step (median) | cut-off s/step (median) | dense best | "
+    head += "cut-off best | dense / cut-off | NND | expanse | (E − E0)/N | substeps/step |"
     if args.kdtree:
         head += " pairs/agent | neighbours: cell list s | cKDTree s |"
     print(head)
@@ -369,30 +373,30 @@ def main() -> None:
         sizes = [int(n) for n in args.sizes.split(",")]
     winner: dict[int, str] = {}
     for n in sizes:
-        sparse = time_step(SparseSwarmNavCore, n, dim, reps, physics)
+        cut = time_step(CutoffSwarmNavCore, n, dim, reps, physics)
         dense = time_step(SwarmNavCore, n, dim, reps, physics) if n <= args.dense_max else None
         line = f"| {n:,} | {config(n, dim, physics).start_radius:.1f} | "
         if dense is None:
-            line += f"— | {sparse[0]:.4f} | — | {sparse[1]:.4f} | — |"
+            line += f"— | {cut[0]:.4f} | — | {cut[1]:.4f} | — |"
         else:
             line += (
-                f"{dense[0]:.4f} | {sparse[0]:.4f} | {dense[1]:.4f} | {sparse[1]:.4f} | "
-                f"{dense[0] / sparse[0]:.1f} |"
+                f"{dense[0]:.4f} | {cut[0]:.4f} | {dense[1]:.4f} | {cut[1]:.4f} | "
+                f"{dense[0] / cut[0]:.1f} |"
             )
-            winner[n] = "sparse" if sparse[0] < dense[0] else "dense"
-        line += f" {sparse[2].cells()}"
+            winner[n] = "cutoff" if cut[0] < dense[0] else "dense"
+        line += f" {cut[2].cells()}"
         if args.kdtree:
             ours, tree, pairs = neighbour_work(n, dim, reps, physics)
             line += f" {pairs / n:.0f} | {ours:.4f} | {'—' if tree is None else f'{tree:.4f}'} |"
         print(line, flush=True)
     print()
     lo = max([n for n, w in winner.items() if w == "dense"], default=10)
-    hi = min([n for n, w in winner.items() if w == "sparse" and n > lo], default=None)
+    hi = min([n for n, w in winner.items() if w == "cutoff" and n > lo], default=None)
     if hi is None:
         print("the dense core won at the largest measured N: no crossover below --dense-max")
     else:
         n_cross = crossover(dim, lo, hi, max(reps, 15), physics)
-        print(f"crossover: the sparse core wins from about N = {n_cross} (d = {dim})")
+        print(f"crossover: the cut-off core wins from about N = {n_cross} (d = {dim})")
     if args.accuracy:
         print()
         print(f"per-agent force error of the cut-off at N = {args.accuracy} (d = {dim}):")

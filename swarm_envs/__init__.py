@@ -3,8 +3,8 @@
 ``import swarm_envs`` registers ``swarm_envs/SwarmNav-v0``, ``swarm_envs/SwarmInformed-v0``
 and ``swarm_envs/SwarmMill-v0`` (one per task of the package, :data:`TASK_IDS`; a task
 registered later with :func:`register_task` brings its own) with Gymnasium:
-``gym.make`` builds :class:`~swarm_envs.envs.swarm_nav.SwarmNavEnv` with that ``task``,
-``gym.make_vec`` the batched :class:`~swarm_envs.envs.gym_vector.SwarmNavVectorEnv`
+``gym.make`` builds :class:`~swarm_envs.envs.adapters.swarm_nav.SwarmNavEnv` with that ``task``,
+``gym.make_vec`` the batched :class:`~swarm_envs.envs.adapters.gym_vector.SwarmNavVectorEnv`
 (its ``vector_entry_point``); the PettingZoo modules are ``swarm_nav_v0``,
 ``swarm_informed_v0`` and ``swarm_mill_v0``. The
 episode length is the config's ``max_steps`` alone: the env truncates itself there, and

@@ -65,7 +65,11 @@ if TYPE_CHECKING:
 DYNAMICS = SHIPPED
 
 #: How the env computes a step (``SwarmConfig.backend``); see ``swarm_envs.envs.backends``.
-BACKENDS = ("auto", "numpy", "sparse", "native", "torch")
+BACKENDS = ("auto", "numpy", "cutoff", "native", "torch")
+
+#: Older names of backends, still accepted (with a :class:`DeprecationWarning`) and
+#: replaced by the name they stand for when a config is validated.
+BACKEND_ALIASES = {"sparse": "cutoff"}
 
 #: What a step that goes unstable does (``SwarmConfig.on_unstable``).
 ON_UNSTABLE = ("raise", "truncate")
@@ -334,12 +338,13 @@ class SwarmConfig:
     (:class:`~swarm_envs.perturbations.Perturbations`); none by default."""
     backend: str = "auto"
     """How a step is computed, one of :data:`BACKENDS`: ``"numpy"`` (dense, every
-    model), ``"sparse"`` (cut-off + cell list, large swarms), ``"native"`` (the step in
+    model), ``"cutoff"`` (cut-off + cell list, large swarms), ``"native"`` (the step in
     C, built at first use), ``"torch"`` (one fused, compiled step; CPU or CUDA) or
     ``"auto"``, which picks by measured speed among the backends that support the config
     (``swarm_envs.envs.backends.select_backend``). Results agree to float tolerance
-    (``"sparse"``: up to its documented cut-off error). A named backend that cannot run
-    the config falls back to ``"auto"``'s pick with a warning."""
+    (``"cutoff"``: up to its documented cut-off error). A named backend that cannot run
+    the config falls back to ``"auto"``'s pick with a warning. ``"sparse"``, the cut-off
+    backend's former name, is accepted and becomes ``"cutoff"`` (deprecated)."""
     device: str = "cpu"
     """Torch device of the ``"torch"`` backend (``"cpu"``, ``"cuda"``, ``"cuda:1"``...)."""
 
@@ -357,8 +362,19 @@ class SwarmConfig:
             raise ValueError(
                 f"{owner}.on_unstable must be one of {ON_UNSTABLE}, got {self.on_unstable!r}"
             )
+        if isinstance(self.backend, str) and self.backend in BACKEND_ALIASES:
+            new = BACKEND_ALIASES[self.backend]
+            warnings.warn(
+                f"{owner}.backend={self.backend!r} is deprecated: the backend is called {new!r}",
+                DeprecationWarning,
+                stacklevel=3,
+            )
+            object.__setattr__(self, "backend", new)
         if self.backend not in BACKENDS:
-            raise ValueError(f"{owner}.backend must be one of {BACKENDS}, got {self.backend!r}")
+            raise ValueError(
+                f"{owner}.backend must be one of {BACKENDS} (or a former name, "
+                f"{', '.join(map(repr, BACKEND_ALIASES))}), got {self.backend!r}"
+            )
         if not isinstance(self.device, str) or not self.device:
             raise ValueError(f"{owner}.device must be a torch device name, got {self.device!r}")
         self._check_model_sections(owner)
@@ -656,6 +672,7 @@ def load_swarm_config(
 
 __all__ = [
     "BACKENDS",
+    "BACKEND_ALIASES",
     "CONFIG_ROOT",
     "DYNAMICS",
     "GOAL_DISTANCE_SCALES",

@@ -386,7 +386,7 @@ _SHIPPED_SPECS = (
         source="social potential, Mabrouk & McInnes",
         action="a force added to ``F_i`` (Mabrouk & McInnes eq. 13)",
         substeps=f"{_RULES}:social_potential_substeps",
-        backends=("numpy", "sparse", "native", "torch"),
+        backends=("numpy", "cutoff", "native", "torch"),
         baseline="potential",
         applies_masks=True,
     ),

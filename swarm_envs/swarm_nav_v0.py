@@ -18,11 +18,11 @@ from pettingzoo.utils import wrappers
 from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from pettingzoo.utils.env import AECEnv
 
-from swarm_envs.envs.inputs import check_agent_action
-from swarm_envs.envs.swarm_nav import SwarmNavParallelEnv
+from swarm_envs.envs.adapters.inputs import check_agent_action
+from swarm_envs.envs.adapters.swarm_nav import SwarmNavParallelEnv
 
 if TYPE_CHECKING:
-    from swarm_envs.envs.vec_env import SwarmNavVecEnv
+    from swarm_envs.envs.adapters.vec_env import SwarmNavVecEnv
 
 
 class _CheckedParallelToAEC(parallel_to_aec_wrapper):
@@ -54,23 +54,24 @@ def parallel_env(**kwargs: Any) -> SwarmNavParallelEnv:
 
 
 def raw_env(**kwargs: Any) -> AECEnv:
-    """The AEC env from :func:`parallel_env`, as PettingZoo's ``parallel_to_aec`` makes it
-    (with its order-enforcing wrapper), checking each action as it is given."""
-    return wrappers.OrderEnforcingWrapper(_CheckedParallelToAEC(parallel_env(**kwargs)))
+    """The bare AEC env (PettingZoo's convention): :func:`parallel_env` converted as
+    PettingZoo's ``parallel_to_aec`` does, checking each action as it is given, without
+    wrappers."""
+    return _CheckedParallelToAEC(parallel_env(**kwargs))
 
 
 def env(**kwargs: Any) -> AECEnv:
-    """The AEC env with PettingZoo's order-enforcing wrapper."""
+    """The AEC env: :func:`raw_env` in PettingZoo's order-enforcing wrapper (once)."""
     return wrappers.OrderEnforcingWrapper(raw_env(**kwargs))
 
 
 def vec_env(n_swarms: int = 1, **kwargs: Any) -> SwarmNavVecEnv:
     """A batched SB3 ``VecEnv`` with ``n_swarms × n_agents`` slots (one shared policy).
 
-    See :class:`swarm_envs.envs.vec_env.SwarmNavVecEnv`. Imported lazily (it needs SB3,
+    See :class:`swarm_envs.envs.adapters.vec_env.SwarmNavVecEnv`. Imported lazily (it needs SB3,
     and so torch).
     """
-    from swarm_envs.envs.vec_env import SwarmNavVecEnv
+    from swarm_envs.envs.adapters.vec_env import SwarmNavVecEnv
 
     return SwarmNavVecEnv(n_swarms, **kwargs)
 

@@ -269,8 +269,8 @@ def _register_gymnasium(name: str, env_id: str) -> None:
         return
     register(
         id=env_id,
-        entry_point="swarm_envs.envs.swarm_nav:SwarmNavEnv",
-        vector_entry_point="swarm_envs.envs.gym_vector:SwarmNavVectorEnv",
+        entry_point="swarm_envs.envs.adapters.swarm_nav:SwarmNavEnv",
+        vector_entry_point="swarm_envs.envs.adapters.gym_vector:SwarmNavVectorEnv",
         kwargs=task,
     )
 

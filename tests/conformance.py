@@ -29,7 +29,7 @@ from hypothesis import strategies as st
 
 from swarm_envs.config import DYNAMICS, INTEGRATORS, SwarmConfig, config_from_mapping
 from swarm_envs.envs import backends
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.perturbed import PerturbedCore
 from swarm_envs.envs.task import ranked_neighbors, stat_keys
 from swarm_envs.envs.task.agent_status import ABSENT, ACTIVE, FAILED, FROZEN, masks
@@ -90,7 +90,7 @@ class Variant:
             cls = backends._core_class(self.backend)
             if self.backend == "torch":
                 core = cls(cfg, batch=BATCH, dtype=self.dtype, compile=False)
-            elif self.backend == "sparse":  # a cut-off past every pair: exact up to round-off
+            elif self.backend == "cutoff":  # a cut-off past every pair: exact up to round-off
                 core = cls(cfg, batch=BATCH, dtype=self.dtype, cutoff_tol=1e-300)
             else:
                 core = cls(cfg, batch=BATCH, dtype=self.dtype)
@@ -110,7 +110,7 @@ def reference(cfg: SwarmConfig) -> Any:
 
 VARIANTS = (
     Variant("numpy", np.float32),
-    Variant("sparse", np.float64),
+    Variant("cutoff", np.float64),
     Variant("torch", np.float64),
     Variant("torch", np.float32),
     Variant("native", np.float64),

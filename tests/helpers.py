@@ -14,7 +14,7 @@ import numpy as np
 import torch
 
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs.core import STAT_KEYS
+from swarm_envs.envs.task import STAT_KEYS
 
 RngStates = tuple[Any, Any, torch.Tensor]
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 
 import gymnasium as gym
@@ -13,16 +14,16 @@ from helpers import strict_warnings
 from pettingzoo.test import parallel_api_test
 
 from swarm_envs import ENV_ID, swarm_nav_v0
-from swarm_envs.config import SwarmConfig
+from swarm_envs.config import SwarmConfig, load_swarm_config
 from swarm_envs.envs.backends import (
-    SPARSE_MIN_AGENTS,
+    CUTOFF_MIN_AGENTS,
     TORCH_MIN_SLOTS,
     make_core,
     select_backend,
     unsupported,
 )
-from swarm_envs.envs.core import SwarmNavCore
-from swarm_envs.envs.sparse_core import SparseSwarmNavCore
+from swarm_envs.envs.cores.cutoff.core import CutoffSwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 
 
 def test_auto_picks_by_model_size_and_batch(monkeypatch):
@@ -31,18 +32,18 @@ def test_auto_picks_by_model_size_and_batch(monkeypatch):
     native = backends.unsupported(SwarmConfig(), "native") is None
     small = "native" if native else "numpy"
     assert select_backend(SwarmConfig()) == small
-    assert select_backend(SwarmConfig(n_agents=SPARSE_MIN_AGENTS)) == "sparse"
-    assert select_backend(SwarmConfig(n_agents=SPARSE_MIN_AGENTS - 1)) == small
+    assert select_backend(SwarmConfig(n_agents=CUTOFF_MIN_AGENTS)) == "cutoff"
+    assert select_backend(SwarmConfig(n_agents=CUTOFF_MIN_AGENTS - 1)) == small
     assert select_backend(SwarmConfig(n_agents=32), batch=TORCH_MIN_SLOTS // 32) == (
         "native" if native else "torch"
     )
     for dynamics in ("zone", "piecewise", "lagrangian"):
-        cfg = SwarmConfig(dynamics=dynamics, n_agents=SPARSE_MIN_AGENTS)
+        cfg = SwarmConfig(dynamics=dynamics, n_agents=CUTOFF_MIN_AGENTS)
         assert select_backend(cfg, batch=1000) == "numpy"
     verlet = SwarmConfig(integrator="velocity_verlet", n_agents=32)
     assert select_backend(verlet, batch=10_000) == "numpy"
     assert select_backend(SwarmConfig(device="cuda")) == "torch"
-    assert select_backend(SwarmConfig(backend="sparse")) == "sparse"
+    assert select_backend(SwarmConfig(backend="cutoff")) == "cutoff"
     # Without the C step: numpy for few slots, torch from TORCH_MIN_SLOTS.
     monkeypatch.setattr(
         backends, "unsupported", lambda cfg, b: "not available" if b == "native" else None
@@ -54,7 +55,7 @@ def test_auto_picks_by_model_size_and_batch(monkeypatch):
 @pytest.mark.parametrize(
     ("kwargs", "reason", "fallback"),
     [
-        ({"backend": "sparse", "dynamics": "zone"}, "social_potential", "numpy"),
+        ({"backend": "cutoff", "dynamics": "zone"}, "social_potential", "numpy"),
         ({"backend": "torch", "integrator": "velocity_verlet"}, "semi_implicit_euler", "numpy"),
         ({"backend": "native", "dynamics": "lagrangian"}, "social_potential", "numpy"),
     ],
@@ -87,10 +88,22 @@ def test_impossible_backend_choices_are_value_errors(kwargs, match):
         make_core(SwarmConfig(**kwargs))
 
 
+def test_the_former_name_sparse_is_the_cutoff_backend():
+    """``backend="sparse"`` (the cut-off backend's former name) is accepted, with a
+    DeprecationWarning, and the config holds ``"cutoff"``."""
+    with pytest.warns(DeprecationWarning, match="'sparse' is deprecated"):
+        cfg = SwarmConfig(n_agents=CUTOFF_MIN_AGENTS, backend="sparse")
+    assert cfg.backend == "cutoff" and select_backend(cfg) == "cutoff"
+    assert dataclasses.replace(cfg, n_agents=8).backend == "cutoff"  # no second warning
+    with pytest.warns(DeprecationWarning):
+        loaded = load_swarm_config(None, {"backend": "sparse"})
+    assert loaded == SwarmConfig(backend="cutoff")
+
+
 def test_every_core_implements_the_protocol():
     from swarm_envs.envs.protocol import Core
 
-    for backend in ("numpy", "sparse", "native", "torch"):
+    for backend in ("numpy", "cutoff", "native", "torch"):
         cfg = SwarmConfig(n_agents=4, backend=backend)
         if unsupported(cfg, backend) is not None:
             continue
@@ -98,34 +111,34 @@ def test_every_core_implements_the_protocol():
         assert isinstance(core, Core) and core.backend == backend
 
 
-def test_large_swarms_run_on_the_sparse_core_through_every_api():
-    n = SPARSE_MIN_AGENTS
+def test_large_swarms_run_on_the_cutoff_core_through_every_api():
+    n = CUTOFF_MIN_AGENTS
     env = gym.make(ENV_ID, n_agents=n, init_radius=15.0)
-    assert isinstance(env.unwrapped.core, SparseSwarmNavCore)
+    assert isinstance(env.unwrapped.core, CutoffSwarmNavCore)
     obs, _ = env.reset(seed=0)
     obs, reward, *_ = env.step(np.zeros(env.action_space.shape, np.float32))
     assert np.isfinite(obs).all() and np.isfinite(reward)
     penv = swarm_nav_v0.parallel_env(n_agents=n, init_radius=15.0)
-    assert isinstance(penv.core, SparseSwarmNavCore)
+    assert isinstance(penv.core, CutoffSwarmNavCore)
     venv = swarm_nav_v0.vec_env(2, n_agents=n, init_radius=15.0)
-    assert venv.backend == "sparse" and all(isinstance(c, SparseSwarmNavCore) for c in venv.cores)
+    assert venv.backend == "cutoff" and all(isinstance(c, CutoffSwarmNavCore) for c in venv.cores)
     venv.reset()
     assert np.isfinite(venv.step(np.zeros((2 * n, 2), np.float32))[0]).all()
 
 
-def test_checkers_pass_on_the_sparse_backend():
+def test_checkers_pass_on_the_cutoff_backend():
     with strict_warnings():
-        gym_check_env(gym.make(ENV_ID, backend="sparse", n_agents=12).unwrapped)
-        parallel_api_test(swarm_nav_v0.parallel_env(backend="sparse", n_agents=6), num_cycles=100)
+        gym_check_env(gym.make(ENV_ID, backend="cutoff", n_agents=12).unwrapped)
+        parallel_api_test(swarm_nav_v0.parallel_env(backend="cutoff", n_agents=6), num_cycles=100)
 
 
 @pytest.mark.parametrize("integrator", ["semi_implicit_euler", "velocity_verlet"])
-def test_sparse_and_numpy_vec_envs_agree_with_a_long_cutoff(integrator: str):
+def test_cutoff_and_numpy_vec_envs_agree_with_a_long_cutoff(integrator: str):
     def rollout(backend: str) -> np.ndarray:
         venv = swarm_nav_v0.vec_env(
             3, n_agents=12, backend=backend, integrator=integrator, dtype=np.float64
         )
-        if backend == "sparse":  # a cut-off past every pair: exact up to round-off
+        if backend == "cutoff":  # a cut-off past every pair: exact up to round-off
             for core in venv.cores:
                 core.cutoff_tol = 1e-300
         venv.seed(3)
@@ -135,7 +148,7 @@ def test_sparse_and_numpy_vec_envs_agree_with_a_long_cutoff(integrator: str):
             out.append(venv.step(rng.uniform(-1, 1, (36, 2)))[0])
         return np.stack(out)
 
-    np.testing.assert_allclose(rollout("sparse"), rollout("numpy"), rtol=0, atol=1e-5)
+    np.testing.assert_allclose(rollout("cutoff"), rollout("numpy"), rtol=0, atol=1e-5)
 
 
 def test_dense_core_is_the_numpy_backend():

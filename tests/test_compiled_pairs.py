@@ -9,7 +9,7 @@ import pytest
 from test_cutoff import direct_pair_sums
 
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs.sparse_core import SparseSwarmNavCore
+from swarm_envs.envs.cores.cutoff.core import CutoffSwarmNavCore
 from swarm_envs.physics import SocialPotentialParams, compiled_pairs
 from swarm_envs.physics.cutoff import PairAccumulator, PairSums
 from swarm_envs.physics.neighbors import CELL_MARGIN, REACH, CellList, knn
@@ -158,14 +158,14 @@ def test_an_installed_numba_that_fails_to_import_falls_back_with_a_warning(monke
 
 
 @pytest.mark.parametrize("d", [2, 3])
-def test_sparse_core_steps_alike_with_and_without_numba(monkeypatch, d: int) -> None:
+def test_cutoff_core_steps_alike_with_and_without_numba(monkeypatch, d: int) -> None:
     cfg = SwarmConfig(n_agents=600, dim=d, init_radius=6.0, n_neighbors=4)
     rng = np.random.default_rng(3)
     actions = rng.uniform(-1, 1, (8, 2, 600, d))
     runs = []
     for flag in ("1", "0"):
         monkeypatch.setenv("SWARM_ENVS_NUMBA", flag)
-        core = SparseSwarmNavCore(cfg, batch=2)
+        core = CutoffSwarmNavCore(cfg, batch=2)
         core.reset(np.random.default_rng(0))
         out = []
         for a in actions:

@@ -34,7 +34,7 @@ from hypothesis import HealthCheck, given, settings
 from swarm_envs import swarm_nav_v0
 from swarm_envs.config import DYNAMICS, RewardWeights, SwarmConfig
 from swarm_envs.envs import backends
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.task import REWARD_TERMS
 from swarm_envs.perturbations import Perturbations
 from swarm_envs.physics import SocialPotentialParams
@@ -183,7 +183,7 @@ def test_other_models_are_refused_with_a_reason_and_run_on_numpy(cfg):
     # discrete rules (zones, turning limits) make float32 and float64 diverge, so they
     # are checked for finite results in both, not against each other.
     # With observe_status a backend without agent statuses may name that first.
-    for backend in ("sparse", "torch", "native"):
+    for backend in ("cutoff", "torch", "native"):
         reason = backends.unsupported(cfg, backend)
         if cfg.dynamics != "social_potential":
             assert reason and ("social_potential" in reason or "statuses" in reason)
@@ -227,7 +227,7 @@ BROKEN_CONFIG = SwarmConfig(n_agents=12, n_neighbors=4, collision_radius=0.6, go
 
 def test_a_perturbed_reward_term_in_one_backend_is_caught(monkeypatch):
     # The torch core's execution of the reward with the collision term doubled.
-    from swarm_envs.envs import torch_step
+    from swarm_envs.envs.cores.torch import step as torch_step
     from swarm_envs.envs.task import reward as shared_reward
 
     def broken(weights, inputs):
@@ -327,7 +327,7 @@ def test_a_new_reward_term_is_one_definition_on_every_backend(monkeypatch):
     base = SwarmConfig(n_agents=6, max_steps=50, reward=WithSpread())
     cfg = dataclasses.replace(base, reward=WithSpread(spread=0.5))
     actions = np.random.default_rng(1).uniform(-1, 1, (3, 6, 2))
-    for backend in ("numpy", "sparse", "torch", "native"):
+    for backend in ("numpy", "cutoff", "torch", "native"):
         if backends.unsupported(base, backend):
             continue
         rewards = []

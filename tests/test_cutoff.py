@@ -81,7 +81,7 @@ def test_cutoff_radius_closed_forms() -> None:
     assert r == pytest.approx(1.5 * math.log(1.4 / 1e-3), 1e-10)
     assert cutoff_radius(alignment, 1e-3, speed=0.0) == 0.0  # no alignment at zero speed
     assert cutoff_radius(SocialPotentialParams(C_a=0, C_r=0, C_o=0), 1e-9) == 0.0
-    # The defaults of the sparse core with the navigation set.
+    # The defaults of the cut-off core with the navigation set.
     assert cutoff_radius(SocialPotentialParams.navigation(), 0.03) == pytest.approx(5.0752, 1e-4)
 
 

@@ -72,7 +72,7 @@ def test_aliased_warmup_arguments_keep_the_guards():
 
 
 def test_the_core_calls_its_compiled_functions_directly_with_the_guarded_results():
-    from swarm_envs.envs.torch_core import TorchSwarmNavCore
+    from swarm_envs.envs.cores.torch.core import TorchSwarmNavCore
 
     cfg = SwarmConfig(n_agents=6, n_neighbors=3, dt=0.3, max_substeps=4, max_steps=20)
     core = TorchSwarmNavCore(cfg, batch=64, dtype=np.float64, compile=True)
@@ -87,9 +87,9 @@ def test_the_core_calls_its_compiled_functions_directly_with_the_guarded_results
 
 
 def test_a_replaced_reward_reaches_the_next_compiled_core(monkeypatch):
-    from swarm_envs.envs import torch_step
+    from swarm_envs.envs.cores.torch import step as torch_step
+    from swarm_envs.envs.cores.torch.core import TorchSwarmNavCore
     from swarm_envs.envs.task import reward as shared_reward
-    from swarm_envs.envs.torch_core import TorchSwarmNavCore
 
     cfg = SwarmConfig(n_agents=5, n_neighbors=2, max_steps=50)
     actions = np.random.default_rng(1).uniform(-1, 1, (2, 5, 2))

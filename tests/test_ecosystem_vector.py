@@ -16,8 +16,8 @@ import pytest
 from gymnasium.vector import AutoresetMode
 
 from swarm_envs import ENV_ID, swarm_nav_v0
-from swarm_envs.envs.gym_vector import SwarmNavVectorEnv
-from swarm_envs.envs.vec_env import SlotEpisodesWarning
+from swarm_envs.envs.adapters.gym_vector import SwarmNavVectorEnv
+from swarm_envs.envs.adapters.vec_env import SlotEpisodesWarning
 
 SMALL: dict[str, Any] = {"n_agents": 5, "max_steps": 6}
 
@@ -155,7 +155,7 @@ def _step_in_parent(backend: str, n_agents: int, n_swarms: int) -> None:
 
 
 @pytest.mark.skipif(mp.get_start_method() != "fork", reason="the hazard is fork()")
-@pytest.mark.parametrize("backend, n_agents, n_swarms", [("sparse", 600, 1), ("native", 8, 4)])
+@pytest.mark.parametrize("backend, n_agents, n_swarms", [("cutoff", 600, 1), ("native", 8, 4)])
 def test_async_make_vec_works_after_the_parent_ran_openmp(
     backend: str, n_agents: int, n_swarms: int
 ):
@@ -200,10 +200,10 @@ def test_forked_child_steps_a_native_batch_after_the_parent_did():
 
 
 @pytest.mark.skipif(mp.get_start_method() != "fork", reason="the hazard is fork()")
-@pytest.mark.parametrize("backend, n_agents", [("sparse", 600), ("native", 8)])
+@pytest.mark.parametrize("backend, n_agents", [("cutoff", 600), ("native", 8)])
 def test_supersuit_multiprocess_concat_after_the_parent_ran_openmp(backend: str, n_agents: int):
     ss = pytest.importorskip("supersuit")
-    _step_in_parent(backend, n_agents, 1 if backend == "sparse" else 4)
+    _step_in_parent(backend, n_agents, 1 if backend == "cutoff" else 4)
     par = swarm_nav_v0.parallel_env(n_agents=n_agents, backend=backend)
     vec = ss.pettingzoo_env_to_vec_env_v1(par)
     venv = ss.concat_vec_envs_v1(vec, 2, num_cpus=2, base_class="stable_baselines3")

@@ -24,7 +24,7 @@ from agents import (
 from agents.vanualailai_sharma import target_potential
 from swarm_envs import ENV_ID, swarm_nav_v0
 from swarm_envs.config import DYNAMICS, SwarmConfig, config_from_mapping
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.physics import (
     LagrangianParams,
     PiecewiseParams,

@@ -82,7 +82,7 @@ def test_registered_spec_has_no_time_limit():
     # The episode length is the config's max_steps alone: no TimeLimit is registered.
     spec = gym.spec(ENV_ID)
     assert spec.max_episode_steps is None
-    assert spec.vector_entry_point == "swarm_envs.envs.gym_vector:SwarmNavVectorEnv"
+    assert spec.vector_entry_point == "swarm_envs.envs.adapters.gym_vector:SwarmNavVectorEnv"
 
 
 @pytest.mark.parametrize("max_steps", [7, None, 1000])

@@ -23,8 +23,10 @@ from pettingzoo.test import (
     render_test,
     seed_test,
 )
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
+from pettingzoo.utils.wrappers import BaseWrapper, OrderEnforcingWrapper
 
-from swarm_envs import ENV_ID, swarm_nav_v0
+from swarm_envs import ENV_ID, swarm_informed_v0, swarm_mill_v0, swarm_nav_v0
 from swarm_envs.envs import OBS_BOUND, STAT_KEYS, SwarmNavParallelEnv, observation_size
 
 
@@ -62,6 +64,27 @@ def test_parallel_api_test_single_agent():
 def test_aec_api_test(dim: int, cycles: int):
     with strict_warnings():
         api_test(swarm_nav_v0.env(dim=dim), num_cycles=cycles)
+
+
+@pytest.mark.parametrize("module", [swarm_nav_v0, swarm_informed_v0, swarm_mill_v0])
+def test_raw_env_is_bare_and_env_wraps_it_once(module: Any):
+    """PettingZoo's convention: ``raw_env`` the bare AEC env (``parallel_to_aec`` of the
+    parallel env, here checking each action as it is given), ``env`` that env in the
+    order-enforcing wrapper, once."""
+    raw = module.raw_env(n_agents=3)
+    assert isinstance(raw, parallel_to_aec_wrapper) and not isinstance(raw, BaseWrapper)
+    wrapped = module.env(n_agents=3)
+    assert isinstance(wrapped, OrderEnforcingWrapper)
+    assert isinstance(wrapped.env, parallel_to_aec_wrapper)
+    assert not isinstance(wrapped.env, BaseWrapper)
+    assert wrapped.unwrapped.cfg.task == raw.unwrapped.cfg.task
+    with pytest.raises(AttributeError, match="reset"):  # the wrapper's order check
+        wrapped.agent_selection  # noqa: B018
+    raw.reset(seed=0)
+    with pytest.raises(ValueError, match="action of agent_0"):  # checked as it is given
+        raw.step(np.array([np.nan, 0.0], np.float32))
+    raw.step(np.zeros(2, np.float32))
+    assert raw.agent_selection == "agent_1"
 
 
 def test_parallel_seed_test():

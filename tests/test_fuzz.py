@@ -33,7 +33,7 @@ from hypothesis import strategies as st
 
 from swarm_envs import SwarmUnstableError
 from swarm_envs.config import INTEGRATORS, SwarmConfig
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.task.observation import OBS_BOUND
 from swarm_envs.perturbations import Perturbations
 
@@ -58,7 +58,7 @@ def _settings(examples: int) -> settings:
 #: where it is built), the torch core plain and compiled.
 STATUS_VARIANTS = (
     ("numpy-float32", Variant("numpy", np.float32), None),
-    ("sparse-float64", Variant("sparse", np.float64), None),
+    ("cutoff-float64", Variant("cutoff", np.float64), None),
     ("torch-plain-float64", Variant("torch", np.float64), False),
     ("torch-plain-float32", Variant("torch", np.float32), False),
     ("torch-compiled-float64", Variant("torch", np.float64), True),
@@ -82,7 +82,7 @@ def _status_cores(name: str, variant: Variant, compiled: bool | None) -> tuple:
             ours = variant.make(cfg).inner  # the core itself: the test gives the statuses
         else:
             from swarm_envs._runtime.torch_compile import compile_support
-            from swarm_envs.envs.torch_core import TorchSwarmNavCore
+            from swarm_envs.envs.cores.torch.core import TorchSwarmNavCore
 
             if compiled and compile_support("cpu") is not None:
                 pytest.skip(f"torch.compile unavailable: {compile_support('cpu')}")
@@ -122,7 +122,7 @@ def test_any_status_sequence_matches_the_reference(name, variant, compiled, sequ
 
 
 def _backend_names() -> list[str]:
-    return ["numpy", "sparse", "torch", "native"]
+    return ["numpy", "cutoff", "torch", "native"]
 
 
 def _make(cfg: SwarmConfig, backend: str, dtype) -> object | None:
@@ -260,7 +260,7 @@ def test_verlet_at_a_large_step_is_integrated_stably():
     # dt=5 with velocity Verlet: its explicit damping is stable only to h·γ < 1, half
     # of Euler's edge; the rule of that integrator keeps the swarm bounded.
     env_cfg = SwarmConfig(integrator="velocity_verlet", dt=5.0, n_agents=10)
-    for backend in ("numpy", "sparse"):
+    for backend in ("numpy", "cutoff"):
         core = _make(env_cfg, backend, np.float64)
         assert run_checked(core, ["uniform"] * 40, seed=0) == 40
         assert np.abs(core.v).max() < 50.0, backend
@@ -305,7 +305,7 @@ def test_absent_and_joining_agents_10000_steps_on_the_torch_core(compiled, monke
     assert joined > 1000
 
 
-@pytest.mark.parametrize("backend", ["numpy", "sparse"])
+@pytest.mark.parametrize("backend", ["numpy", "cutoff"])
 def test_a_diverging_integration_is_stopped_by_the_energy_bound(backend, monkeypatch):
     # Verlet given Euler's step-size edge (twice its stable damping) diverges while its
     # state stays finite and its observation clipped: the guard's energy bound stops it.

@@ -20,14 +20,14 @@ import pytest
 
 from swarm_envs import swarm_nav_v0
 from swarm_envs.config import SwarmConfig
+from swarm_envs.envs.adapters.swarm_nav import SwarmNavEnv
 from swarm_envs.envs.backends import unsupported
-from swarm_envs.envs.swarm_nav import SwarmNavEnv
 from swarm_envs.physics import LagrangianParams
 
 torch = pytest.importorskip("torch")
 
 N, D, B = 4, 2, 2  # agents per swarm, dimension, swarms of the VecEnv
-BACKENDS = ("numpy", "sparse", "torch", "native")
+BACKENDS = ("numpy", "cutoff", "torch", "native")
 ACTION_RULE = r"must be a real numeric array \(float or integer dtype; not bool, complex"
 SEED_RULE = r"seed must be None or a non-negative integer"
 

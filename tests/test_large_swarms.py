@@ -10,12 +10,12 @@ import pytest
 
 from swarm_envs.config import SwarmConfig, load_swarm_config
 from swarm_envs.envs.common import draw_starts
-from swarm_envs.envs.core import SwarmNavCore
-from swarm_envs.envs.sparse_core import (
-    SparseSwarmNavCore,
+from swarm_envs.envs.cores.cutoff.core import (
+    CutoffSwarmNavCore,
     density_preserving_radius,
-    use_sparse_core,
+    use_cutoff_core,
 )
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.physics import SocialPotentialParams
 
 PRESET = SocialPotentialParams.large_swarm()
@@ -82,7 +82,7 @@ def passive_state(
     steps of ``dt = 0.1`` from a start at ``density`` (the density of a uniform ball of
     the same expanse, ``R = expanse (d + 1)/d``)."""
     cfg = SwarmConfig(n_agents=n, dim=dim, physics=physics, init_density=density, max_substeps=1000)
-    core = (SparseSwarmNavCore if n >= 500 else SwarmNavCore)(cfg)
+    core = (CutoffSwarmNavCore if n >= 500 else SwarmNavCore)(cfg)
     core.reset(np.random.default_rng(0))
     zero = np.zeros((1, n, dim))
     subs = []
@@ -195,8 +195,8 @@ def test_one_yaml_for_ten_and_a_hundred_thousand_agents(n: int) -> None:
     do not depend on N; one step runs on the core picked for N, in few substeps."""
     cfg = load_swarm_config("large_swarm", {"n_agents": n})
     assert cfg.n_agents / (math.pi * cfg.start_radius**2) == pytest.approx(cfg.init_density)
-    core = (SparseSwarmNavCore if use_sparse_core(cfg) else SwarmNavCore)(cfg)
-    assert use_sparse_core(cfg) == (n > 1000)
+    core = (CutoffSwarmNavCore if use_cutoff_core(cfg) else SwarmNavCore)(cfg)
+    assert use_cutoff_core(cfg) == (n > 1000)
     core.reset(np.random.default_rng(0))
     beyond = np.linalg.norm(core.goal, axis=-1) - cfg.start_radius
     assert 8.0 <= beyond.min() and beyond.max() <= 12.0

@@ -23,7 +23,7 @@ from helpers import CORE_TOL, mill_about_goal
 from swarm_envs import swarm_nav_v0
 from swarm_envs.config import SwarmConfig, load_swarm_config
 from swarm_envs.envs.common import SwarmUnstableError
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.native import NativeSwarmNavCore, build, contract, native_support
 from swarm_envs.envs.native.build import resolve_native
 from swarm_envs.envs.task import STATISTICS

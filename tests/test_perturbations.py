@@ -20,7 +20,7 @@ import yaml
 from swarm_envs import metrics, swarm_nav_v0
 from swarm_envs.config import SwarmConfig, as_dict, config_from_mapping
 from swarm_envs.envs.backends import make_core
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.task import layer as layer_module  # draws every core's starts
 from swarm_envs.envs.task.agent_status import (
     ABSENT,
@@ -730,7 +730,7 @@ def test_actions_of_agents_that_do_not_act_are_zero_and_noise_is_clipped(dtype):
     assert (np.abs(out[2][~idle[2]]) == 1.0).mean() > 0.5  # loud noise: mostly clipped
 
 
-@pytest.mark.parametrize("backend", ["native", "torch", "sparse"])
+@pytest.mark.parametrize("backend", ["native", "torch", "cutoff"])
 def test_every_status_backend_keeps_an_undone_steps_flag_as_numpy_does(monkeypatch, backend):
     # The numpy test above, on each other core that takes statuses: swarm 0's undone,
     # truncated step stays reported while swarm 1 is measured again for its frozen agent.

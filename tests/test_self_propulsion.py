@@ -1,6 +1,6 @@
 """Self-propulsion (docs/models.md §1.7): the Rayleigh term ``(α − β|v|²) v`` in place of
 the linear friction, its fixed speed, its energy balance, its step-size rate, and every
-backend that runs it (numpy, torch, sparse and the C step) against the numpy core."""
+backend that runs it (numpy, torch, cut-off and the C step) against the numpy core."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from helpers import CORE_TOL, assert_same_status_rollout, status_perturbations, 
 
 from swarm_envs.config import SwarmConfig, load_swarm_config
 from swarm_envs.envs.backends import unsupported
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.native import native_support
 from swarm_envs.physics import SocialPotentialParams, energy, forces, pair_geometry, simulate
 from swarm_envs.physics.integrators import STEP_SAFETY, euler_update, stable_substep
@@ -281,7 +281,7 @@ def _active_config(**kw) -> SwarmConfig:
 
 def test_the_torch_core_matches_the_numpy_core():
     pytest.importorskip("torch")
-    from swarm_envs.envs.torch_core import TorchSwarmNavCore
+    from swarm_envs.envs.cores.torch.core import TorchSwarmNavCore
 
     cfg = _active_config()
     assert TorchSwarmNavCore.unsupported(cfg) is None
@@ -292,15 +292,15 @@ def test_the_torch_core_matches_the_numpy_core():
 
 
 @pytest.mark.parametrize("integrator", ["semi_implicit_euler", "velocity_verlet"])
-def test_the_sparse_core_matches_the_numpy_core(integrator):
-    from swarm_envs.envs.sparse_core import SparseSwarmNavCore
+def test_the_cutoff_core_matches_the_numpy_core(integrator):
+    from swarm_envs.envs.cores.cutoff.core import CutoffSwarmNavCore
 
     cfg = _active_config(integrator=integrator)
-    assert SparseSwarmNavCore.unsupported(cfg) is None
+    assert CutoffSwarmNavCore.unsupported(cfg) is None
     ref = _rollout(SwarmNavCore(cfg, batch=2))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        ours = _rollout(SparseSwarmNavCore(cfg, batch=2, cutoff_tol=1e-12))
+        ours = _rollout(CutoffSwarmNavCore(cfg, batch=2, cutoff_tol=1e-12))
     for a, b in zip(ours, ref, strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-7, atol=1e-7)
 
@@ -429,17 +429,17 @@ def test_the_env_takes_physics_alpha_on_every_backend_it_runs_on():
 
 
 @pytest.mark.parametrize("name", ["fast", "lone-slow"])
-def test_the_sparse_core_plans_verlet_substeps_at_the_state_velocities(name):
+def test_the_cutoff_core_plans_verlet_substeps_at_the_state_velocities(name):
     # With self-propulsion the damping rate depends on the velocities: the stable
     # substep of the state after a Verlet step is the one at its velocities, as the
     # dense core has it, not at the force pass's extrapolated ones.
-    from swarm_envs.envs.sparse_core import SparseSwarmNavCore
+    from swarm_envs.envs.cores.cutoff.core import CutoffSwarmNavCore
 
     cfg = dataclasses.replace(C_CONFIGS[name], integrator="velocity_verlet", max_steps=50)
     cores = [SwarmNavCore(cfg, batch=3)]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        cores.append(SparseSwarmNavCore(cfg, batch=3, cutoff_tol=1e-12))
+        cores.append(CutoffSwarmNavCore(cfg, batch=3, cutoff_tol=1e-12))
     for core in cores:
         core.reset(np.random.default_rng(4))
     actions = np.random.default_rng(5)

@@ -12,7 +12,7 @@ import swarm_envs
 from swarm_envs._runtime import allocator
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.backends import make_core, unsupported
-for backend in ("numpy", "sparse", "native", "torch"):
+for backend in ("numpy", "cutoff", "native", "torch"):
     cfg = SwarmConfig(n_agents=5, backend=backend)
     if unsupported(cfg, backend) is None:
         core = make_core(cfg, batch=2)

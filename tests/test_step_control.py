@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.backends import make_core
 from swarm_envs.envs.common import SwarmUnstableError
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.step_control import check_step_control, start_substeps
 from swarm_envs.physics import SocialPotentialParams, pair_geometry, simulate
 from swarm_envs.physics.integrators import STEP_SAFETY, stable_substep, substep_plan

@@ -19,7 +19,7 @@ from agents import MillController, analytic_name, make_controller
 from swarm_envs import metrics, swarm_informed_v0, swarm_mill_v0, swarm_nav_v0
 from swarm_envs.config import SwarmConfig, load_swarm_config
 from swarm_envs.envs.backends import make_core, unsupported
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.task.episode import episode_end
 from swarm_envs.envs.task.informed import draw_informed
 from swarm_envs.envs.task.observation import block_size, observation_size, own_size
@@ -119,14 +119,14 @@ def test_informed_runs_on_the_backends_that_write_its_observation():
     cfg = task_config("informed")
     assert "informed" in unsupported(cfg, "torch")
     assert make_core(cfg, batch=2).backend == "numpy"
-    big = task_config("informed", n_agents=12, backend="sparse")
-    sparse, dense = make_core(big, batch=2), SwarmNavCore(big, batch=2)
-    for core in (sparse, dense):
+    big = task_config("informed", n_agents=12, backend="cutoff")
+    cut, dense = make_core(big, batch=2), SwarmNavCore(big, batch=2)
+    for core in (cut, dense):
         core.reset(np.random.default_rng(5))
         for _ in range(3):
             core.step(np.full((2, 12, 2), 0.3))
-    np.testing.assert_array_equal(sparse.informed, dense.informed)
-    np.testing.assert_allclose(sparse.observe(), dense.observe(), atol=1e-5)
+    np.testing.assert_array_equal(cut.informed, dense.informed)
+    np.testing.assert_allclose(cut.observe(), dense.observe(), atol=1e-5)
 
 
 @pytest.mark.parametrize("dynamics", ["social_potential", "zone"])

@@ -30,8 +30,9 @@ from helpers import assert_same_rollout, make_config, rollout
 from swarm_envs._runtime.torch_compile import compile_support
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.common import SwarmUnstableError
-from swarm_envs.envs.core import OBS_BOUND, STAT_KEYS, SwarmNavCore
-from swarm_envs.envs.torch_core import TorchSwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
+from swarm_envs.envs.cores.torch.core import TorchSwarmNavCore
+from swarm_envs.envs.task import OBS_BOUND, STAT_KEYS
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])

@@ -24,9 +24,9 @@ from helpers import assert_same_rollout, rollout
 from swarm_envs._runtime.torch_compile import COMPILE_ENV, compile_support
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.backends import STATUS_BACKENDS, make_core, unsupported
-from swarm_envs.envs.core import STAT_KEYS
+from swarm_envs.envs.cores.torch.core import TorchSwarmNavCore
+from swarm_envs.envs.task import STAT_KEYS
 from swarm_envs.envs.task.agent_status import ABSENT, ACTIVE, FROZEN
-from swarm_envs.envs.torch_core import TorchSwarmNavCore
 from swarm_envs.perturbations import Perturbations
 
 #: Perturbations that need statuses in the core (and passive failures, observed).

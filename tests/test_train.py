@@ -13,7 +13,7 @@ import yaml
 
 from agents import PotentialFieldController
 from swarm_envs.config import CONFIG_ROOT
-from swarm_envs.envs.vec_env import SwarmNavVecEnv
+from swarm_envs.envs.adapters.vec_env import SwarmNavVecEnv
 from train import cli_train, demo
 from train.config import (
     TrainConfig,

@@ -25,7 +25,7 @@ from agents import PotentialFieldController, baseline_names, make_controller
 from swarm_envs import ENV_ID, models, swarm_nav_v0
 from swarm_envs.config import SwarmConfig, as_dict, config_from_mapping, load_swarm_config
 from swarm_envs.envs import backends
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.step_control import check_step_control, start_substeps
 from swarm_envs.models import SHIPPED, model_names, model_spec
 from swarm_envs.physics import simulate
@@ -201,7 +201,7 @@ def test_its_step_size_rule_refuses_a_config_that_needs_more_than_the_cap():
 # --------------------------------------------------------------------------- backends, agents
 
 
-@pytest.mark.parametrize("backend", ["sparse", "torch", "native"])
+@pytest.mark.parametrize("backend", ["cutoff", "torch", "native"])
 def test_the_other_cores_refuse_it_and_the_env_falls_back_to_numpy(monkeypatch, backend):
     cfg = cfg_of()
     reason = backends.unsupported(cfg, backend)

@@ -22,7 +22,7 @@ from pettingzoo.test import parallel_api_test
 from swarm_envs import metrics
 from swarm_envs.config import RewardWeights, SwarmConfig, config_from_mapping, load_swarm_config
 from swarm_envs.envs import backends
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.task import REWARD_TERMS, STAT_KEYS, RewardTerm, Statistic, stat_keys
 from swarm_envs.plugins import PLUGINS_ENV, load_plugin
 from swarm_envs.tasks import TASKS, TaskSpec, register_task, task_config, task_names
@@ -122,7 +122,7 @@ def test_the_registry_refuses_clashes_naming_them():
 
 
 def test_the_env_docstring_lists_the_registered_terms_statistics_and_ends():
-    from swarm_envs.envs.swarm_nav import SwarmNavEnv, SwarmNavParallelEnv
+    from swarm_envs.envs.adapters.swarm_nav import SwarmNavEnv, SwarmNavParallelEnv
     from swarm_envs.envs.task import STATISTICS
     from swarm_envs.tasks import task_spec
 
@@ -154,7 +154,7 @@ def test_the_user_task_matches_the_reference_on_every_core_that_runs_it(variant,
     assert not problems, f"{variant.name} on {cfg}: {problems}"
 
 
-@pytest.mark.parametrize("variant", [Variant("torch", np.float64), Variant("sparse", np.float64)])
+@pytest.mark.parametrize("variant", [Variant("torch", np.float64), Variant("cutoff", np.float64)])
 def test_the_example_s_own_config_conforms(variant):
     cfg = task_config("aggregation", n_agents=8)
     assert check(variant, cfg) == []
@@ -204,7 +204,7 @@ def own_statistics_task():
 def test_a_task_s_own_statistics_reach_info_and_the_reward(own_statistics_task):
     cfg = task_config("spread_task", n_agents=6)
     assert stat_keys(cfg) == (*STAT_KEYS, "spread_max")
-    for variant in (Variant("numpy", np.float32), Variant("sparse", np.float64)):
+    for variant in (Variant("numpy", np.float32), Variant("cutoff", np.float64)):
         assert check(variant, cfg) == []
     for backend in ("torch", "native"):
         reason = backends.unsupported(cfg, backend)

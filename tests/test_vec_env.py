@@ -20,7 +20,7 @@ from stable_baselines3.common.vec_env import VecCheckNan, VecEnv, VecMonitor
 
 from swarm_envs import swarm_nav_v0
 from swarm_envs.envs import OBS_BOUND, STAT_KEYS
-from swarm_envs.envs.vec_env import SwarmNavVecEnv
+from swarm_envs.envs.adapters.vec_env import SwarmNavVecEnv
 
 #: Config with which every swarm succeeds on its first step (goal at the start, big radius).
 INSTANT_SUCCESS = {"goal_distance_min": 0.0, "goal_distance_max": 0.0, "goal_radius": 50.0}
@@ -466,8 +466,7 @@ def test_ppo_trains_on_the_vec_env_with_nan_checks():
 
 
 def test_quiet_slots_are_empty_writable_infos_and_swarm_infos_read_the_step():
-    from swarm_envs.envs.infos import QuietInfo
-    from swarm_envs.envs.vec_env import SwarmInfo
+    from swarm_envs.envs.adapters.vec_infos import QuietInfo, SwarmInfo
 
     venv = swarm_nav_v0.vec_env(2, n_agents=3, max_steps=50)
     venv.reset()
@@ -504,7 +503,7 @@ def test_swarm_infos_are_recycled_only_once_the_caller_dropped_them():
 
 
 def test_a_dropped_list_of_infos_is_recycled_with_every_slot_quiet_again():
-    from swarm_envs.envs.infos import QuietInfo, SwarmInfo, TerminalInfo
+    from swarm_envs.envs.adapters.vec_infos import QuietInfo, SwarmInfo, TerminalInfo
 
     venv = swarm_nav_v0.vec_env(3, n_agents=2, max_steps=2)
     venv.reset()
@@ -554,7 +553,7 @@ def test_a_partial_reset_does_not_rewrite_the_returned_statistics():
 def test_terminal_infos_read_their_step_are_writable_and_recycled():
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from swarm_envs.envs.infos import TERMINAL_KEYS, TerminalInfo
+    from swarm_envs.envs.adapters.vec_infos import TERMINAL_KEYS, TerminalInfo
 
     B, N, T = 2, 3, 2
     venv = swarm_nav_v0.vec_env(B, n_agents=N, max_steps=T)

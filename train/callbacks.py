@@ -16,20 +16,20 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.vec_env import VecEnvWrapper
 
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs.core import STAT_KEYS
-from swarm_envs.envs.vec_env import SwarmNavVecEnv
+from swarm_envs.envs.adapters.vec_env import SwarmNavVecEnv
+from swarm_envs.envs.task import STAT_KEYS
 
 
 class SwarmStatsCallback(BaseCallback):
     """Log the swarms' group statistics and task measures as TensorBoard scalars.
 
     Every step, ``swarm/<stat>`` gets the mean over swarms of each of
-    :data:`~swarm_envs.envs.core.STAT_KEYS` (polarization, angular momentum, expanse,
+    :data:`~swarm_envs.envs.cores.numpy.STAT_KEYS` (polarization, angular momentum, expanse,
     nearest-neighbour distance, energy, fraction arrived, collisions, distances). At
     every episode end, ``task/episode_success`` and ``task/episode_time_s`` (simulated
     seconds) record how the episode finished. SB3 averages them per logging interval.
 
-    On a :class:`~swarm_envs.envs.vec_env.SwarmNavVecEnv` (wrapped or not) the means come
+    On a :class:`~swarm_envs.envs.adapters.vec_env.SwarmNavVecEnv` (wrapped or not) the means come
     from its ``last_stats`` arrays, the same numbers as the infos hold: a loop over the
     B·N infos would cost as much as the env step at 1024 × 32.
     """

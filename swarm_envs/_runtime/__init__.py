@@ -5,5 +5,5 @@
 - :mod:`~swarm_envs._runtime.allocator`: the optional glibc heap tuning
   (:func:`swarm_envs.tune_allocator`);
 - :mod:`~swarm_envs._runtime.fork`: what a forked child of a process that ran OpenMP
-  code needs (one OpenMP thread, the sparse core's pair pass in numpy).
+  code needs (one OpenMP thread, the cut-off core's pair pass in numpy).
 """

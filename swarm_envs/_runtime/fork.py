@@ -77,7 +77,7 @@ def _after_fork_in_child() -> None:
             os.environ["SWARM_ENVS_NUMBA"] = "0"
             warnings.warn(
                 "swarm_envs: this process was forked from one that ran numba's GNU OpenMP "
-                "threading layer, which is not fork-safe; the cut-off (sparse) core's "
+                "threading layer, which is not fork-safe; the cut-off core's "
                 "passes run in numpy here. Start workers with 'forkserver' or 'spawn' "
                 "(gym.make_vec(..., vector_kwargs={'context': 'forkserver'})) to keep "
                 "them compiled",

@@ -8,14 +8,14 @@ float tolerance (the cut-off core up to the force error of its cut-off,
 ===========  =========================================================================
 backend      what it is
 ===========  =========================================================================
-``numpy``    :class:`~swarm_envs.envs.core.SwarmNavCore`: dense ``(B, N, N)`` pair
+``numpy``    :class:`~swarm_envs.envs.cores.numpy.SwarmNavCore`: dense ``(B, N, N)`` pair
              arrays; every ``dynamics`` and integrator. The reference.
-``sparse``   :class:`~swarm_envs.envs.sparse_core.SparseSwarmNavCore`: a cut-off
+``cutoff``   :class:`~swarm_envs.envs.cores.cutoff.core.CutoffSwarmNavCore`: a cut-off
              radius and an O(N) cell list (social potential). Large swarms.
 ``native``   :class:`~swarm_envs.envs.native.NativeSwarmNavCore`: the step in C, built
              at first use with the system C compiler (social potential, semi-implicit
              Euler, CPU).
-``torch``    :class:`~swarm_envs.envs.torch_core.TorchSwarmNavCore`: the step as one
+``torch``    :class:`~swarm_envs.envs.cores.torch.core.TorchSwarmNavCore`: the step as one
              torch function, compiled where possible; CPU or ``device="cuda"`` (social
              potential, semi-implicit Euler).
 ===========  =========================================================================
@@ -39,9 +39,9 @@ from typing import Any
 import numpy as np
 
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs.core import SwarmNavCore
+from swarm_envs.envs.cores.cutoff.core import CUTOFF_MIN_AGENTS, CutoffSwarmNavCore
+from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.protocol import Core
-from swarm_envs.envs.sparse_core import SPARSE_MIN_AGENTS, SparseSwarmNavCore
 from swarm_envs.envs.step_control import check_step_control
 from swarm_envs.models import model_spec, models_on
 
@@ -51,7 +51,7 @@ from swarm_envs.models import model_spec, models_on
 TORCH_MIN_SLOTS = 16_384
 
 __all__ = [
-    "SPARSE_MIN_AGENTS",
+    "CUTOFF_MIN_AGENTS",
     "TORCH_MIN_SLOTS",
     "make_core",
     "resolve_backend",
@@ -65,13 +65,13 @@ _WARNED: set[tuple[str, ...]] = set()
 def _core_class(backend: str) -> Any:
     if backend == "numpy":
         return SwarmNavCore
-    if backend == "sparse":
-        return SparseSwarmNavCore
+    if backend == "cutoff":
+        return CutoffSwarmNavCore
     if backend == "native":
         from swarm_envs.envs.native import NativeSwarmNavCore
 
         return NativeSwarmNavCore
-    from swarm_envs.envs.torch_core import TorchSwarmNavCore
+    from swarm_envs.envs.cores.torch.core import TorchSwarmNavCore
 
     return TorchSwarmNavCore
 
@@ -80,7 +80,7 @@ def _core_class(backend: str) -> Any:
 #: absent and joining agents, and ``observe_status``; every backend does. A backend not
 #: listed would run only the perturbations that leave every agent in the physics
 #: (passive failures, noise, dropout).
-STATUS_BACKENDS = ("native", "numpy", "torch", "sparse")
+STATUS_BACKENDS = ("native", "numpy", "torch", "cutoff")
 
 
 def _needs_statuses(cfg: SwarmConfig) -> bool:
@@ -103,10 +103,10 @@ def unsupported(cfg: SwarmConfig, backend: str) -> str | None:
         )
     if backend == "numpy":
         return None if cfg.device == "cpu" else f"runs on the CPU only, got device={cfg.device!r}"
-    if backend == "sparse":
+    if backend == "cutoff":
         if cfg.device != "cpu":
             return f"runs on the CPU only, got device={cfg.device!r}"
-        return SparseSwarmNavCore.unsupported(cfg)
+        return CutoffSwarmNavCore.unsupported(cfg)
     return _core_class(backend).unsupported(cfg)
 
 
@@ -125,8 +125,8 @@ def _auto_by_speed(cfg: SwarmConfig, batch: int) -> tuple[str, str | None]:
     if cfg.device != "cpu":
         return "torch", None
     implemented = model_spec(cfg.dynamics).backends
-    if "sparse" in implemented and cfg.n_agents >= SPARSE_MIN_AGENTS:
-        return "sparse", None
+    if "cutoff" in implemented and cfg.n_agents >= CUTOFF_MIN_AGENTS:
+        return "cutoff", None
     why = unsupported(cfg, "native")
     if why is None:
         return "native", None
@@ -145,7 +145,7 @@ def select_backend(cfg: SwarmConfig, batch: int = 1) -> str:
     supports ``cfg``, else ``auto``'s pick.
 
     ``"auto"``: a ``device`` other than the CPU → ``"torch"``; the social potential with
-    at least ``SPARSE_MIN_AGENTS`` agents per swarm → ``"sparse"``; wherever the C step
+    at least ``CUTOFF_MIN_AGENTS`` agents per swarm → ``"cutoff"``; wherever the C step
     runs the config → ``"native"`` (the fastest at every batch size measured); where it
     is not available, the social potential with the Euler integrator and at least
     ``TORCH_MIN_SLOTS`` agent slots → ``"torch"``; anything else → ``"numpy"``.
@@ -153,7 +153,7 @@ def select_backend(cfg: SwarmConfig, batch: int = 1) -> str:
     >>> select_backend(SwarmConfig(dynamics="zone"), batch=4096)
     'numpy'
     >>> select_backend(SwarmConfig(n_agents=100_000))
-    'sparse'
+    'cutoff'
     """
     if cfg.backend != "auto" and unsupported(cfg, cfg.backend) is None:
         return cfg.backend

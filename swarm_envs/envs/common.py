@@ -1,18 +1,22 @@
-"""What every SwarmNav core shares: input checks and the random starts.
+"""What every SwarmNav core shares: input checks, the random starts and the guard's bounds.
 
 Every core validates actions with :func:`check_actions` (or :func:`check_action_shape`
 where it checks finiteness itself), and draws its starts with :func:`draw_starts`, so a
-seed gives the same starts on every backend.
+seed gives the same starts on every backend; a config whose starts predictably cannot
+be drawn is refused when an env is built (:func:`check_start_fits`).
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from swarm_envs.physics import uniform_ball
+
+if TYPE_CHECKING:
+    from swarm_envs.config import SwarmConfig
 
 #: The error message for NaN or infinite actions (every core and the C step raise it).
 NON_FINITE_ACTIONS = "actions must be finite (got NaN or inf); allowed range [-1, 1]"
@@ -35,7 +39,7 @@ FINITE_KEYS = ("energy", "expanse", "mean_goal_distance")
 SPEED_MARGIN = 2.0
 
 
-def speed_bound(cfg: Any) -> float:
+def speed_bound(cfg: SwarmConfig) -> float:
     """A bound on every agent's speed in the social potential model: ``inf`` where none
     is derived (other models, or no dissipation at all).
 
@@ -61,7 +65,7 @@ def speed_bound(cfg: Any) -> float:
     return max(cfg.init_speed, terminal)
 
 
-def energy_bound(cfg: Any) -> float:
+def energy_bound(cfg: SwarmConfig) -> float:
     """The bound the guard holds the ``energy`` statistic to: ``|φ| ≤ ½ m N (2S)² +
     N(N − 1)/2 (C_r + C_a) + N C_g`` for the speed bound ``S`` (:func:`speed_bound`,
     with :data:`SPEED_MARGIN`), each pair's potential at most ``C_r + C_a`` and each
@@ -96,7 +100,9 @@ def unstable_swarms(
     return bad
 
 
-def check_start(cfg: Any, stats: dict[str, np.ndarray], idx: np.ndarray, dtype: Any) -> None:
+def check_start(
+    cfg: SwarmConfig, stats: dict[str, np.ndarray], idx: np.ndarray, dtype: Any
+) -> None:
     """Raise :class:`SwarmUnstableError` if a new start (swarms ``idx``) is not finite in
     the state's ``dtype`` (a start too large for it: its speeds, distances or energy)."""
     bad = np.zeros(next(iter(stats.values())).shape, dtype=bool)
@@ -111,7 +117,7 @@ def check_start(cfg: Any, stats: dict[str, np.ndarray], idx: np.ndarray, dtype: 
 
 
 def unstable_message(
-    cfg: Any, stats: dict[str, np.ndarray], bad: np.ndarray, needed: np.ndarray, step: Any
+    cfg: SwarmConfig, stats: dict[str, np.ndarray], bad: np.ndarray, needed: np.ndarray, step: Any
 ) -> str:
     """The :class:`SwarmUnstableError` message for the first unstable swarm of ``bad``."""
     b = int(np.flatnonzero(bad)[0])
@@ -190,7 +196,7 @@ def check_dtype(dtype: Any) -> np.dtype:
 
 
 def draw_starts(
-    cfg: Any, rng: np.random.Generator, n: int
+    cfg: SwarmConfig, rng: np.random.Generator, n: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``n`` new starts ``(x (n, N, d), v (n, N, d), goal (n, d))``, float64: the task's
     start law (its spec's ``start``) where it has one, else :func:`uniform_starts`."""
@@ -199,7 +205,7 @@ def draw_starts(
 
 
 def uniform_starts(
-    cfg: Any, rng: np.random.Generator, n: int
+    cfg: SwarmConfig, rng: np.random.Generator, n: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The default start law: ``n`` starts ``(x, v, goal)``, float64.
 
@@ -219,6 +225,49 @@ def uniform_starts(
     if cfg.goal_distance_scale == "relative":
         dist += radius
     return x, v, bearing * dist
+
+
+#: Trial starts that must fit, out of ``MAX_START_DRAWS``, for :func:`check_start_fits`.
+START_FITS_NEEDED = 15
+
+
+def check_start_fits(cfg: SwarmConfig) -> None:
+    """Refuse a Lagrangian config whose random starts rarely place the bins apart.
+
+    The Lagrangian model needs every pair of bins apart at the start (``R_ij > 0``);
+    a reset redraws a swarm's start up to ``MAX_START_DRAWS`` (1000) times, then raises.
+    The config itself refuses a start radius at which the bins can never fit
+    (:func:`swarm_envs.config.lagrangian_min_init_radius`); this check draws trial
+    starts from a fixed generator and refuses the config (``ValueError`` naming
+    ``init_radius`` and ``lagrangian.r``) when fewer than :data:`START_FITS_NEEDED` of
+    ``MAX_START_DRAWS`` fit: a start fitting with a probability of about 1.5 % or less,
+    at which a reset would fail with a probability of about ``1e-7`` or more. So such a
+    config fails when the env is built rather than at some ``reset``. A usable config
+    costs :data:`START_FITS_NEEDED` draws or a few more.
+    """
+    if cfg.dynamics != "lagrangian" or cfg.n_agents < 2:
+        return
+    from swarm_envs.envs.dynamics import MAX_START_DRAWS
+    from swarm_envs.physics.lagrangian import pair_clearance
+
+    n, d = cfg.n_agents, cfg.dim
+    rng = np.random.default_rng(0)
+    cap = max(1, 2**20 // (n * n))  # draws per batch: at most ~1M pair clearances
+    drawn, fits, batch = 0, 0, START_FITS_NEEDED
+    while fits < START_FITS_NEEDED:
+        if fits + MAX_START_DRAWS - drawn < START_FITS_NEEDED:
+            raise ValueError(
+                f"SwarmConfig.init_radius={cfg.init_radius:g} is too small for {n} agents "
+                f"with dynamics='lagrangian': fewer than {START_FITS_NEEDED} of "
+                f"{MAX_START_DRAWS} random starts in a disc of that radius keep every pair "
+                f"of bins (lagrangian.r) apart, so resets would fail; allowed: a larger "
+                f"init_radius, or smaller lagrangian.r"
+            )
+        k = min(batch, cap, MAX_START_DRAWS - drawn)
+        x = uniform_ball(rng, (k, n, d), cfg.init_radius)
+        fits += int((pair_clearance(x, cfg.lagrangian) > 0).all(axis=(-2, -1)).sum())
+        drawn += k
+        batch *= 4
 
 
 def placed_at_rest(
@@ -243,7 +292,7 @@ def placed_at_rest(
     return x, xp.astype(xp.where(spread(still), 0.0, v), v)
 
 
-def wide_dtypes(dtype: np.dtype, cfg: Any = None) -> dict[str, np.dtype]:
+def wide_dtypes(dtype: np.dtype, cfg: SwarmConfig | None = None) -> dict[str, np.dtype]:
     """The dtype of each statistic a core reports (those of ``cfg``'s task; without
     ``cfg`` the common ones): float64 for the ``wide`` ones (counts, fractions, flags),
     ``dtype`` for the rest."""

@@ -1,6 +1,6 @@
 """The physics behind SwarmNav, one adapter per model: how an action biases each model.
 
-:class:`~swarm_envs.envs.core.SwarmNavCore` owns the batched state ``x, v`` ``(B, N, d)``
+:class:`~swarm_envs.envs.cores.numpy.SwarmNavCore` owns the batched state ``x, v`` ``(B, N, d)``
 and the goals ``(B, d)``; the adapter of the model ``SwarmConfig.dynamics`` names (its
 ``ModelSpec.adapter`` in the registry, :mod:`swarm_envs.models`; :func:`make_dynamics`)
 advances it by one step with the control ``u = u_max · a`` (``a ∈ [−1, 1]^d`` per agent)

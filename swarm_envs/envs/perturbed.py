@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from swarm_envs.envs.common import check_actions
+from swarm_envs.envs.protocol import StatusCore, StepResult
 from swarm_envs.envs.task.agent_status import (
     ABSENT,
     AgentSchedule,
@@ -40,7 +41,7 @@ from swarm_envs.envs.task.observation import OBS_BOUND, block_size, own_size
 class PerturbedCore:
     """``inner`` (any core) with the perturbations of its config (module docstring)."""
 
-    def __init__(self, inner: Any) -> None:
+    def __init__(self, inner: StatusCore) -> None:
         self.inner = inner
         cfg = inner.cfg
         self.cfg = cfg
@@ -106,7 +107,7 @@ class PerturbedCore:
             else:
                 self._obs[idx] = fresh
 
-    def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    def step(self, actions: Any) -> StepResult:
         """One step of the core with the perturbed actions; then the statuses due."""
         if self._rng is None:
             raise RuntimeError("step() before reset()")

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 import numpy as np
 
 if TYPE_CHECKING:
+    from swarm_envs.config import SwarmConfig
     from swarm_envs.envs.task.layer import Advance, TaskLayer
 
 __all__ = ["Core", "Execution", "StatusCore", "StepResult"]
@@ -36,17 +37,21 @@ class Core(Protocol):
         batch: number of swarms ``B``.
         dtype: the state's numpy dtype (float32 or float64).
         obs_dim: observation size per agent.
-        backend: the backend's name (``"numpy"``, ``"sparse"``, ``"torch"``, ``"native"``).
+        backend: the backend's name (``"numpy"``, ``"cutoff"``, ``"torch"``, ``"native"``).
         t: steps since each swarm's reset, ``(B,)`` int64 (writable in place).
         x, v: positions and velocities ``(B, N, d)``; goal: ``(B, d)``.
     """
 
-    cfg: Any
+    cfg: SwarmConfig
     batch: int
     dtype: np.dtype
     obs_dim: int
-    backend: str
-    t: np.ndarray
+
+    @property
+    def backend(self) -> str: ...
+
+    @property
+    def t(self) -> np.ndarray: ...
 
     @property
     def x(self) -> np.ndarray: ...
@@ -117,6 +122,7 @@ class Execution(StatusCore, Protocol):
     """
 
     task: TaskLayer
+    t: np.ndarray  # the task layer counts the steps
 
     def begin(
         self,

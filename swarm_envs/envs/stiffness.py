@@ -16,9 +16,12 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from swarm_envs.config import SwarmConfig
 
 __all__ = ["STIFF_SUBSTEPS", "STIFF_WINDOW", "StiffSwarmWarning", "StiffnessWatch"]
 
@@ -42,7 +45,7 @@ class StiffnessWatch:
     swarm averages more than :data:`STIFF_SUBSTEPS` per step over :data:`STIFF_WINDOW`
     consecutive steps (module docstring). One add per step."""
 
-    def __init__(self, cfg: Any, batch: int) -> None:
+    def __init__(self, cfg: SwarmConfig, batch: int) -> None:
         self.cfg = cfg
         self._key = repr(cfg)
         self._total = np.zeros(batch)
@@ -73,7 +76,9 @@ class StiffnessWatch:
         self._steps = 0
 
 
-def stiff_message(cfg: Any, stats: dict[str, np.ndarray], b: int, mean: float, steps: int) -> str:
+def stiff_message(
+    cfg: SwarmConfig, stats: dict[str, np.ndarray], b: int, mean: float, steps: int
+) -> str:
     """The warning for swarm ``b``, stiff at ``mean`` substeps per step over ``steps``."""
     n, d = cfg.n_agents, cfg.dim
     near = float(stats["nearest_neighbor_distance"][b])
@@ -101,7 +106,7 @@ def stiff_message(cfg: Any, stats: dict[str, np.ndarray], b: int, mean: float, s
         )
         remedy = (
             "an H-stable parameter set (SocialPotentialParams.large_swarm()), a less dense "
-            "start (init_density), " + remedy + ", or, for large N, backend='sparse' or "
+            "start (init_density), " + remedy + ", or, for large N, backend='cutoff' or "
             "'torch' (each substep cheaper)"
         )
     return f"stiff swarm: {cause}. To speed it up: {remedy}. (Said once per config.)"

@@ -1,6 +1,6 @@
 """The cell list's two hot loops compiled with numba, when numba imports: the cut-off pair
 pass (:func:`cell_pair_sums`) and the k-nearest round (:func:`knearest_round`); and
-:func:`swarm_pair_sums`, the sparse core's pass over a batch of swarms (this pass, or
+:func:`swarm_pair_sums`, the cut-off core's pass over a batch of swarms (this pass, or
 the numpy one without numba).
 
 :func:`cell_pair_sums` gives exactly what feeding every chunk of
@@ -39,7 +39,7 @@ cache entry is keyed on the code of ``pair_law`` and ``rate_law`` too, so a chan
 either law recompiles).
 Calls are serialised by a lock (numba's fallback threading layer, workqueue, does not
 allow concurrent parallel calls). Its OpenMP layer is not fork-safe: processes that use
-the sparse core after a fork should be started with ``spawn`` or ``forkserver`` (as
+the cut-off core after a fork should be started with ``spawn`` or ``forkserver`` (as
 SB3's ``SubprocVecEnv`` and Ray do by default).
 """
 
@@ -156,7 +156,7 @@ def _numba_imports() -> bool:
         except Exception as err:  # numba raises ImportError, or others on a broken install
             _import_error = f"{type(err).__name__}: {err}"
             warnings.warn(
-                f"numba is installed but does not import ({_import_error}); the sparse "
+                f"numba is installed but does not import ({_import_error}); the cut-off "
                 "core's pair pass runs in numpy",
                 RuntimeWarning,
                 stacklevel=3,

@@ -123,7 +123,7 @@ class SocialPotentialParams:
         :attr:`h_stability_3d`). The pair potential has its minimum at
         ``ρ* = l_a l ln(C/l)/(1 − l) ≈ 1.73`` (depth 0.0625). Dissipation ``β = 1`` as
         in the navigation set; alignment ``C_o = 0.5`` with the range ``l_o = 1`` (the
-        sparse core's cut-off is then ``r_c ≈ 3.3`` at its default tolerance, against
+        cut-off core's cut-off is then ``r_c ≈ 3.3`` at its default tolerance, against
         5.08 for the navigation set). The goal sink ``C_g = 30, l_g = 10`` reaches twice
         as far as the navigation set's (a swarm of this spacing is wider) with the same
         largest force ``C_g/l_g = 3``, the default action bound ``u_max``, so the

@@ -22,7 +22,7 @@ import copy
 from collections.abc import Callable
 from typing import Any
 
-from swarm_envs.envs.swarm_nav import make_config
+from swarm_envs.envs.adapters.inputs import make_config
 from train.benchmarl import INSTALL_HINT
 from train.benchmarl.torchrl_env import GROUP, SwarmTorchRLEnv
 

@@ -30,9 +30,8 @@ from typing import Any
 import numpy as np
 
 from swarm_envs.config import SwarmConfig
+from swarm_envs.envs.adapters.inputs import as_action, make_config
 from swarm_envs.envs.backends import make_core
-from swarm_envs.envs.inputs import as_action
-from swarm_envs.envs.swarm_nav import make_config
 from swarm_envs.envs.task import OBS_BOUND
 from swarm_envs.envs.task.agent_status import ACTIVE
 from train.benchmarl import INSTALL_HINT

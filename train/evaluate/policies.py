@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs.core import observation_size
+from swarm_envs.envs.task import observation_size
 from swarm_envs.envs.task.observation import layout
 
 __all__ = [

@@ -31,8 +31,8 @@ from typing import Any
 from agents.base import swarm_config_of
 from swarm_envs import ENV_ID
 from swarm_envs.config import SwarmConfig, as_dict
-from swarm_envs.envs.core import observation_size
 from swarm_envs.envs.step_control import check_step_control
+from swarm_envs.envs.task import observation_size
 from train.evaluate.episodes import run_episodes
 from train.evaluate.harness import best_baseline, check_policies, controller_names
 from train.evaluate.measures import METRIC_DOCS, summarize

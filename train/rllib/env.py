@@ -40,7 +40,8 @@ def _env_class() -> type:
     from swarm_envs import swarm_nav_v0
 
     class SwarmNavMultiAgentEnv(MultiAgentEnv):
-        """RLlib ``MultiAgentEnv`` over :class:`~swarm_envs.envs.swarm_nav.SwarmNavParallelEnv`.
+        """RLlib ``MultiAgentEnv`` over
+        :class:`~swarm_envs.envs.adapters.swarm_nav.SwarmNavParallelEnv`.
 
         Args:
             config: keyword arguments of ``swarm_nav_v0.parallel_env`` (RLlib passes its

@@ -4,7 +4,7 @@
 :class:`SwarmNavVectorEnv` (the registered ``vector_entry_point``): sub-env ``i`` is
 swarm ``i`` of one batched core, with the single env's spaces batched (observation
 ``(B, N·obs_dim)`` float32, action ``(B, N·d)`` in [−1, 1]; agent-major, as
-:class:`~swarm_envs.envs.swarm_nav.SwarmNavEnv`). ``vectorization_mode="sync"`` or
+:class:`~swarm_envs.envs.adapters.swarm_nav.SwarmNavEnv`). ``vectorization_mode="sync"`` or
 ``"async"`` still builds B single envs instead.
 
 Autoreset: ``metadata["autoreset_mode"]`` is ``AutoresetMode.NEXT_STEP``, Gymnasium's
@@ -39,10 +39,9 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from swarm_envs.envs.adapters.inputs import as_action, check_seed, make_config
 from swarm_envs.envs.backends import make_core
 from swarm_envs.envs.common import check_dtype
-from swarm_envs.envs.inputs import as_action, check_seed
-from swarm_envs.envs.swarm_nav import make_config
 from swarm_envs.envs.task import OBS_BOUND
 
 __all__ = ["SwarmNavVectorEnv"]
@@ -51,12 +50,13 @@ __all__ = ["SwarmNavVectorEnv"]
 class SwarmNavVectorEnv(VectorEnv):
     """``num_envs`` SwarmNav swarms as one Gymnasium ``VectorEnv`` (one swarm per sub-env).
 
-    Keyword arguments as :class:`~swarm_envs.envs.swarm_nav.SwarmNavEnv` (``config``,
+    Keyword arguments as :class:`~swarm_envs.envs.adapters.swarm_nav.SwarmNavEnv` (``config``,
     every field of the config), plus ``dtype`` of the state. ``render_mode`` is
     ``None`` or ``"rgb_array"`` (:meth:`render` gives one frame per sub-env).
     """
 
-    metadata: ClassVar[dict[str, Any]] = {
+    # A class constant; gymnasium annotates it as an instance variable of VectorEnv.
+    metadata: ClassVar[dict[str, Any]] = {  # type: ignore[misc]
         "render_modes": ["rgb_array"],
         "render_fps": 20,
         "autoreset_mode": AutoresetMode.NEXT_STEP,
@@ -120,6 +120,7 @@ class SwarmNavVectorEnv(VectorEnv):
                 )
             return [check_seed(s) for s in seed]
         first = check_seed(seed)
+        assert first is not None  # seed is not None here
         return [first + i for i in range(B)]
 
     def _reset_swarms(self, which: np.ndarray) -> None:
@@ -204,7 +205,8 @@ class SwarmNavVectorEnv(VectorEnv):
         obs = self.core.observe().reshape(B, -1)
         return obs, reward, terminated, truncated, self._infos(stats)
 
-    def render(self) -> tuple[np.ndarray, ...] | None:
+    # gymnasium types the frames with a type variable that no concrete frame type matches.
+    def render(self) -> tuple[np.ndarray, ...] | None:  # type: ignore[override]
         """``rgb_array``: one uint8 ``(H, W, 3)`` frame per sub-env; else ``None``."""
         if self.render_mode is None:
             return None

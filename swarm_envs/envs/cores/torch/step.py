@@ -1,7 +1,8 @@
 """The SwarmNav step as one torch function: the shared definitions on torch tensors.
 
-:func:`build_advance` returns the function :class:`~swarm_envs.envs.torch_core.TorchSwarmNavCore`
-runs (through ``torch.compile`` where it can, plain otherwise; see
+:func:`build_advance` returns the function
+:class:`~swarm_envs.envs.cores.torch.core.TorchSwarmNavCore` runs (through ``torch.compile``
+where it can, plain otherwise; see
 :mod:`swarm_envs._runtime.torch_compile`). It calls the same definitions as the numpy
 core, on tensors: the Euler update and the pair law of :mod:`swarm_envs.physics`, and the
 statistics, observation and reward of :mod:`swarm_envs.envs.task`. What is torch's own
@@ -32,7 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import torch
 
@@ -59,6 +60,9 @@ from swarm_envs.physics.social_potential import (
     passive_components,
     present_geometry,
 )
+
+if TYPE_CHECKING:
+    from swarm_envs.config import SwarmConfig
 
 __all__ = ["PACKED_KEYS", "build_advance", "build_substep", "nearest_neighbors", "plan_substep"]
 
@@ -136,7 +140,7 @@ def _passive(
     xs: list[torch.Tensor],
     vs: list[torch.Tensor],
     goal: torch.Tensor,
-    cfg: Any,
+    cfg: SwarmConfig,
     energy: bool,
 ) -> tuple[list[torch.Tensor], torch.Tensor | None, torch.Tensor, torch.Tensor]:
     """The passive force at ``(x, v)`` per component, the pair energy (``None`` without
@@ -150,7 +154,7 @@ def _passive(
     return fs, pairs, potential, goal_distance
 
 
-def _stable(geo: PairGeometry, vs: list[torch.Tensor], cfg: Any) -> torch.Tensor:
+def _stable(geo: PairGeometry, vs: list[torch.Tensor], cfg: SwarmConfig) -> torch.Tensor:
     """The stable substep ``h*`` ``(B,)`` of the state of ``geo`` with the velocities
     ``vs`` (the shared rule)."""
     p = cfg.physics
@@ -177,7 +181,7 @@ def _held(total: torch.Tensor, mobile: torch.Tensor | None) -> torch.Tensor:
     return total if mobile is None else torch.where(mobile, total, 0.0)
 
 
-def build_advance(cfg: Any) -> Callable[..., tuple[torch.Tensor, ...]]:
+def build_advance(cfg: SwarmConfig) -> Callable[..., tuple[torch.Tensor, ...]]:
     """The fused SwarmNav step for config ``cfg`` (social potential, semi-implicit Euler).
 
     ``advance(x, v, f, goal, a, h, substeps, prev, start[, status])`` with positions, velocities
@@ -311,7 +315,7 @@ def plan_substep(
     return h, last, late, used + n
 
 
-def build_substep(cfg: Any) -> Callable[..., tuple[Any, ...]]:
+def build_substep(cfg: SwarmConfig) -> Callable[..., tuple[Any, ...]]:
     """One substep of the step-size control for every swarm with time left, batched.
 
     ``substep(x, v, f, goal, a, h_stable, remaining, used, over, needed[, status])``: the state

@@ -1,4 +1,4 @@
-"""The infos of :class:`~swarm_envs.envs.vec_env.SwarmNavVecEnv`: views, recycled.
+"""The infos of :class:`~swarm_envs.envs.adapters.vec_env.SwarmNavVecEnv`: views, recycled.
 
 At 1,024 swarms × 32 agents a step has 32,768 slots, and SB3 wants an info mapping per
 slot. Fresh dicts would cost more than the step itself, and not only to build: every
@@ -57,7 +57,7 @@ _FREE_REFCOUNT = max(map(sys.getrefcount, [object()]))
 def _free_list_refcount() -> int:
     """What ``sys.getrefcount`` says, in :meth:`QuietInfos.infos`'s loop, of a list that
     the pool alone holds."""
-    pool = [[]]
+    pool: list[list[Any]] = [[]]
     for held in pool:
         return sys.getrefcount(held)
     raise AssertionError
@@ -78,6 +78,7 @@ class _ReadOnAccess(dict):
     every write through :meth:`_mine` first."""
 
     __slots__ = ("_own",)
+    _own: bool
 
     def _read(self, key: str) -> Any:  # pragma: no cover - every subclass has one
         raise NotImplementedError
@@ -138,15 +139,15 @@ class _ReadOnAccess(dict):
     def __ne__(self, other: object) -> bool:
         return self.copy() != other if isinstance(other, Mapping) else NotImplemented
 
-    __hash__ = None  # type: ignore[assignment]
+    __hash__ = None
 
     def __repr__(self) -> str:
         return repr(self.copy())
 
-    def __or__(self, other: Any) -> dict[str, Any]:
+    def __or__(self, other: Any) -> dict[Any, Any]:
         return self.copy() | other
 
-    def __ror__(self, other: Any) -> dict[str, Any]:
+    def __ror__(self, other: Any) -> dict[Any, Any]:
         return dict(other) | self.copy()
 
     # writes

@@ -3,7 +3,7 @@ agents, ``observe_status``) against the numpy reference, and the statuses' rules
 
 Seeded rollouts through :func:`~swarm_envs.envs.backends.make_core` (the perturbations'
 wrapper around each core, with the VecEnv's automatic resets), with a cut-off past
-every pair as in ``tests/test_sparse_core.py``: observations, rewards, flags and every
+every pair as in ``tests/test_cutoff_core.py``: observations, rewards, flags and every
 statistic agree with the numpy core to round-off. Swarms with more and with fewer
 present agents than neighbour slots take the two paths of the neighbour search among
 present agents. Then what the masks mean, checked on the cut-off core alone: agents that
@@ -22,8 +22,9 @@ import pytest
 from helpers import assert_same_status_rollout, status_perturbations, status_rollout
 
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs import backends, sparse_core
-from swarm_envs.envs.sparse_core import SPARSE_MIN_AGENTS, SparseSwarmNavCore
+from swarm_envs.envs import backends
+from swarm_envs.envs.cores.cutoff import core as cutoff_core
+from swarm_envs.envs.cores.cutoff.core import CUTOFF_MIN_AGENTS, CutoffSwarmNavCore
 from swarm_envs.envs.task import STAT_KEYS
 from swarm_envs.envs.task.agent_status import ABSENT, ACTIVE, FAILED, FROZEN
 from swarm_envs.perturbations import Perturbations
@@ -32,7 +33,7 @@ from swarm_envs.physics.neighbors import CellList, knn
 from swarm_envs.physics.present_neighbors import close_pairs_among, knn_among
 
 TINY = 1e-12  # cut-off tolerance at which no pair of a small swarm is dropped
-TOLERANCE = dict(rtol=1e-9, atol=1e-9)  # as tests/test_sparse_core.py's run_both
+TOLERANCE = dict(rtol=1e-9, atol=1e-9)  # as tests/test_cutoff_core.py's run_both
 BATCH, STEPS = 4, 16
 
 PERTURBATIONS = status_perturbations()
@@ -66,7 +67,7 @@ def _config(kind: str, shape: str, observe_status: bool) -> SwarmConfig:
 def _rollout(cfg: SwarmConfig, backend: str) -> tuple[list, set[int]]:
     core = backends.make_core(dataclasses.replace(cfg, backend=backend), BATCH)
     assert core.backend == backend
-    if backend == "sparse":
+    if backend == "cutoff":
         core.inner.cutoff_tol = TINY
     return status_rollout(core, cfg.n_agents, cfg.dim, STEPS)
 
@@ -90,7 +91,7 @@ def _assert_same_rollout(got: list, want: list) -> None:
 
 @pytest.mark.parametrize(("kind", "shape", "observe_status"), ROLLOUTS)
 def test_rollouts_with_statuses_match_the_numpy_core(kind, shape, observe_status):
-    got, seen = _rollout(_config(kind, shape, observe_status), "sparse")
+    got, seen = _rollout(_config(kind, shape, observe_status), "cutoff")
     want, ref_seen = _reference(kind, shape, observe_status)
     assert seen == ref_seen
     assert PERTURBATIONS[kind][1] <= seen and ACTIVE in seen  # the statuses did occur
@@ -100,8 +101,8 @@ def test_rollouts_with_statuses_match_the_numpy_core(kind, shape, observe_status
 def test_the_look_ahead_search_takes_the_statuses(monkeypatch):
     # The neighbour search that runs in a worker thread during the last pair pass
     # (from KNN_AHEAD_MIN_AGENTS agents on) searches among the present agents too.
-    monkeypatch.setattr(sparse_core, "KNN_AHEAD_MIN_AGENTS", 1)
-    got, _ = _rollout(_config("joining", "2d", True), "sparse")
+    monkeypatch.setattr(cutoff_core, "KNN_AHEAD_MIN_AGENTS", 1)
+    got, _ = _rollout(_config("joining", "2d", True), "cutoff")
     _assert_same_rollout(got, _reference("joining", "2d", True)[0])
 
 
@@ -109,7 +110,7 @@ def test_the_rollouts_see_collisions_between_agents_at_rest():
     # The frozen rollouts must hold close pairs of two frozen agents (no collision),
     # or the rule that leaves them out would go untested above.
     cfg = _config("frozen", "2d", False)
-    core = backends.make_core(dataclasses.replace(cfg, backend="sparse"), BATCH)
+    core = backends.make_core(dataclasses.replace(cfg, backend="cutoff"), BATCH)
     core.reset(np.random.default_rng(0))
     found = False
     for a in np.random.default_rng(1).uniform(-1, 1, (STEPS, BATCH, cfg.n_agents, cfg.dim)):
@@ -129,8 +130,8 @@ def _statuses(batch: int, n: int, seed: int = 7) -> np.ndarray:
     return rng.choice([ACTIVE, ACTIVE, FAILED, FROZEN, ABSENT], size=(batch, n)).astype(np.int8)
 
 
-def _core(cfg: SwarmConfig, batch: int = 2) -> SparseSwarmNavCore:
-    core = SparseSwarmNavCore(cfg, batch, cutoff_tol=TINY)
+def _core(cfg: SwarmConfig, batch: int = 2) -> CutoffSwarmNavCore:
+    core = CutoffSwarmNavCore(cfg, batch, cutoff_tol=TINY)
     core.reset(np.random.default_rng(3))
     return core
 
@@ -340,12 +341,12 @@ def test_close_pairs_among_and_grouped_cell_lists_match_brute_force():
 # --------------------------------------------------------------------------- backends
 
 
-def test_auto_runs_large_swarms_with_statuses_on_the_sparse_core():
-    assert "sparse" in backends.STATUS_BACKENDS
+def test_auto_runs_large_swarms_with_statuses_on_the_cutoff_core():
+    assert "cutoff" in backends.STATUS_BACKENDS
     for kind in PERTURBATIONS:
         for observe_status in (False, True):
             small = _config(kind, "2d", observe_status)
-            assert backends.unsupported(small, "sparse") is None
-            assert backends.select_backend(small, batch=4) != "sparse"
-            large = dataclasses.replace(small, n_agents=SPARSE_MIN_AGENTS)
-            assert backends.select_backend(large, batch=4) == "sparse"
+            assert backends.unsupported(small, "cutoff") is None
+            assert backends.select_backend(small, batch=4) != "cutoff"
+            large = dataclasses.replace(small, n_agents=CUTOFF_MIN_AGENTS)
+            assert backends.select_backend(large, batch=4) == "cutoff"

@@ -1,9 +1,9 @@
 """The torch core's agent statuses: each agent's status on the host and on the device.
 
-:class:`DeviceStatuses` is held by :class:`~swarm_envs.envs.torch_core.TorchSwarmNavCore`.
+:class:`DeviceStatuses` is held by :class:`~swarm_envs.envs.cores.torch.core.TorchSwarmNavCore`.
 A core whose config needs statuses (``perturbations.needs_masks`` or ``observe_status``)
 passes them to its fused step and its substep function
-(:mod:`swarm_envs.envs.torch_step`), which apply the masks of
+(:mod:`swarm_envs.envs.cores.torch.step`), which apply the masks of
 :mod:`~swarm_envs.envs.task.agent_status`; a core whose config needs none runs the
 functions without them and refuses statuses. What a change of statuses does to the
 episode is the task layer's (:mod:`swarm_envs.envs.task.layer`).
@@ -11,10 +11,13 @@ episode is the task layer's (:mod:`swarm_envs.envs.task.layer`).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
+
+if TYPE_CHECKING:
+    from swarm_envs.config import SwarmConfig
 
 __all__ = ["DeviceStatuses"]
 
@@ -28,7 +31,7 @@ class DeviceStatuses:
         tensor: the same on the device (every agent active before).
     """
 
-    def __init__(self, cfg: Any, batch: int, device: torch.device) -> None:
+    def __init__(self, cfg: SwarmConfig, batch: int, device: torch.device) -> None:
         self.enabled = bool(cfg.needs_statuses)
         self.host: np.ndarray | None = None
         self.tensor = torch.zeros((batch, cfg.n_agents), dtype=torch.int8, device=device)

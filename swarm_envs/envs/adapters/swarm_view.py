@@ -3,8 +3,8 @@
 :class:`SwarmState` gives the one swarm's state as fresh arrays (``positions``,
 ``velocities``, ``goal``, ``active``, ``status``); :class:`Rendering` draws frames on
 demand, loading the drawing libraries on first use. Both are base classes of
-:class:`~swarm_envs.envs.swarm_nav.SwarmNavParallelEnv` and
-:class:`~swarm_envs.envs.swarm_nav.SwarmNavEnv`.
+:class:`~swarm_envs.envs.adapters.swarm_nav.SwarmNavParallelEnv` and
+:class:`~swarm_envs.envs.adapters.swarm_nav.SwarmNavEnv`.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import gymnasium
 import numpy as np
 
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs.protocol import Core as SwarmNavCore
+from swarm_envs.envs.protocol import Core
 from swarm_envs.envs.task.agent_status import ACTIVE
 
 __all__ = ["Rendering", "SwarmState"]
@@ -29,7 +29,7 @@ class SwarmState:
     keep the last state after an episode ends, until the next ``reset()``.
     """
 
-    core: SwarmNavCore
+    core: Core
     cfg: SwarmConfig
     _has_state: bool = False
 
@@ -88,7 +88,7 @@ class SwarmState:
 class Rendering:
     """Lazy rendering shared by both adapters (drawing libraries load on first use)."""
 
-    core: SwarmNavCore
+    core: Core
     render_mode: str | None
     _renderer: Any = None
 

@@ -32,7 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from swarm_envs.envs.common import NON_FINITE_ACTIONS
+from swarm_envs.config import SwarmConfig, check_keywords, load_swarm_config
+from swarm_envs.envs.common import NON_FINITE_ACTIONS, check_start_fits
 
 #: dtype kinds an action may have: floating, signed and unsigned integers.
 ACTION_KINDS = frozenset("fiu")
@@ -168,48 +169,28 @@ def as_action(actions: Any, shape: tuple[int, ...], name: str = "actions") -> np
     return a
 
 
-#: Trial starts that must fit, out of ``MAX_START_DRAWS``, for :func:`check_start_fits`.
-START_FITS_NEEDED = 15
+def make_config(
+    config: str | None = None,
+    overrides: Mapping[str, Any] | None = None,
+    *,
+    owner: str = "the SwarmNav env",
+    keywords: Sequence[str] = ("config",),
+) -> SwarmConfig:
+    """Merge a YAML config (optional) and keyword overrides into a validated config.
 
-
-def check_start_fits(cfg: Any) -> None:
-    """Refuse a Lagrangian config whose random starts rarely place the bins apart.
-
-    The Lagrangian model needs every pair of bins apart at the start (``R_ij > 0``);
-    a reset redraws a swarm's start up to ``MAX_START_DRAWS`` (1000) times, then raises.
-    The config itself refuses a start radius at which the bins can never fit
-    (:func:`swarm_envs.config.lagrangian_min_init_radius`); this check draws trial
-    starts from a fixed generator and refuses the config (``ValueError`` naming
-    ``init_radius`` and ``lagrangian.r``) when fewer than :data:`START_FITS_NEEDED` of
-    ``MAX_START_DRAWS`` fit: a start fitting with a probability of about 1.5 % or less,
-    at which a reset would fail with a probability of about ``1e-7`` or more. So such a
-    config fails when the env is built rather than at some ``reset``. A usable config
-    costs :data:`START_FITS_NEEDED` draws or a few more.
+    An override that is neither a :class:`SwarmConfig` field nor one of ``keywords``
+    (the caller's own keyword arguments, named in the message with ``owner``) raises
+    :class:`~swarm_envs.config.UnknownKeyError` (a ``TypeError`` and a ``ValueError``).
+    Beyond the config's own checks, a Lagrangian start radius at which random starts
+    cannot keep the bins apart is refused here
+    (:func:`~swarm_envs.envs.common.check_start_fits`), so every env refuses it
+    when built.
     """
-    if cfg.dynamics != "lagrangian" or cfg.n_agents < 2:
-        return
-    from swarm_envs.envs.dynamics import MAX_START_DRAWS
-    from swarm_envs.physics import uniform_ball
-    from swarm_envs.physics.lagrangian import pair_clearance
-
-    n, d = cfg.n_agents, cfg.dim
-    rng = np.random.default_rng(0)
-    cap = max(1, 2**20 // (n * n))  # draws per batch: at most ~1M pair clearances
-    drawn, fits, batch = 0, 0, START_FITS_NEEDED
-    while fits < START_FITS_NEEDED:
-        if fits + MAX_START_DRAWS - drawn < START_FITS_NEEDED:
-            raise ValueError(
-                f"SwarmConfig.init_radius={cfg.init_radius:g} is too small for {n} agents "
-                f"with dynamics='lagrangian': fewer than {START_FITS_NEEDED} of "
-                f"{MAX_START_DRAWS} random starts in a disc of that radius keep every pair "
-                f"of bins (lagrangian.r) apart, so resets would fail; allowed: a larger "
-                f"init_radius, or smaller lagrangian.r"
-            )
-        k = min(batch, cap, MAX_START_DRAWS - drawn)
-        x = uniform_ball(rng, (k, n, d), cfg.init_radius)
-        fits += int((pair_clearance(x, cfg.lagrangian) > 0).all(axis=(-2, -1)).sum())
-        drawn += k
-        batch *= 4
+    overrides = dict(overrides or {})
+    check_keywords(overrides, owner, keywords)
+    cfg = load_swarm_config(config, overrides)
+    check_start_fits(cfg)
+    return cfg
 
 
 def check_agent_action(action: Any, dim: int, agent: str) -> np.ndarray:
@@ -250,13 +231,12 @@ __all__ = [
     "ACTION_KINDS",
     "ACTION_RULE",
     "SEED_RULE",
-    "START_FITS_NEEDED",
     "as_action",
     "check_agent_action",
     "check_reset_options",
     "check_seed",
-    "check_start_fits",
     "check_tensor_action",
     "is_tensor",
+    "make_config",
     "stack_agent_actions",
 ]

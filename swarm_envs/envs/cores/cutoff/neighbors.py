@@ -1,7 +1,7 @@
 """The cut-off core's neighbour search: the k nearest others of each agent, on demand.
 
 :class:`NeighborSearch` is held by
-:class:`~swarm_envs.envs.sparse_core.SparseSwarmNavCore`. The
+:class:`~swarm_envs.envs.cores.cutoff.core.CutoffSwarmNavCore`. The
 k nearest neighbours (observations, nearest-neighbour distance) come from the cell-list
 structure (:func:`swarm_envs.physics.neighbors.knn`, or among the agents present,
 :func:`swarm_envs.physics.present_neighbors.knn_among`), cached per state and started

@@ -1,6 +1,6 @@
 """The agent statuses' masks in the cut-off core's physics.
 
-:class:`PhysicsMasks` is held by :class:`~swarm_envs.envs.sparse_core.SparseSwarmNavCore`:
+:class:`PhysicsMasks` is held by :class:`~swarm_envs.envs.cores.cutoff.core.CutoffSwarmNavCore`:
 where the config needs the masks (``perturbations.needs_masks``), the core leaves the
 agents not present out of its cell lists (they are neither sources nor receivers of a
 pair term or rate, not counted in a collision, nobody's neighbour:
@@ -15,11 +15,14 @@ the episode, are the task layer's (:mod:`swarm_envs.envs.task.layer`).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from swarm_envs.envs.task.agent_status import AgentMasks
+
+if TYPE_CHECKING:
+    from swarm_envs.config import SwarmConfig
 
 __all__ = ["PhysicsMasks"]
 
@@ -40,7 +43,7 @@ class PhysicsMasks:
         self.mobile: np.ndarray | None = None
         self.still: np.ndarray | None = None
 
-    def take(self, mask: AgentMasks, cfg: Any) -> None:
+    def take(self, mask: AgentMasks, cfg: SwarmConfig) -> None:
         """The masks of new statuses (the physics' only where ``perturbations.needs_masks``)."""
         if cfg.perturbations.needs_masks:
             self.present, self.mobile = mask.present, mask.mobile

@@ -1,4 +1,4 @@
-"""SparseSwarmNavCore: the dense core's interface and trajectory, without (B, N, N) arrays."""
+"""CutoffSwarmNavCore: the dense core's interface and trajectory, without (B, N, N) arrays."""
 
 from __future__ import annotations
 
@@ -9,16 +9,17 @@ import numpy as np
 import pytest
 
 from swarm_envs.config import SwarmConfig
-from swarm_envs.envs import sparse_core
 from swarm_envs.envs.common import SwarmUnstableError
-from swarm_envs.envs.core import OBS_BOUND, STAT_KEYS, SwarmNavCore
-from swarm_envs.envs.sparse_core import (
+from swarm_envs.envs.cores.cutoff import core as cutoff_core
+from swarm_envs.envs.cores.cutoff.core import (
+    CUTOFF_MIN_AGENTS,
     DEFAULT_CUTOFF_SPEED,
     DEFAULT_CUTOFF_TOL,
-    SPARSE_MIN_AGENTS,
-    SparseSwarmNavCore,
+    CutoffSwarmNavCore,
     density_preserving_radius,
 )
+from swarm_envs.envs.cores.numpy import SwarmNavCore
+from swarm_envs.envs.task import OBS_BOUND, STAT_KEYS
 from swarm_envs.physics import SocialPotentialParams, forces
 from swarm_envs.physics.cutoff import cutoff_radius, force_error_bound
 
@@ -31,7 +32,7 @@ def run_both(
     steps: int,
     seed: int = 0,
     ties_at_start: bool = False,
-    **sparse_kwargs: float,
+    **cutoff_kwargs: float,
 ) -> float:
     """Step both cores with the same actions and resets; the largest difference seen.
 
@@ -39,19 +40,19 @@ def run_both(
     equally near neighbours differently: the first observations are compared as sets.
     """
     dense = SwarmNavCore(cfg, batch=batch)
-    sparse = SparseSwarmNavCore(cfg, batch=batch, **sparse_kwargs)
-    rng_d, rng_s = np.random.default_rng(seed), np.random.default_rng(seed)
+    cut = CutoffSwarmNavCore(cfg, batch=batch, **cutoff_kwargs)
+    rng_d, rng_c = np.random.default_rng(seed), np.random.default_rng(seed)
     dense.reset(rng_d)
-    sparse.reset(rng_s)
-    assert rng_d.bit_generator.state == rng_s.bit_generator.state  # the same draws
-    obs_d, obs_s = dense.observe(), sparse.observe()
+    cut.reset(rng_c)
+    assert rng_d.bit_generator.state == rng_c.bit_generator.state  # the same draws
+    obs_d, obs_c = dense.observe(), cut.observe()
     if ties_at_start:
         k, d = cfg.n_neighbors, 2 * cfg.dim + 1
         obs_d = np.sort(obs_d[..., 2 * cfg.dim :].reshape(batch, -1, k, d), axis=-2)
-        obs_s = np.sort(obs_s[..., 2 * cfg.dim :].reshape(batch, -1, k, d), axis=-2)
+        obs_c = np.sort(obs_c[..., 2 * cfg.dim :].reshape(batch, -1, k, d), axis=-2)
     worst = max(
-        np.abs(obs_d - obs_s).max(),
-        max(np.abs(dense.stats()[k] - sparse.stats()[k]).max() for k in STAT_KEYS),
+        np.abs(obs_d - obs_c).max(),
+        max(np.abs(dense.stats()[k] - cut.stats()[k]).max() for k in STAT_KEYS),
     )
     actions = np.random.default_rng(seed + 1)
     n, d = cfg.n_agents, cfg.dim
@@ -59,22 +60,22 @@ def run_both(
         a = actions.uniform(-1.2, 1.2, (batch, n, d))  # some clipped
         if t % 7 == 3:
             a[:] = 0.0  # the passive path (no control)
-        out_d, out_s = dense.step(a), sparse.step(a)
-        for arr_d, arr_s in zip(out_d[:3], out_s[:3], strict=True):
+        out_d, out_c = dense.step(a), cut.step(a)
+        for arr_d, arr_s in zip(out_d[:3], out_c[:3], strict=True):
             worst = max(worst, np.abs(arr_d.astype(float) - arr_s.astype(float)).max())
         for k in STAT_KEYS:
-            worst = max(worst, np.abs(out_d[3][k] - out_s[3][k]).max())
+            worst = max(worst, np.abs(out_d[3][k] - out_c[3][k]).max())
         worst = max(
             worst,
-            np.abs(dense.x - sparse.x).max(),
-            np.abs(dense.v - sparse.v).max(),
-            np.abs(dense.observe() - sparse.observe()).max(),
+            np.abs(dense.x - cut.x).max(),
+            np.abs(dense.v - cut.v).max(),
+            np.abs(dense.observe() - cut.observe()).max(),
         )
-        np.testing.assert_array_equal(dense.t, sparse.t)
+        np.testing.assert_array_equal(dense.t, cut.t)
         if t == steps // 2 and batch > 1:  # a partial reset, as the vector env does
             which = np.arange(batch) % 2 == 0
             dense.reset(rng_d, which)
-            sparse.reset(rng_s, which)
+            cut.reset(rng_c, which)
     return float(worst)
 
 
@@ -94,16 +95,16 @@ def test_follows_the_dense_trajectory(integrator: str, goal_in_physics: bool) ->
 def test_follows_the_dense_trajectory_3d_float32() -> None:
     cfg = SwarmConfig(n_agents=30, dim=3, n_neighbors=4, init_radius=1.0)
     dense = SwarmNavCore(cfg, batch=2, dtype=np.float32)
-    sparse = SparseSwarmNavCore(cfg, batch=2, dtype=np.float32, cutoff_tol=TINY)
+    cut = CutoffSwarmNavCore(cfg, batch=2, dtype=np.float32, cutoff_tol=TINY)
     dense.reset(np.random.default_rng(3))
-    sparse.reset(np.random.default_rng(3))
+    cut.reset(np.random.default_rng(3))
     a = np.random.default_rng(4).uniform(-1, 1, (2, 30, 3))
     for _ in range(10):
         dense.step(a)
-        sparse.step(a)
-    assert sparse.x.dtype == np.float32
-    np.testing.assert_allclose(sparse.x, dense.x, atol=1e-4)
-    for k, value in sparse.stats().items():
+        cut.step(a)
+    assert cut.x.dtype == np.float32
+    np.testing.assert_allclose(cut.x, dense.x, atol=1e-4)
+    for k, value in cut.stats().items():
         np.testing.assert_allclose(value, dense.stats()[k], rtol=1e-4, atol=1e-4, err_msg=k)
 
 
@@ -111,9 +112,9 @@ def test_collisions_and_padding_match_dense() -> None:
     """A crowded start (many collisions) and fewer agents than neighbour slots."""
     crowded = SwarmConfig(n_agents=40, init_radius=0.4, collision_radius=0.15)
     assert run_both(crowded, batch=2, steps=5, cutoff_tol=TINY) < 1e-9
-    sparse = SparseSwarmNavCore(crowded, cutoff_tol=TINY)
-    sparse.reset(np.random.default_rng(0))
-    assert sparse.stats()["collisions"][0] > 10
+    cut = CutoffSwarmNavCore(crowded, cutoff_tol=TINY)
+    cut.reset(np.random.default_rng(0))
+    assert cut.stats()["collisions"][0] > 10
     few = SwarmConfig(n_agents=3, n_neighbors=6)
     assert run_both(few, batch=2, steps=4, cutoff_tol=TINY) < 1e-9
     one = SwarmConfig(n_agents=1)
@@ -123,7 +124,7 @@ def test_collisions_and_padding_match_dense() -> None:
 def test_coincident_start_gives_no_nan() -> None:
     """All agents start on one point (init_radius = 0): no NaN, and the dense result."""
     cfg = SwarmConfig(n_agents=12, init_radius=0.0, collision_radius=0.05)
-    core = SparseSwarmNavCore(cfg, batch=2)
+    core = CutoffSwarmNavCore(cfg, batch=2)
     core.reset(np.random.default_rng(0))
     stats = core.stats()
     assert stats["collisions"][0] == 66 and stats["nearest_neighbor_distance"][0] == 0.0
@@ -134,17 +135,17 @@ def test_coincident_start_gives_no_nan() -> None:
 
 def test_collision_count_is_exact_with_a_wide_collision_radius() -> None:
     cfg = SwarmConfig(n_agents=60, init_radius=4.0, collision_radius=6.0)
-    sparse = SparseSwarmNavCore(cfg, cutoff_tol=0.5)  # r_c < collision_radius
-    assert sparse.cutoff < cfg.collision_radius
-    sparse.reset(np.random.default_rng(2))
-    x = sparse.x[0]
+    cut = CutoffSwarmNavCore(cfg, cutoff_tol=0.5)  # r_c < collision_radius
+    assert cut.cutoff < cfg.collision_radius
+    cut.reset(np.random.default_rng(2))
+    x = cut.x[0]
     rho = np.linalg.norm(x[:, None] - x[None], axis=-1)
-    assert sparse.stats()["collisions"][0] == np.triu(rho < 6.0, 1).sum()
+    assert cut.stats()["collisions"][0] == np.triu(rho < 6.0, 1).sum()
 
 
 def test_interface_shapes_and_dtypes() -> None:
     cfg = SwarmConfig(n_agents=12, n_neighbors=3)
-    core = SparseSwarmNavCore(cfg, batch=4)
+    core = CutoffSwarmNavCore(cfg, batch=4)
     assert core.cfg is cfg and core.batch == 4
     assert core.x.shape == core.v.shape == (4, 12, 2) and core.goal.shape == (4, 2)
     assert core.t.shape == (4,) and core.obs_dim == 4 + 3 * 5
@@ -163,22 +164,22 @@ def test_interface_shapes_and_dtypes() -> None:
 
 def test_reset_draws_like_the_dense_core() -> None:
     cfg = SwarmConfig(n_agents=20, dim=3)
-    dense, sparse = SwarmNavCore(cfg, batch=3), SparseSwarmNavCore(cfg, batch=3)
+    dense, cut = SwarmNavCore(cfg, batch=3), CutoffSwarmNavCore(cfg, batch=3)
     for which in (None, np.array([False, True, True]), np.zeros(3, bool)):
         rd, rs = np.random.default_rng(9), np.random.default_rng(9)
         dense.reset(rd, which)
-        sparse.reset(rs, which)
+        cut.reset(rs, which)
         assert rd.bit_generator.state == rs.bit_generator.state
-        np.testing.assert_array_equal(dense.x, sparse.x)
-        np.testing.assert_array_equal(dense.v, sparse.v)
-        np.testing.assert_array_equal(dense.goal, sparse.goal)
+        np.testing.assert_array_equal(dense.x, cut.x)
+        np.testing.assert_array_equal(dense.v, cut.v)
+        np.testing.assert_array_equal(dense.goal, cut.goal)
 
 
 def test_cutoff_error_per_step_within_the_bound() -> None:
     """At the default tolerance, the passive force differs from the dense one within the bound."""
     n = 400
     cfg = SwarmConfig(n_agents=n, init_radius=density_preserving_radius(n))
-    core = SparseSwarmNavCore(cfg)
+    core = CutoffSwarmNavCore(cfg)
     assert core.cutoff == pytest.approx(cutoff_radius(cfg.physics, DEFAULT_CUTOFF_TOL))
     core.reset(np.random.default_rng(0))
     a = np.random.default_rng(1).uniform(-1, 1, (1, n, 2))
@@ -193,7 +194,7 @@ def test_cutoff_error_per_step_within_the_bound() -> None:
 
 
 def test_cutoff_follows_a_replaced_config() -> None:
-    core = SparseSwarmNavCore(SwarmConfig())
+    core = CutoffSwarmNavCore(SwarmConfig())
     first = core.cutoff
     core.cfg = dataclasses.replace(core.cfg, max_steps=7)  # as the PettingZoo env does
     assert core.cutoff == first
@@ -213,7 +214,7 @@ def test_density_preserving_radius() -> None:
 
 
 def test_constants() -> None:
-    assert isinstance(SPARSE_MIN_AGENTS, int) and SPARSE_MIN_AGENTS > 10
+    assert isinstance(CUTOFF_MIN_AGENTS, int) and CUTOFF_MIN_AGENTS > 10
     assert DEFAULT_CUTOFF_TOL > 0 and DEFAULT_CUTOFF_SPEED >= 0
 
 
@@ -221,13 +222,13 @@ def test_invalid_input_raises() -> None:
     cfg = SwarmConfig(n_agents=5)
     for bad in (0.0, -1.0, np.nan):
         with pytest.raises(ValueError, match="cutoff_tol"):
-            SparseSwarmNavCore(cfg, cutoff_tol=bad)
+            CutoffSwarmNavCore(cfg, cutoff_tol=bad)
     with pytest.raises(ValueError, match="cutoff_speed"):
-        SparseSwarmNavCore(cfg, cutoff_speed=-1.0)
+        CutoffSwarmNavCore(cfg, cutoff_speed=-1.0)
     for batch in (0, 1.5, True):
         with pytest.raises(ValueError, match="batch"):
-            SparseSwarmNavCore(cfg, batch=batch)  # type: ignore[arg-type]
-    core = SparseSwarmNavCore(cfg)
+            CutoffSwarmNavCore(cfg, batch=batch)  # type: ignore[arg-type]
+    core = CutoffSwarmNavCore(cfg)
     with pytest.raises(ValueError, match="before reset"):
         core.step(np.zeros((1, 5, 2)))
     core.reset(np.random.default_rng(0))
@@ -237,14 +238,14 @@ def test_invalid_input_raises() -> None:
         core.step(np.full((1, 5, 2), np.nan))
     if "dynamics" in {f.name for f in dataclasses.fields(SwarmConfig)}:
         with pytest.raises(ValueError, match="social_potential"):
-            SparseSwarmNavCore(dataclasses.replace(cfg, dynamics="zone"))
+            CutoffSwarmNavCore(dataclasses.replace(cfg, dynamics="zone"))
 
 
 def test_large_swarm_step() -> None:
     """20,000 agents at the default start density: one step, no (N, N) array."""
     n = 20_000
     cfg = SwarmConfig(n_agents=n, init_radius=density_preserving_radius(n))
-    core = SparseSwarmNavCore(cfg)
+    core = CutoffSwarmNavCore(cfg)
     core.reset(np.random.default_rng(0))
     reward, *_, stats = core.step(np.random.default_rng(1).uniform(-1, 1, (1, n, 2)))
     obs = core.observe()
@@ -259,9 +260,9 @@ def test_look_ahead_neighbour_search_changes_nothing(monkeypatch) -> None:
     cfg = SwarmConfig(n_agents=60, init_radius=3.0, n_neighbors=5)
     actions = np.random.default_rng(1).uniform(-1, 1, (2, 60, 2))
 
-    def run(threshold: int) -> tuple[list, SparseSwarmNavCore]:
-        monkeypatch.setattr(sparse_core, "KNN_AHEAD_MIN_AGENTS", threshold)
-        core = SparseSwarmNavCore(cfg, batch=2)
+    def run(threshold: int) -> tuple[list, CutoffSwarmNavCore]:
+        monkeypatch.setattr(cutoff_core, "KNN_AHEAD_MIN_AGENTS", threshold)
+        core = CutoffSwarmNavCore(cfg, batch=2)
         rng = np.random.default_rng(0)
         core.reset(rng)
         out = []
@@ -302,7 +303,7 @@ def test_follows_the_dense_substeps(
     integrator: str, goal_in_physics: bool, pair_pass: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """A config that needs several substeps per step, different ones per swarm: the
-    sparse core takes the dense core's substeps and follows its trajectory (no pair
+    cut-off core takes the dense core's substeps and follows its trajectory (no pair
     dropped), through a partial reset; with the compiled pair pass where numba imports,
     and with the numpy one."""
     if pair_pass == "numpy":
@@ -327,22 +328,20 @@ def test_substeps_at_the_default_cutoff_within_its_error() -> None:
     cfg = SwarmConfig(
         n_agents=n, physics=SocialPotentialParams.large_swarm(), init_density=0.6, dt=0.2
     )
-    dense, sparse = SwarmNavCore(cfg), SparseSwarmNavCore(cfg)
+    dense, cut = SwarmNavCore(cfg), CutoffSwarmNavCore(cfg)
     dense.reset(np.random.default_rng(4))
-    sparse.reset(np.random.default_rng(4))
+    cut.reset(np.random.default_rng(4))
     x = dense.x[0]  # the density hypothesis of the bound: n ω ρ² ≥ agents within ρ ≥ r_c
     rho = np.sort(np.linalg.norm(x[:, None] - x[None], axis=-1), axis=-1)[:, 1:]
-    density = float((np.arange(1, n) / (np.pi * np.maximum(rho, sparse.cutoff) ** 2)).max())
+    density = float((np.arange(1, n) / (np.pi * np.maximum(rho, cut.cutoff) ** 2)).max())
     a = np.random.default_rng(5).uniform(-1, 1, (1, n, 2))
-    out_d, out_s = dense.step(a), sparse.step(a)
+    out_d, out_c = dense.step(a), cut.step(a)
     assert out_d[3]["substeps"][0] >= 2
-    np.testing.assert_array_equal(out_s[3]["substeps"], out_d[3]["substeps"])
+    np.testing.assert_array_equal(out_c[3]["substeps"], out_d[3]["substeps"])
     # The largest relative speed of the step (its end) bounds the alignment's speed.
     w = float(np.linalg.norm(dense.v[0, :, None] - dense.v[0, None], axis=-1).max())
-    bound = force_error_bound(
-        cfg.physics, sparse.cutoff, speed=w, n_agents=n, density=density, dim=2
-    )
-    err = np.linalg.norm(sparse.v - dense.v, axis=-1).max()
+    bound = force_error_bound(cfg.physics, cut.cutoff, speed=w, n_agents=n, density=density, dim=2)
+    err = np.linalg.norm(cut.v - dense.v, axis=-1).max()
     assert 0 < err <= cfg.dt * bound / cfg.physics.m
 
 
@@ -350,13 +349,13 @@ def test_unstable_step_raises_or_truncates_like_the_dense_core() -> None:
     """More substeps needed than max_substeps: SwarmUnstableError naming the cap, or
     (truncate) that swarm put back to its state before the step, as the dense core."""
     base = SwarmConfig(n_agents=30, init_radius=0.3, dt=0.2, max_substeps=2)
-    core = SparseSwarmNavCore(base, batch=2)
+    core = CutoffSwarmNavCore(base, batch=2)
     core.reset(np.random.default_rng(0))
     with pytest.raises(SwarmUnstableError, match="max_substeps=2"):
         core.step(np.zeros((2, 30, 2)))
     cfg = dataclasses.replace(base, on_unstable="truncate")
     assert run_both(cfg, batch=2, steps=3, cutoff_tol=TINY) < 1e-9
-    core = SparseSwarmNavCore(cfg, batch=2)
+    core = CutoffSwarmNavCore(cfg, batch=2)
     core.reset(np.random.default_rng(0))
     x0, v0 = core.x.copy(), core.v.copy()
     reward, terminated, truncated, stats = core.step(np.zeros((2, 30, 2)))
@@ -376,7 +375,7 @@ def test_diverged_state_is_caught_without_a_neighbour_search(
     truncated and put back; the other swarm steps on as if alone, and the cell list
     never sees the diverged one."""
     cfg = SwarmConfig(n_agents=20, on_unstable=on_unstable, max_substeps=1)
-    core = SparseSwarmNavCore(cfg, batch=2)
+    core = CutoffSwarmNavCore(cfg, batch=2)
     core.reset(np.random.default_rng(0))
     core.v[1, 0] = speed
     x0, v0 = core.x.copy(), core.v.copy()
@@ -391,7 +390,7 @@ def test_diverged_state_is_caught_without_a_neighbour_search(
     np.testing.assert_array_equal(core.x[1], x0[1])
     np.testing.assert_array_equal(core.v[1], v0[1])
     assert np.isfinite(core.observe()[0]).all()  # swarm 1 keeps the state it was given
-    ref = SparseSwarmNavCore(cfg, batch=1)  # swarm 0 as if alone
+    ref = CutoffSwarmNavCore(cfg, batch=1)  # swarm 0 as if alone
     ref.reset(np.random.default_rng(0))
     ref.x[0], ref.v[0], ref.goal[0] = x0[0], v0[0], core.goal[0]
     ref._after_reset(np.arange(1), np.random.default_rng(0))
