@@ -67,7 +67,7 @@ DYNAMICS = SHIPPED
 #: How the env computes a step (``SwarmConfig.backend``); see ``swarm_envs.envs.backends``.
 BACKENDS = ("auto", "numpy", "cutoff", "native", "torch")
 
-#: Older names of backends, still accepted (with a :class:`DeprecationWarning`) and
+#: Deprecated names of backends: accepted (with a :class:`DeprecationWarning`) and
 #: replaced by the name they stand for when a config is validated.
 BACKEND_ALIASES = {"sparse": "cutoff"}
 
@@ -343,8 +343,8 @@ class SwarmConfig:
     ``"auto"``, which picks by measured speed among the backends that support the config
     (``swarm_envs.envs.backends.select_backend``). Results agree to float tolerance
     (``"cutoff"``: up to its documented cut-off error). A named backend that cannot run
-    the config falls back to ``"auto"``'s pick with a warning. ``"sparse"``, the cut-off
-    backend's former name, is accepted and becomes ``"cutoff"`` (deprecated)."""
+    the config falls back to ``"auto"``'s pick with a warning. ``"sparse"``, a deprecated
+    name of the cut-off backend, is accepted and becomes ``"cutoff"``."""
     device: str = "cpu"
     """Torch device of the ``"torch"`` backend (``"cpu"``, ``"cuda"``, ``"cuda:1"``...)."""
 
@@ -372,7 +372,7 @@ class SwarmConfig:
             object.__setattr__(self, "backend", new)
         if self.backend not in BACKENDS:
             raise ValueError(
-                f"{owner}.backend must be one of {BACKENDS} (or a former name, "
+                f"{owner}.backend must be one of {BACKENDS} (or a deprecated name: "
                 f"{', '.join(map(repr, BACKEND_ALIASES))}), got {self.backend!r}"
             )
         if not isinstance(self.device, str) or not self.device:

@@ -88,8 +88,8 @@ def test_impossible_backend_choices_are_value_errors(kwargs, match):
         make_core(SwarmConfig(**kwargs))
 
 
-def test_the_former_name_sparse_is_the_cutoff_backend():
-    """``backend="sparse"`` (the cut-off backend's former name) is accepted, with a
+def test_the_deprecated_name_sparse_is_the_cutoff_backend():
+    """``backend="sparse"`` (a deprecated name of the cut-off backend) is accepted, with a
     DeprecationWarning, and the config holds ``"cutoff"``."""
     with pytest.warns(DeprecationWarning, match="'sparse' is deprecated"):
         cfg = SwarmConfig(n_agents=CUTOFF_MIN_AGENTS, backend="sparse")
