@@ -31,6 +31,7 @@ from swarm_envs.envs.core import SwarmNavCore
 from swarm_envs.envs.native import NativeSwarmNavCore, build, contract, native_support
 from swarm_envs.envs.task import STAT_KEYS
 from swarm_envs.envs.task.agent_status import ABSENT, ACTIVE, FAILED, FROZEN
+from swarm_envs.envs.task.observation import LAYOUT
 from swarm_envs.perturbations import Perturbations
 from swarm_envs.physics import SocialPotentialParams
 
@@ -239,7 +240,7 @@ def test_a_kernel_without_statuses_is_refused_where_a_config_needs_them():
     info = contract.KernelInfo(
         physics=tuple(f.name for f in dataclasses.fields(SocialPotentialParams)),
         statistics=(),
-        obs_layouts=(contract.LAYOUT,),
+        obs_layouts=(LAYOUT,),
         kmax=64,
     )
     assert contract.unsupported(SwarmConfig(), info) is None
@@ -251,7 +252,7 @@ def test_a_kernel_without_statuses_is_refused_where_a_config_needs_them():
     reason = contract.unsupported(SwarmConfig(observe_status=True), info)
     assert "observation layouts" in reason and ",status" in reason
     full = dataclasses.replace(
-        info, obs_layouts=(contract.LAYOUT, contract.LAYOUT + ",status"), statuses=("present",)
+        info, obs_layouts=(LAYOUT, LAYOUT + ",status"), statuses=("present",)
     )
     reason = contract.unsupported(SwarmConfig(observe_status=True), full)
     assert "(mobile, members, active)" in reason

@@ -1,7 +1,7 @@
 """Building and loading the C step: compiled at first use into a per-user cache.
 
 The first use compiles ``fused_step.c`` (with ``fused_step_body.h``,
-``fused_step_members.h`` and the header :func:`~swarm_envs.envs.native.contract.header`
+``fused_step_stats.h`` and the header :func:`~swarm_envs.envs.native.contract.header`
 generates) with the C compiler (``$CC``, else ``cc`` or ``gcc``) into
 ``$SWARM_ENVS_CACHE`` (default ``~/.cache/swarm_envs``) as
 ``fused_step-<sources>-<compiler>.so``: ``<sources>`` hashes the sources, the generated
@@ -96,7 +96,7 @@ CC_TIMEOUT_ENV = "SWARM_ENVS_CC_TIMEOUT"
 #: compiler is still stopped.
 DEFAULT_CC_TIMEOUT = 600.0
 _BASE_FLAGS = ("-O3", "-fopenmp", "-fno-math-errno", "-fno-trapping-math", "-fPIC", "-shared")
-_SOURCES = ("fused_step.c", "fused_step_body.h", "fused_step_members.h")
+_SOURCES = ("fused_step.c", "fused_step_body.h", "fused_step_stats.h")
 
 _LOCK = threading.Lock()
 _LIBRARIES: dict[tuple[str, ...], Library] = {}

@@ -37,7 +37,6 @@ import numpy as np
 
 from swarm_envs._array import NUMPY, SCALAR
 from swarm_envs.envs.common import (
-    NON_FINITE_ACTIONS,
     StatisticColumns,
     SwarmUnstableError,
     beyond_bound,
@@ -52,7 +51,13 @@ from swarm_envs.envs.common import (
     wide_dtypes,
 )
 from swarm_envs.envs.native.build import NATIVE_ENV, Library, load_library, resolve_native
-from swarm_envs.envs.native.contract import PACKED_COLUMNS, UNSOUND, step_params, unsupported
+from swarm_envs.envs.native.contract import (
+    PACKED_COLUMNS,
+    UNSOUND,
+    step_error,
+    step_params,
+    unsupported,
+)
 from swarm_envs.envs.stiffness import StiffnessWatch
 from swarm_envs.envs.task import (
     STAT_KEYS,
@@ -241,11 +246,8 @@ class NativeSwarmNavCore:
             obs.ctypes.data,
             packed,
         )
-        error = code & ~UNSOUND
-        if error == 3:
-            raise ValueError(NON_FINITE_ACTIONS)
-        if error:
-            raise MemoryError("the C step could not allocate its scratch memory")
+        if code & ~UNSOUND:
+            raise step_error(code)
         return bool(code & UNSOUND)
 
     def _bind(self) -> None:
