@@ -618,6 +618,9 @@ def test_flags_follow_the_arch_variable_and_cflags(monkeypatch):
     monkeypatch.setenv("CFLAGS", "-g -DEXTRA=1")
     flags = build.build_flags()
     assert "-march=x86-64-v3" in flags and flags[-2:] == ("-g", "-DEXTRA=1")
+    monkeypatch.setenv(build.ARCH_ENV, build.PORTABLE)  # the compiler's default target
+    flags = build.build_flags()
+    assert not any(f.startswith("-march") for f in flags) and flags[-2:] == ("-g", "-DEXTRA=1")
 
 
 def test_the_switch_turns_it_off_or_requires_it(monkeypatch):

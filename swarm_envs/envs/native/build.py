@@ -23,11 +23,13 @@ sources and flags by any compiler is loaded. A build runs under a per-library fi
 (default 600). Build folders left by killed builds are removed at the next load: those
 of processes of this host that are gone at once, any older than an hour.
 
-Flags: ``-O3 -march=<arch> -fopenmp -fno-math-errno -fno-trapping-math -fPIC -shared``,
-then the words of ``$CFLAGS``. ``<arch>`` is ``$SWARM_ENVS_NATIVE_ARCH`` (default
-``native``: the best code for this CPU; a portable target such as ``x86-64-v3`` or
-``x86-64-v2`` builds code that runs on any CPU of that level and exercises the kernel's
-non-AVX-512 branches).
+Flags: ``-O3 -fno-gcse -fno-gcse-after-reload -fopenmp -fno-math-errno
+-fno-trapping-math -fPIC -shared -march=<arch>``, then the words of ``$CFLAGS``.
+``<arch>`` is ``$SWARM_ENVS_NATIVE_ARCH`` (default ``native``: the best code for this
+CPU; a target such as ``x86-64-v3`` or ``x86-64-v2`` builds code that runs on any CPU of
+that level and exercises the kernel's non-AVX-512 branches). ``portable``
+(:data:`PORTABLE`) gives no ``-march`` at all: the compiler's default target, code for
+any CPU of this architecture (on x86-64: SSE2 only, without AVX or FMA).
 
 Threads: the kernel spreads the swarms over OpenMP threads. It links ``libgomp.so.1``;
 in a process that imported torch that is torch's own copy (same soname), so the step
@@ -73,6 +75,7 @@ __all__ = [
     "DEFAULT_CC_TIMEOUT",
     "LEFTOVER_AGE",
     "NATIVE_ENV",
+    "PORTABLE",
     "Library",
     "build_flags",
     "compiler_timeout",
@@ -85,17 +88,34 @@ logger = logging.getLogger(__name__)
 
 #: Environment variable overriding the automatic choice: ``0``, ``1`` or ``auto``.
 NATIVE_ENV = "SWARM_ENVS_NATIVE"
-#: Environment variable naming the ``-march`` target (default ``native``).
+#: Environment variable naming the ``-march`` target (default ``native``), or
+#: :data:`PORTABLE`.
 ARCH_ENV = "SWARM_ENVS_NATIVE_ARCH"
+#: The :data:`ARCH_ENV` value that builds for the compiler's default target (no
+#: ``-march``): a library that runs on any CPU of the architecture.
+PORTABLE = "portable"
 #: Environment variable naming the cache folder (default ``~/.cache/swarm_envs``).
 CACHE_ENV = "SWARM_ENVS_CACHE"
 #: Environment variable limiting a build's time, in seconds.
 CC_TIMEOUT_ENV = "SWARM_ENVS_CC_TIMEOUT"
 #: A build's time limit where :data:`CC_TIMEOUT_ENV` is not set, in seconds: generous,
-#: since a portable (``x86-64-v3``) build on a busy machine can take minutes; a hung
-#: compiler is still stopped.
+#: as one compiler run over the whole kernel is long (``docs/performance.md`` gives its
+#: time), and a busy machine stretches it; a hung compiler is still stopped.
 DEFAULT_CC_TIMEOUT = 600.0
-_BASE_FLAGS = ("-O3", "-fopenmp", "-fno-math-errno", "-fno-trapping-math", "-fPIC", "-shared")
+#: The fixed flags. Without AVX-512 the kernel's 64-byte vectors become several narrower
+#: registers each, and GCC's RTL partial redundancy elimination (``-fgcse``) and load CSE
+#: after register allocation (``-fgcse-after-reload``) then take most of a build's time
+#: over the result; the vectorised loops do not need them (``docs/performance.md``).
+_BASE_FLAGS = (
+    "-O3",
+    "-fno-gcse",
+    "-fno-gcse-after-reload",
+    "-fopenmp",
+    "-fno-math-errno",
+    "-fno-trapping-math",
+    "-fPIC",
+    "-shared",
+)
 _SOURCES = ("fused_step.c", "fused_step_body.h", "fused_step_stats.h")
 
 _LOCK = threading.Lock()
@@ -131,10 +151,12 @@ class Library:
 
 
 def build_flags() -> tuple[str, ...]:
-    """The compiler flags: the fixed ones, ``-march`` from :data:`ARCH_ENV`, ``$CFLAGS``."""
+    """The compiler flags: the fixed ones, ``-march`` from :data:`ARCH_ENV` (none for
+    :data:`PORTABLE`), ``$CFLAGS``."""
     arch = os.environ.get(ARCH_ENV, "native").strip() or "native"
+    target = () if arch == PORTABLE else (f"-march={arch}",)
     extra = tuple(shlex.split(os.environ.get("CFLAGS", "")))
-    return (*_BASE_FLAGS, f"-march={arch}", *extra)
+    return (*_BASE_FLAGS, *target, *extra)
 
 
 def _source_dir() -> Path:

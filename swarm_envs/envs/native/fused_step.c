@@ -15,13 +15,13 @@
  * configs that need more.
  *
  * Compiled at first use by swarm_envs/envs/native/build.py with the system C compiler
- * (-O3 -march=<SWARM_ENVS_NATIVE_ARCH, default native> -fopenmp, plus $CFLAGS): the
- * loops over pairs are vectorised (float32 with the inlined exp_f32 below; float64
- * calls glibc's vector exp, libmvec, declared SIMD), and the swarms are spread over
- * OpenMP threads. Called through ctypes. The GCC vector extensions used (vector_size,
- * __builtin_shuffle, __builtin_convertvector) lower to narrower vectors or scalars where
- * AVX-512 is missing; AVX-512 gets min/max intrinsics for the k-NN keys and compressed
- * stores for the observations.
+ * (-O3 -march=<SWARM_ENVS_NATIVE_ARCH, default native; none where it is "portable">
+ * -fopenmp, plus $CFLAGS): the loops over pairs are vectorised (float32 with the
+ * inlined exp_f32 below; float64 calls glibc's vector exp, libmvec, declared SIMD), and
+ * the swarms are spread over OpenMP threads. Called through ctypes. The GCC vector
+ * extensions used (vector_size, __builtin_shuffle, __builtin_convertvector) lower to
+ * narrower vectors or scalars where AVX-512 is missing; AVX-512 gets min/max intrinsics
+ * for the k-NN keys and compressed stores for the observations.
  */
 #include <math.h>
 #include <stdint.h>
