@@ -5,7 +5,7 @@ suite's (tests/test_conformance.py). Here: what is particular to the C step — 
 few swarms measured alone and in place, results independent of the thread count,
 actions checked in C, the inlined float32 exponential, coincident agents, ties in the
 neighbour ranking, pickling, the step-size control (substeps, the cap in both modes of
-``on_unstable``, a non-finite state) against the numpy core, also in the portable build,
+``on_unstable``, a non-finite state) against the numpy core, also in the ``x86-64-v3`` build,
 the generated contract, the build cache and the fallbacks (no compiler, a failing build,
 more neighbours than the kernel ranks).
 """
@@ -353,7 +353,7 @@ def test_substeps_match_the_numpy_core(monkeypatch, name, arch, dtype):
     # Every swarm plans its own substeps from the stable substep it carries: the same
     # counts, states, statistics and rewards as the numpy core, step after step; the
     # count is 0 after a reset (of all swarms or some, as the numpy core reports it).
-    if arch is not None:  # the portable build: no AVX-512 branches
+    if arch is not None:  # the x86-64-v3 build: no AVX-512 branches
         monkeypatch.setenv(build.ARCH_ENV, arch)
     cfg = SUBSTEP_CONFIGS[name]
     B, N, d = 4, cfg.n_agents, cfg.dim

@@ -4,7 +4,7 @@
 Seeded rollouts through :func:`~swarm_envs.envs.backends.make_core` (the perturbations'
 wrapper around each core, with the VecEnv's automatic resets): observations, rewards,
 flags and every statistic agree with the numpy core in float64 to round-off, in float32
-to 2e-3, also in the portable ``x86-64-v3`` build. Then what the masks mean, checked on
+to 2e-3, also in the ``x86-64-v3`` build (no AVX-512). Then what the masks mean, checked on
 both cores: agents that do not move stay put at rest, only present others are
 neighbours (an agent never observes itself, an absent one observes nobody), joining
 agents are placed at rest, and a kernel that does not apply statuses is refused.
@@ -101,7 +101,7 @@ def test_rollouts_with_statuses_match_the_numpy_core(kind, shape, observe_status
 @pytest.mark.parametrize(
     ("kind", "shape"), [("removed", "2d"), ("joining", "3d"), ("frozen", "3d")]
 )
-def test_the_portable_build_matches_the_numpy_core(monkeypatch, kind, shape, dtype):
+def test_the_x86_64_v3_build_matches_the_numpy_core(monkeypatch, kind, shape, dtype):
     # x86-64-v3: the kernel's branches without AVX-512 (k-NN, observations).
     monkeypatch.setenv(build.ARCH_ENV, "x86-64-v3")
     got, _ = _rollout(_config(kind, shape, True), "native", dtype)
