@@ -5,7 +5,7 @@ suite's (tests/test_conformance.py). Here: what is particular to the C step — 
 few swarms measured alone and in place, results independent of the thread count,
 actions checked in C, the inlined float32 exponential, coincident agents, ties in the
 neighbour ranking, pickling, the step-size control (substeps, the cap in both modes of
-``on_unstable``, a non-finite state) against the numpy core, also in the portable build,
+``on_unstable``, a non-finite state) against the numpy core, also in the ``x86-64-v3`` build,
 the generated contract, the build cache and the fallbacks (no compiler, a failing build,
 more neighbours than the kernel ranks).
 """
@@ -26,7 +26,8 @@ from swarm_envs.envs.common import SwarmUnstableError
 from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.native import NativeSwarmNavCore, build, contract, native_support
 from swarm_envs.envs.native.build import resolve_native
-from swarm_envs.envs.task import STATISTICS
+from swarm_envs.envs.task import STATISTICS, observation_size
+from swarm_envs.envs.task.observation import LAYOUT
 from swarm_envs.physics import SocialPotentialParams
 
 SUPPORTED, WHY = native_support()
@@ -352,7 +353,7 @@ def test_substeps_match_the_numpy_core(monkeypatch, name, arch, dtype):
     # Every swarm plans its own substeps from the stable substep it carries: the same
     # counts, states, statistics and rewards as the numpy core, step after step; the
     # count is 0 after a reset (of all swarms or some, as the numpy core reports it).
-    if arch is not None:  # the portable build: no AVX-512 branches
+    if arch is not None:  # the x86-64-v3 build: no AVX-512 branches
         monkeypatch.setenv(build.ARCH_ENV, arch)
     cfg = SUBSTEP_CONFIGS[name]
     B, N, d = 4, cfg.n_agents, cfg.dim
@@ -483,6 +484,61 @@ def test_the_struct_is_generated_from_the_dataclasses():
     assert (params.n_agents, params.dt, params.physics_C_o) == (7, 0.03, 0.25)
 
 
+def _kernel_code(cfg: SwarmConfig, actions: np.ndarray, x: np.ndarray, **params) -> int:
+    """The C step's return value for one float64 swarm at ``x`` ``(N, d)`` at rest,
+    called directly, with ``params`` overriding fields of its ``StepParams``."""
+    struct = contract.step_params(cfg, np.float64)
+    struct.batch = 1
+    for name, value in params.items():
+        setattr(struct, name, value)
+    n, d = cfg.n_agents, cfg.dim
+    state = [np.ascontiguousarray(x.T[:, None, :]), np.zeros((d, 1, n)), np.zeros((d, 1, n))]
+    out = [np.zeros((d, 1, n)) for _ in range(3)]
+    h, h_out = np.full(1, np.inf), np.zeros(1)
+    obs = np.zeros((1, n, observation_size(cfg)), np.float32)
+    packed = np.zeros((1, len(contract.PACKED_COLUMNS)))
+    arrays = [*state, h, np.zeros((1, d)), actions, np.ones(1, np.uint8), None, *out, h_out]
+    pointers = [None if a is None else a.ctypes.data for a in [*arrays, obs, packed]]
+    return build.load_library().f64(ctypes.addressof(struct), 0, 1, None, *pointers)
+
+
+@needs_native
+def test_the_kernel_returns_the_contracts_codes_and_each_maps_to_its_error():
+    # The codes come from contract.StepCode through the generated header: the C step
+    # returns them by name, and step_error turns each into its own exception.
+    cfg = SwarmConfig(n_agents=5)
+    x = np.random.default_rng(0).uniform(-1, 1, (5, 2))
+    still = np.zeros((1, 5, 2))
+    assert _kernel_code(cfg, still, x) == contract.StepCode.OK
+    kmax = build.load_library().info.kmax
+    code = _kernel_code(cfg, still, x, k_rank=kmax + 1)
+    assert code == contract.StepCode.TOO_MANY_NEIGHBOURS
+    with pytest.raises(RuntimeError, match="rank more neighbours"):
+        raise contract.step_error(code)
+    code = _kernel_code(cfg, np.full((1, 5, 2), np.nan), x)
+    assert code == contract.StepCode.NON_FINITE_ACTIONS
+    with pytest.raises(ValueError, match="finite"):
+        raise contract.step_error(code)
+    x[2] = np.nan  # a non-finite state: the guard's flag, no error
+    assert _kernel_code(cfg, still, x) == contract.UNSOUND
+    assert isinstance(contract.step_error(contract.StepCode.NO_SCRATCH), MemoryError)
+    assert "unknown code" in str(contract.step_error(2 * contract.UNSOUND))
+    assert all(code < contract.UNSOUND for code in contract.StepCode)
+
+
+def test_the_header_names_the_statuses_and_their_flags_from_the_python_definitions():
+    from swarm_envs.envs.task import agent_status
+
+    text = contract.header()
+    for name in contract.AGENT_STATUSES:
+        assert f"STATUS_{name} = {getattr(agent_status, name)}," in text
+    flags = contract.status_flags()
+    for name, value in zip(contract.AGENT_STATUSES, range(len(flags)), strict=True):
+        m = agent_status.masks(np.array(getattr(agent_status, name)))
+        want = {"PRESENT": m.present, "MOBILE": m.mobile, "ACTIVE": m.controlled}
+        assert set(flags[name]) == {flag for flag, on in want.items() if on}, (name, value)
+
+
 def test_a_config_the_kernel_does_not_implement_is_refused():
     from swarm_envs.physics import SocialPotentialParams
 
@@ -502,7 +558,7 @@ def test_a_config_the_kernel_does_not_implement_is_refused():
 @needs_native
 def test_the_kernel_declares_what_it_implements():
     info = build.load_library().info
-    assert info.obs_layouts == (contract.LAYOUT, contract.LAYOUT + ",status")
+    assert info.obs_layouts == (LAYOUT, LAYOUT + ",status")
     assert set(info.statuses) == set(contract.STATUS_MASKS)
     assert info.kmax == 64
     assert set(info.statistics) <= set(contract.PACKED_COLUMNS)
@@ -562,6 +618,9 @@ def test_flags_follow_the_arch_variable_and_cflags(monkeypatch):
     monkeypatch.setenv("CFLAGS", "-g -DEXTRA=1")
     flags = build.build_flags()
     assert "-march=x86-64-v3" in flags and flags[-2:] == ("-g", "-DEXTRA=1")
+    monkeypatch.setenv(build.ARCH_ENV, build.PORTABLE)  # the compiler's default target
+    flags = build.build_flags()
+    assert not any(f.startswith("-march") for f in flags) and flags[-2:] == ("-g", "-DEXTRA=1")
 
 
 def test_the_switch_turns_it_off_or_requires_it(monkeypatch):

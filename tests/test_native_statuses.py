@@ -4,7 +4,7 @@
 Seeded rollouts through :func:`~swarm_envs.envs.backends.make_core` (the perturbations'
 wrapper around each core, with the VecEnv's automatic resets): observations, rewards,
 flags and every statistic agree with the numpy core in float64 to round-off, in float32
-to 2e-3, also in the portable ``x86-64-v3`` build. Then what the masks mean, checked on
+to 2e-3, also in the ``x86-64-v3`` build (no AVX-512). Then what the masks mean, checked on
 both cores: agents that do not move stay put at rest, only present others are
 neighbours (an agent never observes itself, an absent one observes nobody), joining
 agents are placed at rest, and a kernel that does not apply statuses is refused.
@@ -31,6 +31,7 @@ from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.native import NativeSwarmNavCore, build, contract, native_support
 from swarm_envs.envs.task import STAT_KEYS
 from swarm_envs.envs.task.agent_status import ABSENT, ACTIVE, FAILED, FROZEN
+from swarm_envs.envs.task.observation import LAYOUT
 from swarm_envs.perturbations import Perturbations
 from swarm_envs.physics import SocialPotentialParams
 
@@ -100,7 +101,7 @@ def test_rollouts_with_statuses_match_the_numpy_core(kind, shape, observe_status
 @pytest.mark.parametrize(
     ("kind", "shape"), [("removed", "2d"), ("joining", "3d"), ("frozen", "3d")]
 )
-def test_the_portable_build_matches_the_numpy_core(monkeypatch, kind, shape, dtype):
+def test_the_x86_64_v3_build_matches_the_numpy_core(monkeypatch, kind, shape, dtype):
     # x86-64-v3: the kernel's branches without AVX-512 (k-NN, observations).
     monkeypatch.setenv(build.ARCH_ENV, "x86-64-v3")
     got, _ = _rollout(_config(kind, shape, True), "native", dtype)
@@ -239,7 +240,7 @@ def test_a_kernel_without_statuses_is_refused_where_a_config_needs_them():
     info = contract.KernelInfo(
         physics=tuple(f.name for f in dataclasses.fields(SocialPotentialParams)),
         statistics=(),
-        obs_layouts=(contract.LAYOUT,),
+        obs_layouts=(LAYOUT,),
         kmax=64,
     )
     assert contract.unsupported(SwarmConfig(), info) is None
@@ -251,7 +252,7 @@ def test_a_kernel_without_statuses_is_refused_where_a_config_needs_them():
     reason = contract.unsupported(SwarmConfig(observe_status=True), info)
     assert "observation layouts" in reason and ",status" in reason
     full = dataclasses.replace(
-        info, obs_layouts=(contract.LAYOUT, contract.LAYOUT + ",status"), statuses=("present",)
+        info, obs_layouts=(LAYOUT, LAYOUT + ",status"), statuses=("present",)
     )
     reason = contract.unsupported(SwarmConfig(observe_status=True), full)
     assert "(mobile, members, active)" in reason

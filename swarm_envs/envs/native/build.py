@@ -1,7 +1,7 @@
 """Building and loading the C step: compiled at first use into a per-user cache.
 
 The first use compiles ``fused_step.c`` (with ``fused_step_body.h``,
-``fused_step_members.h`` and the header :func:`~swarm_envs.envs.native.contract.header`
+``fused_step_stats.h`` and the header :func:`~swarm_envs.envs.native.contract.header`
 generates) with the C compiler (``$CC``, else ``cc`` or ``gcc``) into
 ``$SWARM_ENVS_CACHE`` (default ``~/.cache/swarm_envs``) as
 ``fused_step-<sources>-<compiler>.so``: ``<sources>`` hashes the sources, the generated
@@ -23,11 +23,13 @@ sources and flags by any compiler is loaded. A build runs under a per-library fi
 (default 600). Build folders left by killed builds are removed at the next load: those
 of processes of this host that are gone at once, any older than an hour.
 
-Flags: ``-O3 -march=<arch> -fopenmp -fno-math-errno -fno-trapping-math -fPIC -shared``,
-then the words of ``$CFLAGS``. ``<arch>`` is ``$SWARM_ENVS_NATIVE_ARCH`` (default
-``native``: the best code for this CPU; a portable target such as ``x86-64-v3`` or
-``x86-64-v2`` builds code that runs on any CPU of that level and exercises the kernel's
-non-AVX-512 branches).
+Flags: ``-O3 -fno-gcse -fno-gcse-after-reload -fopenmp -fno-math-errno
+-fno-trapping-math -fPIC -shared -march=<arch>``, then the words of ``$CFLAGS``.
+``<arch>`` is ``$SWARM_ENVS_NATIVE_ARCH`` (default ``native``: the best code for this
+CPU; a target such as ``x86-64-v3`` or ``x86-64-v2`` builds code that runs on any CPU of
+that level and exercises the kernel's non-AVX-512 branches). ``portable``
+(:data:`PORTABLE`) gives no ``-march`` at all: the compiler's default target, code for
+any CPU of this architecture (on x86-64: SSE2 only, without AVX or FMA).
 
 Threads: the kernel spreads the swarms over OpenMP threads. It links ``libgomp.so.1``;
 in a process that imported torch that is torch's own copy (same soname), so the step
@@ -61,6 +63,7 @@ import warnings
 from collections.abc import Iterator
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 from swarm_envs.envs.native import cache as store
 from swarm_envs.envs.native.cache import LEFTOVER_AGE
@@ -73,6 +76,7 @@ __all__ = [
     "DEFAULT_CC_TIMEOUT",
     "LEFTOVER_AGE",
     "NATIVE_ENV",
+    "PORTABLE",
     "Library",
     "build_flags",
     "compiler_timeout",
@@ -85,18 +89,35 @@ logger = logging.getLogger(__name__)
 
 #: Environment variable overriding the automatic choice: ``0``, ``1`` or ``auto``.
 NATIVE_ENV = "SWARM_ENVS_NATIVE"
-#: Environment variable naming the ``-march`` target (default ``native``).
+#: Environment variable naming the ``-march`` target (default ``native``), or
+#: :data:`PORTABLE`.
 ARCH_ENV = "SWARM_ENVS_NATIVE_ARCH"
+#: The :data:`ARCH_ENV` value that builds for the compiler's default target (no
+#: ``-march``): a library that runs on any CPU of the architecture.
+PORTABLE = "portable"
 #: Environment variable naming the cache folder (default ``~/.cache/swarm_envs``).
 CACHE_ENV = "SWARM_ENVS_CACHE"
 #: Environment variable limiting a build's time, in seconds.
 CC_TIMEOUT_ENV = "SWARM_ENVS_CC_TIMEOUT"
 #: A build's time limit where :data:`CC_TIMEOUT_ENV` is not set, in seconds: generous,
-#: since a portable (``x86-64-v3``) build on a busy machine can take minutes; a hung
-#: compiler is still stopped.
+#: as one compiler run over the whole kernel is long (``docs/performance.md`` gives its
+#: time), and a busy machine stretches it; a hung compiler is still stopped.
 DEFAULT_CC_TIMEOUT = 600.0
-_BASE_FLAGS = ("-O3", "-fopenmp", "-fno-math-errno", "-fno-trapping-math", "-fPIC", "-shared")
-_SOURCES = ("fused_step.c", "fused_step_body.h", "fused_step_members.h")
+#: The fixed flags. Without AVX-512 the kernel's 64-byte vectors become several narrower
+#: registers each, and GCC's RTL partial redundancy elimination (``-fgcse``) and load CSE
+#: after register allocation (``-fgcse-after-reload``) then take most of a build's time
+#: over the result; the vectorised loops do not need them (``docs/performance.md``).
+_BASE_FLAGS = (
+    "-O3",
+    "-fno-gcse",
+    "-fno-gcse-after-reload",
+    "-fopenmp",
+    "-fno-math-errno",
+    "-fno-trapping-math",
+    "-fPIC",
+    "-shared",
+)
+_SOURCES = ("fused_step.c", "fused_step_body.h", "fused_step_stats.h")
 
 _LOCK = threading.Lock()
 _LIBRARIES: dict[tuple[str, ...], Library] = {}
@@ -127,14 +148,17 @@ class Library:
         self.f32, self.f64 = lib.fused_step_f32, lib.fused_step_f64
         for fn in (self.f32, self.f64):
             fn.restype = ctypes.c_int
-            fn.argtypes = [ctypes.c_void_p, ctypes.c_int64, ctypes.c_int64] + [ctypes.c_void_p] * 15
+            args: list[Any] = [ctypes.c_void_p, ctypes.c_int64, ctypes.c_int64]
+            fn.argtypes = args + [ctypes.c_void_p] * 15
 
 
 def build_flags() -> tuple[str, ...]:
-    """The compiler flags: the fixed ones, ``-march`` from :data:`ARCH_ENV`, ``$CFLAGS``."""
+    """The compiler flags: the fixed ones, ``-march`` from :data:`ARCH_ENV` (none for
+    :data:`PORTABLE`), ``$CFLAGS``."""
     arch = os.environ.get(ARCH_ENV, "native").strip() or "native"
+    target = () if arch == PORTABLE else (f"-march={arch}",)
     extra = tuple(shlex.split(os.environ.get("CFLAGS", "")))
-    return (*_BASE_FLAGS, f"-march={arch}", *extra)
+    return (*_BASE_FLAGS, *target, *extra)
 
 
 def _source_dir() -> Path:
@@ -415,7 +439,8 @@ def resolve_native(request: bool | str = "auto") -> tuple[bool, str]:
         env = os.environ.get(NATIVE_ENV, "auto").strip().lower()
         if env not in ("0", "1", "auto"):
             raise ValueError(f"{NATIVE_ENV} must be 0, 1 or auto, got {env!r}")
-        request = {"0": False, "1": True, "auto": "auto"}[env]
+        choices: dict[str, bool | str] = {"0": False, "1": True, "auto": "auto"}
+        request = choices[env]
     if request is False:
         return False, f"{NATIVE_ENV}=0"
     ok, why = native_support()

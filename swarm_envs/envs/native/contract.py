@@ -10,14 +10,24 @@ itself derived from the dataclasses:
   typed from the dataclass's annotations;
 - a few derived values (:data:`DERIVED`), each with the function that computes it.
 
-The output columns' indices (``PK_<name>``, :data:`PACKED_COLUMNS`: the statistics in
-the order of ``STAT_KEYS`` from :mod:`swarm_envs.envs.task.statistics`, then
-``PK_effort``, ``PK_over_cap``, ``PK_needed``) are generated too. The generated header
-is part of the build (and of the cache key); the C code refers to fields and columns by
-name, so a field or statistic renamed or removed on the Python side fails the build. The
-other direction: the kernel declares the physics parameters, statistics and observation
-layout it implements (:class:`KernelInfo`, read from the library), and
-:func:`unsupported` refuses a config that needs more than that, naming what.
+Generated too, each from its one Python definition:
+
+- the output columns' indices (``PK_<name>``, :data:`PACKED_COLUMNS`: the statistics in
+  the order of ``STAT_KEYS`` from :mod:`swarm_envs.envs.task.statistics`, then
+  ``PK_effort``, ``PK_over_cap``, ``PK_needed``);
+- the agents' statuses (``STATUS_<name>``, from
+  :mod:`~swarm_envs.envs.task.agent_status`), the kernel's flag bits ``AG_*`` and the
+  flags of each status (``STATUS_FLAGS``, from
+  :func:`~swarm_envs.envs.task.agent_status.masks`);
+- the return codes (``STEP_<name>``, :class:`StepCode`) and the flag ``STEP_UNSOUND``
+  (:data:`UNSOUND`); :func:`step_error` turns a code into its exception by name.
+
+The generated header is part of the build (and of the cache key); the C code refers to
+fields, columns, statuses and codes by name, so one renamed or removed on the Python
+side fails the build. The other direction: the kernel declares the physics parameters,
+statistics and observation layout it implements (:class:`KernelInfo`, read from the
+library), and :func:`unsupported` refuses a config that needs more than that, naming
+what.
 
 Every :class:`~swarm_envs.config.SwarmConfig` field is either read by the kernel or
 listed in :data:`HOST_CONFIG_FIELDS` (handled in Python, or irrelevant to the social
@@ -29,6 +39,7 @@ from __future__ import annotations
 
 import ctypes
 import dataclasses
+import enum
 import hashlib
 import math
 import typing
@@ -39,14 +50,15 @@ from typing import Any
 import numpy as np
 
 from swarm_envs.config import SwarmConfig
+from swarm_envs.envs.common import NON_FINITE_ACTIONS
 from swarm_envs.envs.task import (
     OBS_BOUND,
     STAT_KEYS,
+    agent_status,
     observation_size,
     ranked_neighbors,
-    success_count,
 )
-from swarm_envs.envs.task.observation import LAYOUT, layout
+from swarm_envs.envs.task.observation import layout
 from swarm_envs.envs.task.statistics import mill_speed_scale
 from swarm_envs.metrics import CENTRE_RTOL
 from swarm_envs.models import SHIPPED, model_spec, models_on
@@ -55,6 +67,8 @@ from swarm_envs.physics.integrators import STEP_SAFETY
 from swarm_envs.physics.social_potential import RHO_FLOOR
 
 __all__ = [
+    "AGENT_FLAGS",
+    "AGENT_STATUSES",
     "DERIVED",
     "HOST_CONFIG_FIELDS",
     "KERNEL_CONFIG_FIELDS",
@@ -63,9 +77,12 @@ __all__ = [
     "UNSOUND",
     "Field",
     "KernelInfo",
+    "StepCode",
     "header",
     "layout_hash",
     "params_struct",
+    "status_flags",
+    "step_error",
     "step_fields",
     "step_params",
     "unsupported",
@@ -107,7 +124,7 @@ HOST_CONFIG_FIELDS = {
     "goal_radius": "as the derived `arrival_radius`",
     "goal_distance_min": "starts are drawn in Python",
     "goal_distance_max": "starts are drawn in Python",
-    "success_fraction": "as the derived count `need`",
+    "success_fraction": "as the derived `success_threshold`",
     "max_steps": "truncation is counted in Python",
     "reward": "the reward is combined in Python from the kernel's columns",
     "backend": "selects the core",
@@ -120,10 +137,76 @@ HOST_CONFIG_FIELDS = {
     "informed_fraction": "task='informed' only, which is refused",
 }
 
+
+class StepCode(enum.IntEnum):
+    """What the C step returns, less the flag :data:`UNSOUND` (``STEP_<name>`` in C).
+
+    The errors are checked before anything is written (``NON_FINITE_ACTIONS``,
+    ``TOO_MANY_NEIGHBOURS``) or while the swarms are stepped (``NO_SCRATCH``: a thread
+    without its scratch memory skips its swarms); :func:`step_error` gives each one's
+    exception.
+    """
+
+    OK = 0
+    NO_SCRATCH = 1
+    """A thread could not allocate its scratch memory."""
+    TOO_MANY_NEIGHBOURS = 2
+    """The config ranks more neighbours than the kernel's ``kmax``
+    (:func:`unsupported` refuses such a config up front)."""
+    NON_FINITE_ACTIONS = 3
+    """An action of the swarms stepped is NaN or infinite."""
+
+
 #: Or'ed into the C step's return value where a swarm of the call went over the cap or
 #: wrote a non-finite column: only then does the caller run its guard (the exact check,
-#: :func:`~swarm_envs.envs.common.unstable_swarms`).
-UNSOUND = 4
+#: :func:`~swarm_envs.envs.common.unstable_swarms`). A bit above every :class:`StepCode`.
+UNSOUND = 1 << max(StepCode).bit_length()
+
+_STEP_ERRORS: dict[StepCode, tuple[type[Exception], str]] = {
+    StepCode.NO_SCRATCH: (MemoryError, "the C step could not allocate its scratch memory"),
+    StepCode.TOO_MANY_NEIGHBOURS: (
+        RuntimeError,
+        "the C step was asked to rank more neighbours than it can (KernelInfo.kmax); "
+        "such a config must be refused by contract.unsupported",
+    ),
+    StepCode.NON_FINITE_ACTIONS: (ValueError, NON_FINITE_ACTIONS),
+}
+
+
+def step_error(code: int) -> Exception:
+    """The exception for the C step's return value ``code`` (:data:`UNSOUND` ignored),
+    by its :class:`StepCode`; an unknown code is a :class:`RuntimeError` naming it."""
+    try:
+        kind, message = _STEP_ERRORS[StepCode(code & ~UNSOUND)]
+    except (KeyError, ValueError):
+        return RuntimeError(f"the C step returned the unknown code {code}")
+    return kind(message)
+
+
+#: The agents' statuses by name (:mod:`~swarm_envs.envs.task.agent_status`), in C as
+#: ``STATUS_<name>``; their values are the module's.
+AGENT_STATUSES = ("ACTIVE", "FAILED", "FROZEN", "ABSENT")
+
+#: The kernel's flag bits of an agent (``AG_<name>`` in C), each one of the masks of
+#: :func:`~swarm_envs.envs.task.agent_status.masks`: in the physics (``present``),
+#: integrated and a member of the swarm (``mobile``), observed as active
+#: (``controlled``).
+AGENT_FLAGS = {"PRESENT": "present", "MOBILE": "mobile", "ACTIVE": "controlled"}
+
+
+def status_flags() -> dict[str, tuple[str, ...]]:
+    """The flags ``AG_*`` of each status (``STATUS_FLAGS`` in C), from
+    :func:`~swarm_envs.envs.task.agent_status.masks`."""
+    codes = np.array([getattr(agent_status, name) for name in AGENT_STATUSES])
+    if sorted(codes.tolist()) != list(range(len(codes))):
+        named = dict(zip(AGENT_STATUSES, codes.tolist(), strict=True))
+        raise RuntimeError(f"the agent statuses {named} are not numbered 0 .. n - 1")
+    m = agent_status.masks(codes)._asdict()
+    return {
+        name: tuple(flag for flag, mask in AGENT_FLAGS.items() if m[mask][i])
+        for i, name in enumerate(AGENT_STATUSES)
+    }
+
 
 #: Columns of the kernel's per-swarm output: the statistics, the actions' effort, then
 #: the step-size control's ``over_cap`` (1 where the step needed more substeps than
@@ -149,7 +232,6 @@ def _eps(dtype: np.dtype) -> float:
 DERIVED: tuple[tuple[str, str, Callable[[SwarmConfig, np.dtype], float], str], ...] = (
     ("k_real", "int64_t", lambda c, dt: min(c.n_neighbors, c.n_agents - 1), "observed neighbours"),
     ("k_rank", "int64_t", lambda c, dt: max(ranked_neighbors(c), 0), "ranked neighbours"),
-    ("need", "int64_t", lambda c, dt: success_count(c.n_agents, c.success_fraction), "success"),
     ("obs_dim", "int64_t", lambda c, dt: observation_size(c), "observation size"),
     ("arrival_radius", "double", lambda c, dt: c.arrival_radius, "arrived within this"),
     (
@@ -168,7 +250,7 @@ DERIVED: tuple[tuple[str, str, Callable[[SwarmConfig, np.dtype], float], str], .
         "success_threshold",
         "double",
         lambda c, dt: c.success_fraction - 1e-9,  # success_count's rule
-        "success: arrived members / members at least this",
+        "success: arrived members / members at least this (success_count's rule)",
     ),
     ("obs_bound", "double", lambda c, dt: OBS_BOUND, "observation clip"),
     ("rho_floor", "double", lambda c, dt: RHO_FLOOR, "distance floor"),
@@ -222,8 +304,17 @@ def _header_body() -> list[str]:
     lines.append("} StepParams;")
     columns = ", ".join(f"PK_{name}" for name in PACKED_COLUMNS)
     lines.append(f"enum {{ {columns}, PK_SIZE }};")
-    lines.append(f'#define STEP_OBS_LAYOUT "{LAYOUT}"')
-    lines.append(f"#define STEP_UNSOUND {UNSOUND}")
+    codes = ", ".join(f"STEP_{c.name} = {c.value}" for c in StepCode)
+    lines.append(f"enum {{ {codes}, STEP_UNSOUND = {UNSOUND} }};")
+    statuses = ", ".join(f"STATUS_{n} = {getattr(agent_status, n)}" for n in AGENT_STATUSES)
+    lines.append(f"enum {{ {statuses}, STATUS_COUNT = {len(AGENT_STATUSES)} }};")
+    bits = ", ".join(f"AG_{name} = {1 << i}" for i, name in enumerate(AGENT_FLAGS))
+    lines.append(f"enum {{ {bits} }};")
+    table = ", ".join(
+        f"[STATUS_{name}] = {' | '.join(f'AG_{f}' for f in flags) or '0'}"
+        for name, flags in status_flags().items()
+    )
+    lines.append(f"#define STATUS_FLAGS {{ {table} }}")
     # the numerator of the step-size rule, 4 · STEP_SAFETY, exactly as Python rounds it
     lines.append(f"#define STEP_EDGE_NUMERATOR {float.hex(4.0 * STEP_SAFETY)}")
     return lines
@@ -236,7 +327,8 @@ def layout_hash() -> int:
 
 
 def header() -> str:
-    """The generated C header: ``StepParams``, the ``PK_*`` columns, the layout hash."""
+    """The generated C header: ``StepParams``, the ``PK_*`` columns, the return codes,
+    the agents' statuses and flags, the layout hash."""
     lines = [*_header_body(), f"#define STEP_LAYOUT_HASH {layout_hash()}LL", "#endif"]
     return "\n".join(lines) + "\n"
 

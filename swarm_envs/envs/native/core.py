@@ -39,7 +39,6 @@ import numpy as np
 
 from swarm_envs._array import NUMPY
 from swarm_envs.envs.common import (
-    NON_FINITE_ACTIONS,
     StatisticColumns,
     check_action_shape,
     check_batch,
@@ -48,7 +47,13 @@ from swarm_envs.envs.common import (
     wide_dtypes,
 )
 from swarm_envs.envs.native.build import NATIVE_ENV, Library, load_library, resolve_native
-from swarm_envs.envs.native.contract import PACKED_COLUMNS, UNSOUND, step_params, unsupported
+from swarm_envs.envs.native.contract import (
+    PACKED_COLUMNS,
+    UNSOUND,
+    step_error,
+    step_params,
+    unsupported,
+)
 from swarm_envs.envs.task import STAT_KEYS, STATISTICS, Frame, observation_size
 from swarm_envs.envs.task.agent_status import masks
 from swarm_envs.envs.task.layer import Advance, HostRecords, TaskCore, TaskLayer
@@ -207,11 +212,8 @@ class NativeSwarmNavCore(TaskCore):
             obs.ctypes.data,
             packed,
         )
-        error = code & ~UNSOUND
-        if error == 3:
-            raise ValueError(NON_FINITE_ACTIONS)
-        if error:
-            raise MemoryError("the C step could not allocate its scratch memory")
+        if code & ~UNSOUND:
+            raise step_error(code)
         return bool(code & UNSOUND)
 
     def _bind(self) -> None:
@@ -405,7 +407,7 @@ class NativeSwarmNavCore(TaskCore):
 
     # ------------------------------------------------------------------ pickling
     def __getstate__(self) -> dict[str, Any]:
-        skip = ("_lib", "_params", "_params_ptr", "_fn", "_pool", "_spare")
+        skip: tuple[str, ...] = ("_lib", "_params", "_params_ptr", "_fn", "_pool", "_spare")
         skip += ("_state_ptrs", "_spare_ptrs", "_fixed_ptrs")
         state = {k: v for k, v in self.__dict__.items() if k not in skip}
         state["_obs"] = self._obs.copy()

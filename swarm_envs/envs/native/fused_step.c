@@ -4,23 +4,24 @@
  * swarm_envs.envs.task (docs/design.md): the same semi-implicit Euler step with the
  * carried force and stable substep (step-size control, docs/models.md §7), pair law,
  * goal sink, neighbour ranking, observation layout and statistics, laid out for the
- * CPU. The reward is not here: Python combines it from the
- * statistics and the effort this step writes (swarm_envs.envs.task.reward).
+ * CPU. The reward is not here: Python combines it from the statistics and the effort
+ * this step writes (swarm_envs.envs.task.reward).
  *
- * The parameters arrive in StepParams, and the output columns are PK_*, both from the
- * header step_params.h that swarm_envs/envs/native/contract.py generates from the config
- * dataclasses at build time. What this kernel implements it declares below
+ * The parameters arrive in StepParams; the output columns PK_*, the return codes STEP_*,
+ * the agents' statuses STATUS_* and their flags AG_* are named in the header
+ * step_params.h that swarm_envs/envs/native/contract.py generates from the Python
+ * definitions at build time. What this kernel implements it declares below
  * (KERNEL_PHYSICS, KERNEL_STATS, KERNEL_OBS_LAYOUTS, KERNEL_STATUSES); Python refuses
  * configs that need more.
  *
  * Compiled at first use by swarm_envs/envs/native/build.py with the system C compiler
- * (-O3 -march=<SWARM_ENVS_NATIVE_ARCH, default native> -fopenmp, plus $CFLAGS): the loops
- * over pairs are vectorised (float32 with the inlined exp_f32 below; float64 calls
- * glibc's vector exp, libmvec, declared SIMD), and the swarms are spread over OpenMP
- * threads. Called through ctypes. The GCC vector extensions used (vector_size,
- * __builtin_shuffle, __builtin_convertvector) lower to narrower vectors or scalars where
- * AVX-512 is missing; AVX-512 gets min/max intrinsics for the k-NN keys and compressed
- * stores for the observations.
+ * (-O3 -march=<SWARM_ENVS_NATIVE_ARCH, default native; none where it is "portable">
+ * -fopenmp, plus $CFLAGS): the loops over pairs are vectorised (float32 with the
+ * inlined exp_f32 below; float64 calls glibc's vector exp, libmvec, declared SIMD), and
+ * the swarms are spread over OpenMP threads. Called through ctypes. The GCC vector
+ * extensions used (vector_size, __builtin_shuffle, __builtin_convertvector) lower to
+ * narrower vectors or scalars where AVX-512 is missing; AVX-512 gets min/max intrinsics
+ * for the k-NN keys and compressed stores for the observations.
  */
 #include <math.h>
 #include <stdint.h>
@@ -51,20 +52,17 @@ double exp(double);
  * (the mobile agents), the observed flag of the active ones. */
 #define KERNEL_STATUSES "present mobile members active"
 
-/* An agent's flags (fused_step_body.h): in the physics, moving (a member), active. */
-#define AG_PRESENT 1
-#define AG_MOBILE 2
-#define AG_ACTIVE 4
+/* The agents' flags of each status (STATUS_FLAGS, AG_*: generated from
+ * swarm_envs.envs.task.agent_status.masks), read by fused_step_body.h. */
+static const int8_t status_flags[STATUS_COUNT] = STATUS_FLAGS;
 
-/* e^x in float32, inlined so that the pair loop vectorises without calls (a call to
- * libmvec's vector expf spills every live register, which made the loop 1.6x slower).
+/* e^x in float32, inlined so that the pair loop vectorises without calls
+ * (docs/performance.md, "Inside the C step", says what each choice here saves).
  * Cephes' expf: x = n ln2 + r with |r| <= ln2/2 (ln2 in two parts), e^r by a degree-6
- * polynomial (relative error below 2e-7, about 2 ulp), times 2^n as one exponent
- * field. x is clamped to [-87.28, 88.3] on its bits, by integer mins (as float compares
- * GCC turned the clamp into chains of blends, twice the instructions), and e^x is 0
- * below -87.28: there it is under 1.3e-38, the subnormal range, which the single
- * factor 2^n (n >= -126) cannot reach; flushing it saves the second factor, about 10 %
- * of the pair loop. NaN becomes a bound. */
+ * polynomial (relative error below 2e-7, about 2 ulp), times 2^n as one exponent field.
+ * x is clamped to [-87.28, 88.3] on its bits, by integer mins, and e^x is 0 below
+ * -87.28: there it is under 1.3e-38, the subnormal range, which the single factor 2^n
+ * (n >= -126) cannot reach. NaN becomes a bound. */
 static inline float exp_f32(float x) {
     uint32_t ub; /* the clamp on the bits: an unsigned and a signed integer min */
     memcpy(&ub, &x, sizeof ub);
@@ -134,7 +132,7 @@ typedef int32_t vindex_f32 __attribute__((vector_size(64)));
 #define FABS fabsf
 #define FUSED_SWARM fused_swarm_f32
 #define STABLE_SUBSTEP stable_substep_f32
-#define MEMBER_STATS member_stats_f32
+#define SWARM_STATS swarm_stats_f32
 typedef uint64_t vkey __attribute__((vector_size(64)));
 /* Lanes [8h, 8h + 8) of a 16-lane int32 vector, zero-extended to 64 bits. */
 #define KEY_HALF(v, h)                                                                 \
@@ -169,7 +167,7 @@ static inline vkey key_max(vkey a, vkey b) { vkey lt = (vkey)(a < b); return (b 
 #undef FABS
 #undef FUSED_SWARM
 #undef STABLE_SUBSTEP
-#undef MEMBER_STATS
+#undef SWARM_STATS
 #undef KNN_BLOCK
 #undef KNN_KEYS
 #undef OBS_PAIRS_AVX512
@@ -194,7 +192,7 @@ typedef int64_t vindex_f64 __attribute__((vector_size(64)));
 #define FABS fabs
 #define FUSED_SWARM fused_swarm_f64
 #define STABLE_SUBSTEP stable_substep_f64
-#define MEMBER_STATS member_stats_f64
+#define SWARM_STATS swarm_stats_f64
 #define KNN_BLOCK knn_block_f64
 #define FUSED_STEP fused_step_f64
 #include "fused_step_body.h"

@@ -108,7 +108,7 @@ static inline double STABLE_SUBSTEP(REAL omega2, REAL gamma) {
     return den > 0 ? (double)((REAL)STEP_EDGE_NUMERATOR / den) : INFINITY;
 }
 
-#include "fused_step_members.h" /* MEMBER_STATS */
+#include "fused_step_stats.h" /* SWARM_STATS */
 
 static inline __attribute__((always_inline)) int FUSED_SWARM(
     const StepParams *P, const int64_t d, int64_t b, REAL *scratch, const REAL *x,
@@ -116,7 +116,7 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
     const uint8_t *move, const int8_t *status, REAL *x_out, REAL *v_out, REAL *f_out,
     double *h_out, float *obs, REAL *packed) {
     const int64_t B = P->batch, N = P->n_agents, k = P->n_neighbors;
-    const int64_t k_real = P->k_real, k_sort = P->k_rank, need = P->need;
+    const int64_t k_real = P->k_real, k_sort = P->k_rank;
     const int64_t obs_dim = P->obs_dim, physics_goal = P->physics_goal;
     const int64_t observe_status = P->observe_status;
     const int64_t NP = (N + LANES - 1) / LANES * LANES;
@@ -155,7 +155,6 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
     const int friction = !rayleigh && beta > 0;
     const double cap = (double)P->max_substeps;
     const int same_decay = l_a == l_r, alignment = C_o > 0;
-    const REAL Nr = (REAL)N;
     const int64_t S = NP; /* component stride of the scratch state (padded to LANES) */
 
     /* Scratch: xs, vs, fs, offset (d × NP each), the agents' rate sums ks, ws (NP each),
@@ -169,17 +168,16 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
     INDEX *alive = (INDEX *)(near_d + 2 * k_sort * N + 8 * NP + 2 * d * NP);
 
     /* The agents' statuses (swarm_envs.envs.task.agent_status; status NULL: every agent
-     * active) as flags: AG_PRESENT (in the physics: its pairs interact, it can be a
-     * neighbour), AG_MOBILE (its update is integrated, it is a member of the swarm for
-     * the statistics), AG_ACTIVE (the observed status); padding lanes have none. With
-     * statuses (masked), every tile takes the masked path: a pair interacts where both
-     * agents are present. */
+     * active) as flags (STATUS_FLAGS, generated): AG_PRESENT (in the physics: its pairs
+     * interact, it can be a neighbour), AG_MOBILE (its update is integrated, it is a
+     * member of the swarm for the statistics), AG_ACTIVE (the observed status); padding
+     * lanes are absent. With statuses (masked), every tile takes the masked path: a pair
+     * interacts where both agents are present. */
     const int8_t *st = status ? status + b * N : NULL;
     const int masked = st != NULL;
     for (int64_t i = 0; i < NP; i++) {
-        const int s_i = i < N ? (st ? st[i] : 0) : 4;
-        alive[i] = (INDEX)((s_i <= 2 ? AG_PRESENT : 0) | (s_i <= 1 ? AG_MOBILE : 0) |
-                           (s_i == 0 ? AG_ACTIVE : 0));
+        const int s_i = i < N ? (st ? st[i] : STATUS_ACTIVE) : STATUS_ABSENT;
+        alive[i] = (INDEX)(s_i >= 0 && s_i < STATUS_COUNT ? status_flags[s_i] : 0);
     }
 
     /* 1. The step in substeps (swarm_envs.envs.dynamics.SocialPotentialDynamics.step).
@@ -507,7 +505,6 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
      * of LANES, each candidate inserted into the sorted lists of its lane (KNN_BLOCK; the
      * usual list lengths are instantiated with constant K, so the lists stay in
      * registers). */
-    REAL nnd = 0;
     if (N > 1) {
         for (int64_t I = 0; I < nb; I++) {
             switch (k_sort) {
@@ -521,11 +518,6 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
             case 8: KNN_BLOCK(8, I, nb, N, rho, rot, near_d, near_i); break;
             default: KNN_BLOCK(k_sort, I, nb, N, rho, rot, near_d, near_i); break;
             }
-        }
-        if (!masked) { /* with statuses: over the members (MEMBER_STATS) */
-#pragma omp simd reduction(+ : nnd)
-            for (int64_t i = 0; i < N; i++) nnd += near_d[i];
-            nnd = nnd / Nr;
         }
     }
 
@@ -638,102 +630,15 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
 #endif
 #undef CLIP_OBS
 
-    /* 5. Statistics (swarm_envs.metrics, docs/models.md §2). Headings v/|v| (0 at rest) and
-     * unit offsets from the centroid (0 within the centring tolerance) as quotients
-     * whose divisor is replaced by 1 where they are 0: the loops vectorise. */
+    /* 5. Statistics (SWARM_STATS, fused_step_stats.h): over every agent, or over the
+     * members where agents have statuses. */
     REAL *pk = packed + b * PK_SIZE;
-    if (masked) {
-        MEMBER_STATS(N, d, S, xs, vs, off, gd, near_d, alive, g, centre_tol, goal_radius,
-                     (REAL)P->success_threshold, pk);
-    } else {
-        const REAL *x0 = xs, *x1 = xs + S, *x2 = xs + 2 * S;
-        const REAL *v0 = vs, *v1 = vs + S, *v2 = vs + 2 * S;
-        REAL hs0 = 0, hs1 = 0, hs2 = 0, cs0 = 0, cs1 = 0, cs2 = 0, scale = 0;
-#pragma omp simd reduction(+ : hs0, hs1, hs2, cs0, cs1, cs2) reduction(max : scale)
-        for (int64_t i = 0; i < N; i++) {
-            const REAL vz = d == 3 ? v2[i] : 0, xz = d == 3 ? x2[i] : 0;
-            const REAL speed = SQRT(v0[i] * v0[i] + v1[i] * v1[i] + vz * vz);
-            const int moves = speed > 0;
-            const REAL den = moves ? speed : 1;
-            hs0 += (moves ? v0[i] : 0) / den;
-            hs1 += (moves ? v1[i] : 0) / den;
-            hs2 += (moves ? vz : 0) / den;
-            cs0 += x0[i];
-            cs1 += x1[i];
-            cs2 += xz;
-            REAL ax = FABS(x0[i]) > FABS(x1[i]) ? FABS(x0[i]) : FABS(x1[i]);
-            ax = FABS(xz) > ax ? FABS(xz) : ax;
-            scale = ax > scale ? ax : scale;
-        }
-        const REAL centre[3] = {cs0 / Nr, cs1 / Nr, cs2 / Nr};
-        REAL polarization = SQRT(hs0 * hs0 + hs1 * hs1 + hs2 * hs2) / Nr;
-        polarization = polarization > 1 ? 1 : polarization;
-        const REAL tol = centre_tol * scale;
-        REAL cross0 = 0, cross1 = 0, cross2 = 0, radius_sum = 0;
-#pragma omp simd reduction(+ : cross0, cross1, cross2, radius_sum)
-        for (int64_t i = 0; i < N; i++) {
-            const REAL vz = d == 3 ? v2[i] : 0;
-            const REAL r0 = x0[i] - centre[0], r1 = x1[i] - centre[1];
-            const REAL r2 = d == 3 ? x2[i] - centre[2] : 0;
-            const REAL radius = SQRT(r0 * r0 + r1 * r1 + r2 * r2);
-            const REAL speed = SQRT(v0[i] * v0[i] + v1[i] * v1[i] + vz * vz);
-            radius_sum += radius;
-            const int moves = speed > 0, off_centre = radius > tol;
-            const REAL sden = moves ? speed : 1, rden = off_centre ? radius : 1;
-            const REAL h0 = (moves ? v0[i] : 0) / sden, h1 = (moves ? v1[i] : 0) / sden;
-            const REAL h2 = (moves ? vz : 0) / sden;
-            const REAL e0 = (off_centre ? r0 : 0) / rden, e1 = (off_centre ? r1 : 0) / rden;
-            const REAL e2 = (off_centre ? r2 : 0) / rden;
-            cross2 += e0 * h1 - e1 * h0;
-            if (d == 3) {
-                cross0 += e1 * h2 - e2 * h1;
-                cross1 += e2 * h0 - e0 * h2;
-            }
-        }
-        REAL turn = d == 2 ? FABS(cross2) : SQRT(cross0 * cross0 + cross1 * cross1 + cross2 * cross2);
-        REAL angular = turn / Nr;
-        angular = angular > 1 ? 1 : angular;
-        REAL cd2 = 0;
-        for (int64_t c = 0; c < d; c++) cd2 += (centre[c] - g[c]) * (centre[c] - g[c]);
-        /* The goal distances, and the angular momenta about the goal: Σ (r_i − r_g) × v_i
-         * (goal_angular_momentum) and the same weighted by 1/|r_i − r_g| within the
-         * arrival radius (mill_speed), from the offsets r_g − r_i (the sign goes in the
-         * norm). */
-        int64_t arrived_count = 0;
-        REAL gd_sum = 0, am0 = 0, am1 = 0, am2 = 0, ms0 = 0, ms1 = 0, ms2 = 0;
-#pragma omp simd reduction(+ : arrived_count, gd_sum, am0, am1, am2, ms0, ms1, ms2)
-        for (int64_t i = 0; i < N; i++) {
-            const REAL dist = gd[i];
-            const int arrived = dist <= goal_radius, inside = arrived & (dist > 0);
-            arrived_count += arrived;
-            gd_sum += dist;
-            const REAL w = (inside ? 1 : 0) / (inside ? dist : 1);
-            const REAL o0 = off[i], o1 = off[S + i], o2 = d == 3 ? off[2 * S + i] : 0;
-            const REAL vz = d == 3 ? v2[i] : 0;
-            const REAL z = o0 * v1[i] - o1 * v0[i];
-            am2 += z;
-            ms2 += w * z;
-            if (d == 3) {
-                const REAL cx = o1 * vz - o2 * v1[i], cy = o2 * v0[i] - o0 * vz;
-                am0 += cx;
-                am1 += cy;
-                ms0 += w * cx;
-                ms1 += w * cy;
-            }
-        }
-        const REAL goal_turn = d == 2 ? FABS(am2) : SQRT(am0 * am0 + am1 * am1 + am2 * am2);
-        const REAL mill_turn = d == 2 ? FABS(ms2) : SQRT(ms0 * ms0 + ms1 * ms1 + ms2 * ms2);
-        pk[PK_polarization] = polarization;
-        pk[PK_angular_momentum] = angular;
-        pk[PK_expanse] = radius_sum / Nr;
-        pk[PK_nearest_neighbor_distance] = nnd;
-        pk[PK_fraction_arrived] = (REAL)arrived_count / Nr;
-        pk[PK_centroid_distance] = SQRT(cd2);
-        pk[PK_mean_goal_distance] = gd_sum / Nr;
-        pk[PK_goal_angular_momentum] = goal_turn / Nr;
-        pk[PK_mill_speed] = mill_turn / Nr;
-        pk[PK_success] = arrived_count >= need ? 1 : 0;
-    }
+    if (masked)
+        SWARM_STATS(1, N, d, S, xs, vs, off, gd, near_d, alive, g, centre_tol, goal_radius,
+                    P->success_threshold, pk);
+    else
+        SWARM_STATS(0, N, d, S, xs, vs, off, gd, near_d, alive, g, centre_tol, goal_radius,
+                    P->success_threshold, pk);
     /* mill_order: mill_speed / v0, at most 1; 0 without self-propulsion (v0 = 0). */
     const REAL cruise = (REAL)P->cruise_speed;
     const REAL mill = pk[PK_mill_speed] / (cruise > 0 ? cruise : 1);
@@ -783,8 +688,10 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
  * *_out arrays, the observations to obs and the columns PK_* to packed (B × PK_SIZE):
  * the statistics, the actions' effort, over_cap (1 where the step needed more than
  * max_substeps) and needed (the substeps it would have taken).
- * Returns 0, 1 if scratch memory could not be allocated, 2 if k_sort > KMAX_SORT, 3 if
- * an action of these swarms is NaN or infinite (checked first: nothing is written);
+ * Returns a STEP_* code (swarm_envs.envs.native.contract.StepCode): STEP_OK,
+ * STEP_NO_SCRATCH where a thread could not allocate its scratch memory,
+ * STEP_TOO_MANY_NEIGHBOURS where k_sort > KMAX_SORT or STEP_NON_FINITE_ACTIONS where an
+ * action of these swarms is NaN or infinite (both checked first: nothing is written);
  * or'ed with STEP_UNSOUND where a swarm went over the cap or wrote a non-finite column.
  * Finite actions outside [-1, 1] are clipped, as numpy's clip would. */
 int FUSED_STEP(const StepParams *P, int64_t b0, int64_t b1, const int64_t *rows,
@@ -793,7 +700,7 @@ int FUSED_STEP(const StepParams *P, int64_t b0, int64_t b1, const int64_t *rows,
                REAL *v_out, REAL *f_out, double *h_out, float *obs, REAL *packed) {
     const int64_t N = P->n_agents, d = P->dim, k_sort = P->k_rank;
     const int64_t NP = (N + LANES - 1) / LANES * LANES;
-    if (k_sort > KMAX_SORT) return 2;
+    if (k_sort > KMAX_SORT) return STEP_TOO_MANY_NEIGHBOURS;
     /* Non-finite actions: exponent bits all ones (an integer OR reduction, vectorised). */
     ABITS nonfinite = 0;
     for (int64_t t = b0; t < b1; t++) {
@@ -801,10 +708,10 @@ int FUSED_STEP(const StepParams *P, int64_t b0, int64_t b1, const int64_t *rows,
         for (int64_t u = 0; u < N * d; u++)
             nonfinite |= (ABITS)((abits[u] & EXP_MASK) == EXP_MASK);
     }
-    if (nonfinite) return 3;
+    if (nonfinite) return STEP_NON_FINITE_ACTIONS;
     const size_t n_real =
         (size_t)(4 * d * NP + 2 * NP + N + NP * NP + 2 * k_sort * N + 8 * NP + 2 * d * NP + NP);
-    int code = 0;
+    int code = STEP_OK;
 #pragma omp parallel if (b1 - b0 > 1) reduction(| : code)
     {
         REAL *scratch = (REAL *)malloc(n_real * sizeof(REAL) + 64);
@@ -813,7 +720,7 @@ int FUSED_STEP(const StepParams *P, int64_t b0, int64_t b1, const int64_t *rows,
         if (d == 2) {
 #pragma omp for schedule(static)
             for (int64_t t = b0; t < b1; t++) {
-                if (!scratch) { code |= 1; continue; }
+                if (!scratch) { code |= STEP_NO_SCRATCH; continue; }
                 if (FUSED_SWARM(P, 2, rows ? rows[t] : t, scratch, x, v, f, h, goal, a, move,
                                 status, x_out, v_out, f_out, h_out, obs, packed))
                     code |= STEP_UNSOUND;
@@ -821,7 +728,7 @@ int FUSED_STEP(const StepParams *P, int64_t b0, int64_t b1, const int64_t *rows,
         } else {
 #pragma omp for schedule(static)
             for (int64_t t = b0; t < b1; t++) {
-                if (!scratch) { code |= 1; continue; }
+                if (!scratch) { code |= STEP_NO_SCRATCH; continue; }
                 if (FUSED_SWARM(P, 3, rows ? rows[t] : t, scratch, x, v, f, h, goal, a, move,
                                 status, x_out, v_out, f_out, h_out, obs, packed))
                     code |= STEP_UNSOUND;
