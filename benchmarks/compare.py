@@ -67,9 +67,9 @@ import swarm_envs  # noqa: F401  (registers the Gymnasium id)
 from swarm_envs import swarm_nav_v0, tune_allocator
 from swarm_envs._runtime.torch_compile import SocialPotentialStepper
 from swarm_envs.config import SwarmConfig
+from swarm_envs.envs.cores.native import NativeSwarmNavCore, native_support
 from swarm_envs.envs.cores.numpy import SwarmNavCore
 from swarm_envs.envs.cores.torch.core import TorchSwarmNavCore
-from swarm_envs.envs.native import NativeSwarmNavCore, native_support
 from swarm_envs.physics import SocialPotentialParams, random_swarm
 from swarm_envs.physics import step as numpy_step
 

@@ -173,7 +173,7 @@ def test_named_configs_resolve_from_an_installed_wheel(tmp_path: Path):
         "import swarm_envs, swarm_envs.config as c, train.demo as d;"
         f"assert swarm_envs.__file__.startswith({str(site)!r}), swarm_envs.__file__;"
         "assert not c.CONFIG_ROOT.is_symlink() and d.DEFAULT_CONFIG.is_file();"
-        "from swarm_envs.envs.native import build as n;"  # the C step's sources ship too
+        "from swarm_envs.envs.cores.native import build as n;"  # the C step's sources ship too
         "assert all((n._source_dir() / f).is_file() for f in n._SOURCES);"
         "print(c.load_swarm_config('paper_navigation').n_agents)"
     )

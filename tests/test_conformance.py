@@ -241,7 +241,7 @@ def test_a_perturbed_reward_term_in_one_backend_is_caught(monkeypatch):
 
 def test_a_perturbed_observation_scale_in_one_backend_is_caught(monkeypatch):
     # The C step given the wrong velocity scale (as a hand-kept contract could).
-    from swarm_envs.envs.native import core as native_core
+    from swarm_envs.envs.cores.native import core as native_core
 
     if backends.unsupported(BROKEN_CONFIG, "native"):
         pytest.skip("C step unavailable")
@@ -291,7 +291,7 @@ def test_frozen_agents_that_move_in_one_backend_are_caught(monkeypatch):
 def test_a_perturbed_term_in_the_c_step_is_caught(monkeypatch, tmp_path, column):
     # The C step built with one output column deliberately off (a -D flag the kernel
     # honours for this test only): the statistic, and for collisions the reward too.
-    from swarm_envs.envs.native import build
+    from swarm_envs.envs.cores.native import build
 
     if not build.native_support()[0]:
         pytest.skip("C step unavailable")

@@ -26,6 +26,10 @@ ALIASES = {
     "swarm_envs.envs.torch_core": {
         "TorchSwarmNavCore": ("swarm_envs.envs.cores.torch.core", "TorchSwarmNavCore"),
     },
+    "swarm_envs.envs.native": {
+        name: ("swarm_envs.envs.cores.native", name)
+        for name in ("NATIVE_ENV", "NativeSwarmNavCore", "native_support", "resolve_native")
+    },
     "swarm_envs.envs.sparse_core": {
         name: ("swarm_envs.envs.cores.cutoff.core", name)
         for name in (

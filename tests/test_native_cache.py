@@ -1,4 +1,4 @@
-"""The C step's cache (swarm_envs.envs.native.build): checked before it is loaded.
+"""The C step's cache (swarm_envs.envs.cores.native.build): checked before it is loaded.
 
 A damaged cached library (truncated, empty, cut short, garbage, without its record) is
 never handed to the loader: it is rebuilt with a warning, or, without a compiler, refused
@@ -30,7 +30,7 @@ import pytest
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs import backends
 from swarm_envs.envs.backends import make_core
-from swarm_envs.envs.native import build, native_support
+from swarm_envs.envs.cores.native import build, native_support
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -41,7 +41,7 @@ PROBE = textwrap.dedent(
     import json, warnings
     from swarm_envs.config import SwarmConfig
     from swarm_envs.envs.backends import make_core
-    from swarm_envs.envs.native import build, native_support
+    from swarm_envs.envs.cores.native import build, native_support
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         ok, why = native_support()
@@ -176,7 +176,7 @@ def test_without_a_compiler_a_damaged_library_is_refused_with_a_warning(
     required = textwrap.dedent(
         """
         import json
-        from swarm_envs.envs.native import resolve_native
+        from swarm_envs.envs.cores.native import resolve_native
         try:
             resolve_native(True)
         except RuntimeError as err:
@@ -261,7 +261,7 @@ def test_a_build_in_another_process_is_waited_for_at_most_the_timeout(monkeypatc
     hung = script(tmp_path / "hung-cc", f"echo $$ > {pid_file}\nexec sleep 60\n")
     env = {k: v for k, v in os.environ.items() if not k.startswith("SWARM_ENVS_")}
     env.update(PYTHONPATH=str(ROOT), SWARM_ENVS_CACHE=str(fresh), CC=str(hung))
-    code = "from swarm_envs.envs.native import native_support; native_support()"
+    code = "from swarm_envs.envs.cores.native import native_support; native_support()"
     child = subprocess.Popen([sys.executable, "-c", code], env=env)  # holds the lock
     try:
         for _ in range(300):
@@ -292,7 +292,7 @@ def test_the_timeout_must_be_a_positive_number_of_seconds(monkeypatch, fresh, va
 def test_concurrent_processes_build_once(tmp_path, golden, copy_cc):
     slow = script(tmp_path / "slow-cc", f'sleep 1\nexec {copy_cc} "$@"\n')
     cache = tmp_path / "cache"
-    code = "from swarm_envs.envs.native import native_support; print(native_support()[0])"
+    code = "from swarm_envs.envs.cores.native import native_support; print(native_support()[0])"
     env = {k: v for k, v in os.environ.items() if not k.startswith("SWARM_ENVS_")}
     env.update(PYTHONPATH=str(ROOT), SWARM_ENVS_CACHE=str(cache), CC=str(slow))
     procs = [
@@ -314,7 +314,7 @@ def test_folders_of_killed_builds_are_removed(monkeypatch, fresh, tmp_path, gold
     hung = script(tmp_path / "hung-cc", f"echo $$ > {pid_file}\nexec sleep 60\n")
     env = {k: v for k, v in os.environ.items() if not k.startswith("SWARM_ENVS_")}
     env.update(PYTHONPATH=str(ROOT), SWARM_ENVS_CACHE=str(fresh), CC=str(hung))
-    code = "from swarm_envs.envs.native import native_support; native_support()"
+    code = "from swarm_envs.envs.cores.native import native_support; native_support()"
     child = subprocess.Popen([sys.executable, "-c", code], env=env)
     try:
         for _ in range(300):

@@ -1,4 +1,4 @@
-"""The C step (swarm_envs.envs.native): the core that runs it, its build and its contract.
+"""The C step (swarm_envs.envs.cores.native): the core that runs it, its build and its contract.
 
 Its agreement with the shared definitions over every config field is the conformance
 suite's (tests/test_conformance.py). Here: what is particular to the C step — resets of a
@@ -23,9 +23,9 @@ from helpers import CORE_TOL, mill_about_goal
 from swarm_envs import swarm_nav_v0
 from swarm_envs.config import SwarmConfig, load_swarm_config
 from swarm_envs.envs.common import SwarmUnstableError
+from swarm_envs.envs.cores.native import NativeSwarmNavCore, build, contract, native_support
+from swarm_envs.envs.cores.native.build import resolve_native
 from swarm_envs.envs.cores.numpy import SwarmNavCore
-from swarm_envs.envs.native import NativeSwarmNavCore, build, contract, native_support
-from swarm_envs.envs.native.build import resolve_native
 from swarm_envs.envs.task import STATISTICS, observation_size
 from swarm_envs.envs.task.observation import LAYOUT
 from swarm_envs.physics import SocialPotentialParams

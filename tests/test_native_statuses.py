@@ -27,8 +27,8 @@ from helpers import (
 
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs import backends
+from swarm_envs.envs.cores.native import NativeSwarmNavCore, build, contract, native_support
 from swarm_envs.envs.cores.numpy import SwarmNavCore
-from swarm_envs.envs.native import NativeSwarmNavCore, build, contract, native_support
 from swarm_envs.envs.task import STAT_KEYS
 from swarm_envs.envs.task.agent_status import ABSENT, ACTIVE, FAILED, FROZEN
 from swarm_envs.envs.task.observation import LAYOUT

@@ -14,8 +14,8 @@ from helpers import CORE_TOL, assert_same_status_rollout, status_perturbations, 
 
 from swarm_envs.config import SwarmConfig, load_swarm_config
 from swarm_envs.envs.backends import unsupported
+from swarm_envs.envs.cores.native import native_support
 from swarm_envs.envs.cores.numpy import SwarmNavCore
-from swarm_envs.envs.native import native_support
 from swarm_envs.physics import SocialPotentialParams, energy, forces, pair_geometry, simulate
 from swarm_envs.physics.integrators import STEP_SAFETY, euler_update, stable_substep
 from swarm_envs.physics.social_potential import (
@@ -340,7 +340,7 @@ def test_the_c_step_matches_the_numpy_core(monkeypatch, name, arch, dtype):
     the carried ``h*`` with the Rayleigh rate) exactly, ``h*``, the state, the
     observations, the statistics and the rewards to round-off (float32: to 2e-4); also
     in the portable build (no AVX-512 branches)."""
-    from swarm_envs.envs.native import NativeSwarmNavCore, build
+    from swarm_envs.envs.cores.native import NativeSwarmNavCore, build
 
     if arch is not None:
         monkeypatch.setenv(build.ARCH_ENV, arch)

@@ -5,7 +5,7 @@
 - :mod:`~swarm_envs.envs.backends`: which core runs a config (``make_core``), with
   :mod:`~swarm_envs.envs.perturbed` around it where agents fail, join or are absent;
 - :mod:`~swarm_envs.envs.cores`: the cores, one per backend (numpy, cut-off, torch; the
-  C step in :mod:`swarm_envs.envs.native`), each implementing :class:`Core`
+  C step in :mod:`swarm_envs.envs.cores.native`), each implementing :class:`Core`
   (:mod:`~swarm_envs.envs.protocol`);
 - :mod:`~swarm_envs.envs.task`: the task every core executes, defined once, and the task
   layer above the cores;

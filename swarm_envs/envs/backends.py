@@ -12,7 +12,7 @@ backend      what it is
              arrays; every ``dynamics`` and integrator. The reference.
 ``cutoff``   :class:`~swarm_envs.envs.cores.cutoff.core.CutoffSwarmNavCore`: a cut-off
              radius and an O(N) cell list (social potential). Large swarms.
-``native``   :class:`~swarm_envs.envs.native.NativeSwarmNavCore`: the step in C, built
+``native``   :class:`~swarm_envs.envs.cores.native.NativeSwarmNavCore`: the step in C, built
              at first use with the system C compiler (social potential, semi-implicit
              Euler, CPU).
 ``torch``    :class:`~swarm_envs.envs.cores.torch.core.TorchSwarmNavCore`: the step as one
@@ -68,7 +68,7 @@ def _core_class(backend: str) -> Any:
     if backend == "cutoff":
         return CutoffSwarmNavCore
     if backend == "native":
-        from swarm_envs.envs.native import NativeSwarmNavCore
+        from swarm_envs.envs.cores.native import NativeSwarmNavCore
 
         return NativeSwarmNavCore
     from swarm_envs.envs.cores.torch.core import TorchSwarmNavCore
@@ -130,7 +130,7 @@ def _auto_by_speed(cfg: SwarmConfig, batch: int) -> tuple[str, str | None]:
     why = unsupported(cfg, "native")
     if why is None:
         return "native", None
-    from swarm_envs.envs.native.core import UNAVAILABLE
+    from swarm_envs.envs.cores.native.core import UNAVAILABLE
 
     missing = why if why.startswith(UNAVAILABLE) else None  # not built here: say so
     if "native" in implemented and cfg.integrator == "semi_implicit_euler":

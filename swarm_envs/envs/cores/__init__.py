@@ -10,7 +10,7 @@ Every core implements :class:`~swarm_envs.envs.protocol.Core` under the one task
   cell list, for large swarms;
 - :mod:`~swarm_envs.envs.cores.torch`: ``"torch"``, the step as one compiled torch
   function, CPU or CUDA;
-- :mod:`swarm_envs.envs.native`: ``"native"``, the step in C.
+- :mod:`~swarm_envs.envs.cores.native`: ``"native"``, the step in C.
 
 Nothing is imported here: each core loads its own dependencies (torch, the C compiler)
 when its package is imported.

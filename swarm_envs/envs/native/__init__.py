@@ -1,12 +1,13 @@
-"""The SwarmNav step in C: an execution strategy for the shared definitions.
+"""``swarm_envs.envs.native``: the C step's public names, an import path that stays.
 
-- :mod:`~swarm_envs.envs.native.contract`: the parameter struct and output columns,
-  generated from the config dataclasses, and what a config needs of the kernel;
-- :mod:`~swarm_envs.envs.native.build`: compiling and caching the kernel;
-- :mod:`~swarm_envs.envs.native.core`: :class:`NativeSwarmNavCore`, the core that runs it.
+The C step is defined in :mod:`swarm_envs.envs.cores.native`.
 """
 
-from swarm_envs.envs.native.build import NATIVE_ENV, native_support, resolve_native
-from swarm_envs.envs.native.core import NativeSwarmNavCore
+from swarm_envs.envs.cores.native import (
+    NATIVE_ENV,
+    NativeSwarmNavCore,
+    native_support,
+    resolve_native,
+)
 
 __all__ = ["NATIVE_ENV", "NativeSwarmNavCore", "native_support", "resolve_native"]

@@ -7,7 +7,7 @@ library against its record and returns the very bytes it checked; :func:`dlopen_
 loads those bytes from a sealed in-memory copy, so that whatever happens to the cached
 file afterwards cannot reach the loader. :func:`clean_leftovers` removes the folders of
 builds that were killed. The building and choosing is in
-:mod:`swarm_envs.envs.native.build`.
+:mod:`swarm_envs.envs.cores.native.build`.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import shutil
 import time
 from pathlib import Path
 
-from swarm_envs.envs.native.contract import layout_hash
+from swarm_envs.envs.cores.native.contract import layout_hash
 
 __all__ = [
     "BUILD_PREFIX",

@@ -688,7 +688,7 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
  * *_out arrays, the observations to obs and the columns PK_* to packed (B × PK_SIZE):
  * the statistics, the actions' effort, over_cap (1 where the step needed more than
  * max_substeps) and needed (the substeps it would have taken).
- * Returns a STEP_* code (swarm_envs.envs.native.contract.StepCode): STEP_OK,
+ * Returns a STEP_* code (swarm_envs.envs.cores.native.contract.StepCode): STEP_OK,
  * STEP_NO_SCRATCH where a thread could not allocate its scratch memory,
  * STEP_TOO_MANY_NEIGHBOURS where k_sort > KMAX_SORT or STEP_NON_FINITE_ACTIONS where an
  * action of these swarms is NaN or infinite (both checked first: nothing is written);

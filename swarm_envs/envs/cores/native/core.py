@@ -2,7 +2,7 @@
 
 :class:`NativeSwarmNavCore` implements :class:`~swarm_envs.envs.protocol.Core` for the
 social potential model with the semi-implicit Euler integrator. Its step is the C step
-of ``fused_step.c`` (:mod:`swarm_envs.envs.native.build`): the same physics, step-size
+of ``fused_step.c`` (:mod:`swarm_envs.envs.cores.native.build`): the same physics, step-size
 control, neighbour ranking, observation layout and statistics as the shared definitions,
 computed per swarm in a few kilobytes of scratch memory, the swarms spread over OpenMP
 threads. The reward is the shared definition (:func:`swarm_envs.envs.task.reward`)
@@ -46,8 +46,8 @@ from swarm_envs.envs.common import (
     placed_at_rest,
     wide_dtypes,
 )
-from swarm_envs.envs.native.build import NATIVE_ENV, Library, load_library, resolve_native
-from swarm_envs.envs.native.contract import (
+from swarm_envs.envs.cores.native.build import NATIVE_ENV, Library, load_library, resolve_native
+from swarm_envs.envs.cores.native.contract import (
     PACKED_COLUMNS,
     UNSOUND,
     step_error,
@@ -102,7 +102,7 @@ class NativeSwarmNavCore(TaskCore):
 
     Raises:
         RuntimeError: the C step cannot be built or loaded here
-            (:func:`~swarm_envs.envs.native.build.native_support` says why).
+            (:func:`~swarm_envs.envs.cores.native.build.native_support` says why).
         ValueError: ``cfg`` needs what the C step does not implement
             (:meth:`unsupported` names it).
 

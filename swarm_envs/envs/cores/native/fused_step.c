@@ -1,4 +1,4 @@
-/* The fused SwarmNav step of swarm_envs.envs.native, in C (float32 and float64).
+/* The fused SwarmNav step of swarm_envs.envs.cores.native, in C (float32 and float64).
  *
  * An execution strategy for the shared definitions of swarm_envs.physics and
  * swarm_envs.envs.task (docs/design.md): the same semi-implicit Euler step with the
@@ -9,12 +9,12 @@
  *
  * The parameters arrive in StepParams; the output columns PK_*, the return codes STEP_*,
  * the agents' statuses STATUS_* and their flags AG_* are named in the header
- * step_params.h that swarm_envs/envs/native/contract.py generates from the Python
+ * step_params.h that swarm_envs/envs/cores/native/contract.py generates from the Python
  * definitions at build time. What this kernel implements it declares below
  * (KERNEL_PHYSICS, KERNEL_STATS, KERNEL_OBS_LAYOUTS, KERNEL_STATUSES); Python refuses
  * configs that need more.
  *
- * Compiled at first use by swarm_envs/envs/native/build.py with the system C compiler
+ * Compiled at first use by swarm_envs/envs/cores/native/build.py with the system C compiler
  * (-O3 -march=<SWARM_ENVS_NATIVE_ARCH, default native; none where it is "portable">
  * -fopenmp, plus $CFLAGS): the loops over pairs are vectorised (float32 with the
  * inlined exp_f32 below; float64 calls glibc's vector exp, libmvec, declared SIMD), and
@@ -36,7 +36,7 @@
 #pragma omp declare simd notinbranch
 double exp(double);
 
-/* What this kernel implements (read by swarm_envs.envs.native.contract.KernelInfo). */
+/* What this kernel implements (read by swarm_envs.envs.cores.native.contract.KernelInfo). */
 #define KERNEL_PHYSICS "C_a C_r l_a l_r C_o l_o beta C_g l_g m alpha"
 #define KERNEL_STATS                                                                        \
     "polarization angular_momentum expanse nearest_neighbor_distance energy "              \

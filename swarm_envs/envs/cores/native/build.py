@@ -1,7 +1,7 @@
 """Building and loading the C step: compiled at first use into a per-user cache.
 
 The first use compiles ``fused_step.c`` (with ``fused_step_body.h``,
-``fused_step_stats.h`` and the header :func:`~swarm_envs.envs.native.contract.header`
+``fused_step_stats.h`` and the header :func:`~swarm_envs.envs.cores.native.contract.header`
 generates) with the C compiler (``$CC``, else ``cc`` or ``gcc``) into
 ``$SWARM_ENVS_CACHE`` (default ``~/.cache/swarm_envs``) as
 ``fused_step-<sources>-<compiler>.so``: ``<sources>`` hashes the sources, the generated
@@ -65,9 +65,9 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from swarm_envs.envs.native import cache as store
-from swarm_envs.envs.native.cache import LEFTOVER_AGE
-from swarm_envs.envs.native.contract import KernelInfo, header, layout_hash
+from swarm_envs.envs.cores.native import cache as store
+from swarm_envs.envs.cores.native.cache import LEFTOVER_AGE
+from swarm_envs.envs.cores.native.contract import KernelInfo, header, layout_hash
 
 __all__ = [
     "ARCH_ENV",
@@ -162,7 +162,7 @@ def build_flags() -> tuple[str, ...]:
 
 
 def _source_dir() -> Path:
-    return Path(str(resources.files("swarm_envs.envs") / "native"))
+    return Path(str(resources.files("swarm_envs.envs.cores") / "native"))
 
 
 def _compiler() -> str | None:
