@@ -23,6 +23,9 @@ ALIASES = {
         "SwarmNavVecEnv": ("swarm_envs.envs.adapters.vec_env", "SwarmNavVecEnv"),
         "SlotEpisodesWarning": ("swarm_envs.envs.adapters.vec_env", "SlotEpisodesWarning"),
     },
+    "swarm_envs.envs.gym_vector": {
+        "SwarmNavVectorEnv": ("swarm_envs.envs.adapters.gym_vector", "SwarmNavVectorEnv"),
+    },
     "swarm_envs.envs.torch_core": {
         "TorchSwarmNavCore": ("swarm_envs.envs.cores.torch.core", "TorchSwarmNavCore"),
     },
