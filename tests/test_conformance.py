@@ -6,8 +6,9 @@ share of the configs the perturbations and ``observe_status`` — and the state'
 every backend either matches the reference, the numpy core in float64 (float64: to
 round-off; float32: to 2e-3), through automatic resets, or refuses the config up front
 with a reason. The C step runs in its default build and in an ``x86-64-v3`` build (no
-AVX-512 branches); CI also runs its variants on the portable build (no ``-march``). ``tests/conformance.py`` holds the machinery;
-the tests at the end show that it catches one backend's perturbed term.
+AVX-512 branches); CI also runs its variants on the portable build (no ``-march``).
+``tests/conformance.py`` holds the machinery; the tests at the end show that it catches
+one backend's perturbed term.
 """
 
 from __future__ import annotations
