@@ -204,6 +204,7 @@ def test_bound_is_exact_for_one_free_agent_without_drag():
 def test_bound_is_undefined_where_it_would_not_hold():
     assert bound_reason(SwarmConfig(dynamics="piecewise")) is not None
     assert bound_reason(task_config("mill")) is not None
+    assert bound_reason(task_config("informed")) is None  # the gathered swarm, as navigation
     assert bound_reason(SwarmConfig(success_fraction=0.5)) is not None
     assert (
         time_to_goal_bound(

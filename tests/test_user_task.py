@@ -65,6 +65,14 @@ def test_the_example_registers_its_task_beside_the_package_s(aggregation):
     assert aggregation.parallel_env(n_agents=4).cfg.task == "aggregation"
 
 
+def test_no_time_to_goal_bound_for_a_task_with_its_own_success_rule(aggregation):
+    from train.evaluate.bound import bound_reason
+
+    assert bound_reason(task_config("navigation")) is None
+    reason = bound_reason(task_config("aggregation"))
+    assert reason is not None and "'aggregation'" in reason
+
+
 def test_reward_weights_are_set_by_term_name_and_checked_against_the_task():
     cfg = load_swarm_config(None, {"task": "aggregation", "reward": {"contraction": 0.5}})
     assert cfg.reward.weight("contraction") == 0.5 and cfg.reward.success == 5.0

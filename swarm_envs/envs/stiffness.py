@@ -69,7 +69,7 @@ class StiffnessWatch:
             warnings.warn(
                 stiff_message(self.cfg, stats, b, float(mean[b]), self._steps),
                 StiffSwarmWarning,
-                stacklevel=4,
+                stacklevel=5,
             )
         self._done = self._key in _WARNED
         self._total[:] = 0.0

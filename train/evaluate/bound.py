@@ -17,7 +17,9 @@ What bounds the centroid's progress depends on the model:
   most ``speed · dt`` per step: ``⌈(D − R) / (speed · dt)⌉`` steps.
 
 Elsewhere — the piecewise model (its neighbour forces are one-way and do not cancel),
-the Lagrangian model, self-propulsion, a passive sink, the mill task, ``success_fraction
+the Lagrangian model, self-propulsion, a passive sink, a task with its own success rule
+or one that holds a state (the mill, a user's task: ``TaskSpec.success``,
+``terminates_on_success``), ``success_fraction
 < 1`` or perturbations that change who acts — no bound is defined (``None``). The bound
 ignores everything that slows a real swarm (keeping together, braking, turning), so a
 policy at the bound is optimal, and one within a few percent of it has little left to
@@ -44,8 +46,9 @@ def bound_reason(cfg: SwarmConfig) -> str | None:
     "dynamics 'piecewise': the pair forces do not cancel"
     """
     p = cfg.perturbations
-    if cfg.task == "mill":
-        return "the mill task"
+    spec = cfg.task_spec
+    if spec.success is not None or not spec.terminates_on_success:
+        return f"task {cfg.task!r}: its success is not the swarm gathered at the goal"
     if cfg.success_fraction < 1.0:
         return "success_fraction < 1"
     if any(
