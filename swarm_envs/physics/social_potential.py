@@ -458,7 +458,8 @@ def passive_components(
     params: SocialPotentialParams,
     sink: list[Array] | None = None,
 ) -> list[Array]:
-    """The passive force per component, assembled once for every core: the pair forces
+    """The passive force per component, assembled once for the numpy, cut-off and torch
+    paths (the C step writes the same sum in its kernel): the pair forces
     (Morse and alignment, eqs. 9–13, however a core summed them: dense, cut-off or in
     compiled pair sums) with the dissipation (:func:`dissipation`) and, where given, the
     goal sink's force components (eq. 19, ``goal_terms(...)[0]``).
