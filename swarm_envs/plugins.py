@@ -7,7 +7,7 @@ ones named by ``--plugin`` and by the ``plugins:`` list of a train config, befor
 read the env config; a script calls :func:`load_plugin` itself (or simply imports its
 module).
 
-Each file is imported once per process, as the module ``swarm_envs_plugin_<stem>``
+Each file is imported once per process, as the module ``swarm_envs_plugin_<stem>_<hash>``
 (registered in ``sys.modules``, so that what it defines pickles by name within the
 process). The paths loaded are also kept in the environment variable
 :data:`PLUGINS_ENV`, which ``import swarm_envs`` reads: worker processes started with
