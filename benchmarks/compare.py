@@ -227,7 +227,7 @@ def physics_torch(compile: bool) -> Callable[[int, int], Step]:
 # --------------------------------------------------------------------------- peers
 
 
-def vmas_navigation(n: int, b: int) -> Step | None:
+def vmas_navigation(n: int, b: int, device: str = "cpu") -> Step | None:
     try:
         import vmas
     except ImportError:
@@ -236,18 +236,18 @@ def vmas_navigation(n: int, b: int) -> Step | None:
     env = vmas.make_env(
         "navigation",
         num_envs=b,
-        device="cpu",
+        device=device,
         n_agents=n,
         continuous_actions=True,
         world_spawning_x=half_width,
         world_spawning_y=half_width,
     )
     env.reset()
-    acts = [torch.from_numpy(actions_for((b, 2), seed=i)) for i in range(n)]
+    acts = [torch.from_numpy(actions_for((b, 2), seed=i)).to(device) for i in range(n)]
     return lambda: env.step(acts)
 
 
-def vmas_pairwise(n: int, b: int) -> Step | None:
+def vmas_pairwise(n: int, b: int, device: str = "cpu") -> Step | None:
     try:
         import vmas
         from vmas.simulator.core import Agent, Sphere, World
@@ -277,9 +277,9 @@ def vmas_pairwise(n: int, b: int) -> Step | None:
         def reward(self, agent: Agent) -> torch.Tensor:
             return torch.zeros(self.world.batch_dim, device=self.world.device)
 
-    env = vmas.make_env(Pairwise(), num_envs=b, device="cpu", continuous_actions=True)
+    env = vmas.make_env(Pairwise(), num_envs=b, device=device, continuous_actions=True)
     env.reset()
-    acts = [torch.from_numpy(actions_for((b, 2), seed=i)) for i in range(n)]
+    acts = [torch.from_numpy(actions_for((b, 2), seed=i)).to(device) for i in range(n)]
     return lambda: env.step(acts)
 
 

@@ -1,7 +1,7 @@
 """Throughput of the torch core on a GPU: one swarm and batched, up to 4096 × 128.
 
 Usage: ``python benchmarks/gpu.py [--sizes 32x1,32x1024,32x4096,128x64,128x1024,128x4096]
-[--seconds 1] [--repeats 5] [--device cuda] [--json out.json]``
+[--seconds 1] [--repeats 5] [--device cuda] [--peers] [--json out.json]``
 
 Rows per size (N agents × B swarms, float32, compiled):
 
@@ -12,7 +12,13 @@ Rows per size (N agents × B swarms, float32, compiled):
   GPU learner would take them; the ``(B, 11)`` statistics and rewards come to the host
   each step);
 - ``core, to host``: the same with :meth:`~TorchSwarmNavCore.observe`, which copies the
-  observations to a numpy array (what an SB3 VecEnv hands its policy).
+  observations to a numpy array (what an SB3 VecEnv hands its policy);
+- with ``--peers``, where ``vmas`` imports: ``vmas pairwise`` and ``vmas navigation``
+  on the same GPU, the scenarios of ``benchmarks/compare.py`` (VMAS's simulator core
+  with the cheapest observation and zero reward; its navigation scenario).
+
+``benchmarks/gpu_check.sh`` runs this with the CUDA tests in one call on a machine
+with a GPU (see its header for the wheels it needs there).
 
 Every timed window ends with ``torch.cuda.synchronize``. Printed: median and best
 agent-steps/s, the compile time of each core, and the GPU's name. Needs CUDA; prints
@@ -24,8 +30,10 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
+import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -57,7 +65,22 @@ def rates(
     return out
 
 
-def bench_size(n: int, b: int, device: torch.device, seconds: float, repeats: int) -> list[dict]:
+def peer_rows(n: int, b: int, device: torch.device) -> list[tuple[str, None, Callable[[], object]]]:
+    """VMAS's rows on ``device`` (none where ``vmas`` does not import)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from compare import vmas_navigation, vmas_pairwise
+
+    rows: list[tuple[str, None, Callable[[], object]]] = []
+    for label, make in (("vmas pairwise", vmas_pairwise), ("vmas navigation", vmas_navigation)):
+        step = make(n, b, device=str(device))
+        if step is not None:
+            rows.append((label, None, step))
+    return rows
+
+
+def bench_size(
+    n: int, b: int, device: torch.device, seconds: float, repeats: int, peers: bool = False
+) -> list[dict]:
     sync = lambda: torch.cuda.synchronize(device)  # noqa: E731
     rows = []
     params = SocialPotentialParams.navigation()
@@ -79,6 +102,8 @@ def bench_size(n: int, b: int, device: torch.device, seconds: float, repeats: in
         ("core, on device", core.compile_seconds, lambda: (core.step(a), core.observe_tensor()))
     )
     rows.append(("core, to host", None, lambda: (core.step(a), core.observe())))
+    if peers:
+        rows += peer_rows(n, b, device)
     out = []
     for label, compile_s, fn in rows:
         r = rates(fn, sync, seconds, repeats)
@@ -109,6 +134,7 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=1.0)
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--device", default="cuda")
+    parser.add_argument("--peers", action="store_true", help="add VMAS's rows, same GPU")
     parser.add_argument("--json", default=None)
     args = parser.parse_args()
     if not torch.cuda.is_available():
@@ -122,7 +148,7 @@ def main() -> None:
     results = []
     for size in args.sizes.split(","):
         n, b = (int(s) for s in size.lower().split("x"))
-        results += bench_size(n, b, device, args.seconds, args.repeats)
+        results += bench_size(n, b, device, args.seconds, args.repeats, args.peers)
     if args.json:
         with open(args.json, "w") as fh:
             json.dump({"gpu": name, "torch": torch.__version__, "results": results}, fh, indent=1)
