@@ -36,10 +36,12 @@ needs_native = pytest.mark.skipif(not SUPPORTED, reason=f"C step unavailable: {W
 
 @pytest.fixture
 def fresh_library(monkeypatch, tmp_path):
-    """The loader's state reset (and restored afterwards), its cache in ``tmp_path``."""
+    """The loader's state reset (and restored afterwards), its cache in ``tmp_path``, the
+    libraries built at install ignored."""
     monkeypatch.setattr(build, "_LIBRARIES", {})
     monkeypatch.setattr(build, "_FAILURES", {})
     monkeypatch.setenv("SWARM_ENVS_CACHE", str(tmp_path))
+    monkeypatch.setenv(build.PREBUILT_ENV, "0")
     monkeypatch.delenv(build.NATIVE_ENV, raising=False)
     return tmp_path
 
