@@ -170,7 +170,7 @@ def test_a_damaged_library_is_rebuilt_with_a_warning(how, tmp_path, golden, copy
     first = run_python(PROBE, cache, CC=str(copy_cc))
     assert first["ok"] and first["backend"] == "native" and first["warnings"] == []
     (announced,) = first["announced"]  # a build is announced, once
-    assert "building the C step now (SWARM_ENVS_NATIVE_PREBUILT=0)" in announced
+    assert "building the C step now, as SWARM_ENVS_NATIVE_PREBUILT=0" in announced
     (library,) = cache.glob("fused_step-*.so")
     damage(library, how)
     again = run_python(PROBE, cache, CC=str(copy_cc))

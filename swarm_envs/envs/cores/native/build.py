@@ -322,10 +322,10 @@ def _rebuilt(
         if why != store.MISSING:
             _warn_once(f"the cached C step {target} was damaged ({why}); rebuilding it")
         else:
+            march = " ".join(f for f in flags if f.startswith("-march")) or "(portable)"
             _warn_once(
-                f"building the C step now ({reason}): {os.path.basename(compiler)} "
-                f"{' '.join(f for f in flags if f.startswith('-march')) or '(portable)'} "
-                f"into {target.parent}, once; a build usually takes {BUILD_TIME}"
+                f"building the C step now, as {reason}: {os.path.basename(compiler)} "
+                f"{march} into {target.parent}, once (a build usually takes {BUILD_TIME})"
             )
         start = time.perf_counter()
         _build(compiler, flags, key, target, timeout)
@@ -421,8 +421,6 @@ def _load(arch: str | None, timeout: float) -> Library:
         data, reason = _prebuilt(variant)
         if data is not None:
             return _open(data, _prebuilt_path(variant), variant)
-        if arch is None:  # the library of this CPU, then, built at first use
-            reason = f"{reason}; {ARCH_ENV} unset: -march=native"
     flags = build_flags(arch)
     cache, key = _cache_dir(), _source_key(flags)
     store.clean_leftovers(cache)
