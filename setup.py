@@ -51,6 +51,8 @@ class BuildWithCStep(build_py):
         variants = _variants()
         base = ROOT if self.editable_mode else Path(self.build_lib)
         out = base / NATIVE / variants.LIB_DIR
+        names = ", ".join(variants.shipped_variants())
+        print(f"building the C step ({names}) in parallel into {out}", file=sys.stderr)
         try:
             times = variants.build_variants(ROOT / NATIVE, out)
         except (OSError, RuntimeError) as err:
@@ -59,7 +61,7 @@ class BuildWithCStep(build_py):
             self.warn(f"the C step was not built ({err}); it is built at first use instead")
             return
         for name, (cpu, wall) in times.items():
-            self.announce(f"built the C step {name}: {cpu:.1f} s CPU, {wall:.1f} s wall", 2)
+            print(f"built the C step {name}: {cpu:.1f} s CPU, {wall:.1f} s wall", file=sys.stderr)
 
 
 class BinaryDistribution(Distribution):

@@ -576,7 +576,8 @@ def test_the_kernel_declares_what_it_implements():
 
 def test_without_a_compiler_auto_warns_and_runs_numpy(monkeypatch, fresh_library):
     monkeypatch.setattr(build, "_compiler", lambda: None)
-    assert resolve_native("auto") == (False, "no C compiler found ($CC, cc, gcc)")
+    why = "no C compiler found ($CC, cc, gcc); SWARM_ENVS_NATIVE_PREBUILT=0"
+    assert resolve_native("auto") == (False, why)
     assert "no C compiler" in NativeSwarmNavCore.unsupported(SwarmConfig())
     from swarm_envs.envs import backends
 

@@ -426,7 +426,10 @@ def _load(arch: str | None, timeout: float) -> Library:
     store.clean_leftovers(cache)
     compiler = _compiler()
     if compiler is None:
-        return _open_any(cache, key)
+        try:
+            return _open_any(cache, key)
+        except RuntimeError as err:
+            raise RuntimeError(f"{err}; {reason}") from None
     target = _library_path(cache, key, compiler)
     data, _ = store.verified(target, key)
     if data is None:
