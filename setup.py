@@ -23,7 +23,7 @@ from pathlib import Path
 from types import ModuleType
 
 from setuptools import Distribution, setup
-from setuptools.command.build_py import build_py
+from setuptools.command.build_ext import build_ext
 
 ROOT = Path(__file__).resolve().parent
 NATIVE = Path("swarm_envs", "envs", "cores", "native")
@@ -39,9 +39,10 @@ def _variants() -> ModuleType:
     return module
 
 
-class BuildWithCStep(build_py):
-    """``build_py``, then the C step's variants: into the build folder for a wheel, into
-    the source tree for an editable install."""
+class BuildWithCStep(build_ext):
+    """``build_ext``, then the C step's variants: into the build folder for a wheel, into
+    the source tree for an editable install (or ``python setup.py build_ext --inplace``).
+    Not ``build_py``: an editable install ignores a customised ``build_py`` that fails."""
 
     def run(self) -> None:
         super().run()
@@ -49,7 +50,7 @@ class BuildWithCStep(build_py):
         if switch == "0" or not sys.platform.startswith("linux"):
             return
         variants = _variants()
-        base = ROOT if self.editable_mode else Path(self.build_lib)
+        base = ROOT if self.editable_mode or self.inplace else Path(self.build_lib)
         out = base / NATIVE / variants.LIB_DIR
         names = ", ".join(variants.shipped_variants())
         print(f"building the C step ({names}) in parallel into {out}", file=sys.stderr)
@@ -65,10 +66,11 @@ class BuildWithCStep(build_py):
 
 
 class BinaryDistribution(Distribution):
-    """A wheel that holds compiled libraries is tagged for its platform."""
+    """A wheel that holds compiled libraries is tagged for its platform (and ``build``
+    runs ``build_ext``)."""
 
     def has_ext_modules(self) -> bool:
         return True
 
 
-setup(cmdclass={"build_py": BuildWithCStep}, distclass=BinaryDistribution)
+setup(cmdclass={"build_ext": BuildWithCStep}, distclass=BinaryDistribution)
