@@ -5,8 +5,9 @@ weights, observation scales, k, d, dt, u_max, the goal radius, the physics, and 
 share of the configs the perturbations and ``observe_status`` — and the state's dtype),
 every backend either matches the reference, the numpy core in float64 (float64: to
 round-off; float32: to 2e-3), through automatic resets, or refuses the config up front
-with a reason. The C step runs in its default build and in an ``x86-64-v3`` build (no
-AVX-512 branches); CI also runs its variants on the portable build (no ``-march``).
+with a reason. The C step runs in the variant chosen for this CPU and in the prebuilt
+``x86-64-v3`` one (no AVX-512 branches); CI also runs its variants on the prebuilt
+portable one (no ``-march``).
 ``tests/conformance.py`` holds the machinery; the tests at the end show that it catches
 one backend's perturbed term.
 """

@@ -6,7 +6,9 @@ never handed to the loader: it is rebuilt with a warning, or, without a compiler
 crash the loader runs in a child process, so a crash fails the test instead of ending
 pytest. Also: an intact library loads without any compiler; a hung compiler is killed
 after ``SWARM_ENVS_CC_TIMEOUT``; concurrent processes build once; folders of killed
-builds are removed; each fallback warns once.
+builds are removed; each fallback warns once; each build is announced. The libraries
+built at install are ignored here (``SWARM_ENVS_NATIVE_PREBUILT=0``;
+tests/test_native_variants.py is about them).
 
 One real build at most (the library of the default cache, reused); rebuilds use a fake
 compiler that copies that library, so they take milliseconds.
@@ -23,6 +25,7 @@ import sys
 import textwrap
 import time
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -39,6 +42,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PROBE = textwrap.dedent(
     """
     import json, warnings
+    ANNOUNCE = "building the C step now"
     from swarm_envs.config import SwarmConfig
     from swarm_envs.envs.backends import make_core
     from swarm_envs.envs.cores.native import build, native_support
@@ -53,7 +57,11 @@ PROBE = textwrap.dedent(
     print(json.dumps({
         "ok": ok, "why": why, "backend": cores[0].backend,
         "path": str(build.load_library().path) if ok else None,
-        "warnings": [str(w.message) for w in caught if issubclass(w.category, UserWarning)],
+        "announced": [str(w.message) for w in caught if str(w.message).startswith(ANNOUNCE)],
+        "warnings": [
+            str(w.message) for w in caught
+            if issubclass(w.category, UserWarning) and not str(w.message).startswith(ANNOUNCE)
+        ],
     }))
     """
 )
@@ -64,6 +72,7 @@ def run_python(code: str, cache: Path, timeout: float = 120, **env: str) -> dict
     naming the exit status, where it crashed)."""
     full = {k: v for k, v in os.environ.items() if not k.startswith("SWARM_ENVS_")}
     full.update(PYTHONPATH=str(ROOT), SWARM_ENVS_CACHE=str(cache), **env)
+    full[build.PREBUILT_ENV] = "0"  # the cache alone
     for name in ("SWARM_ENVS_NATIVE_ARCH", "CFLAGS"):  # the same flags as this process
         if name in os.environ:
             full[name] = os.environ[name]
@@ -78,6 +87,18 @@ def script(path: Path, body: str) -> Path:
     path.write_text("#!/bin/sh\n" + textwrap.dedent(body))
     path.chmod(0o755)
     return path
+
+
+@pytest.fixture(scope="module", autouse=True)
+def cache_alone() -> Iterator[None]:
+    """The libraries built at install ignored: these tests are about the cache."""
+    old = os.environ.get(build.PREBUILT_ENV)
+    os.environ[build.PREBUILT_ENV] = "0"
+    yield
+    if old is None:
+        del os.environ[build.PREBUILT_ENV]
+    else:
+        os.environ[build.PREBUILT_ENV] = old
 
 
 @pytest.fixture(scope="module")
@@ -148,6 +169,8 @@ def test_a_damaged_library_is_rebuilt_with_a_warning(how, tmp_path, golden, copy
     cache = tmp_path / "cache"
     first = run_python(PROBE, cache, CC=str(copy_cc))
     assert first["ok"] and first["backend"] == "native" and first["warnings"] == []
+    (announced,) = first["announced"]  # a build is announced, once
+    assert "building the C step now, as SWARM_ENVS_NATIVE_PREBUILT=0" in announced
     (library,) = cache.glob("fused_step-*.so")
     damage(library, how)
     again = run_python(PROBE, cache, CC=str(copy_cc))
@@ -229,6 +252,7 @@ def test_an_intact_library_loads_without_any_compiler(tmp_path, golden, no_compi
         "why": "supported",
         "backend": "native",
         "path": str(cache / golden.name),
+        "announced": [],
         "warnings": [],
     }
 
@@ -260,7 +284,12 @@ def test_a_build_in_another_process_is_waited_for_at_most_the_timeout(monkeypatc
     pid_file = tmp_path / "cc.pid"
     hung = script(tmp_path / "hung-cc", f"echo $$ > {pid_file}\nexec sleep 60\n")
     env = {k: v for k, v in os.environ.items() if not k.startswith("SWARM_ENVS_")}
-    env.update(PYTHONPATH=str(ROOT), SWARM_ENVS_CACHE=str(fresh), CC=str(hung))
+    env.update(
+        SWARM_ENVS_NATIVE_PREBUILT="0",
+        PYTHONPATH=str(ROOT),
+        SWARM_ENVS_CACHE=str(fresh),
+        CC=str(hung),
+    )
     code = "from swarm_envs.envs.cores.native import native_support; native_support()"
     child = subprocess.Popen([sys.executable, "-c", code], env=env)  # holds the lock
     try:
@@ -294,7 +323,12 @@ def test_concurrent_processes_build_once(tmp_path, golden, copy_cc):
     cache = tmp_path / "cache"
     code = "from swarm_envs.envs.cores.native import native_support; print(native_support()[0])"
     env = {k: v for k, v in os.environ.items() if not k.startswith("SWARM_ENVS_")}
-    env.update(PYTHONPATH=str(ROOT), SWARM_ENVS_CACHE=str(cache), CC=str(slow))
+    env.update(
+        SWARM_ENVS_NATIVE_PREBUILT="0",
+        PYTHONPATH=str(ROOT),
+        SWARM_ENVS_CACHE=str(cache),
+        CC=str(slow),
+    )
     procs = [
         subprocess.Popen([sys.executable, "-c", code], env=env, stdout=subprocess.PIPE, text=True)
         for _ in range(3)
@@ -313,7 +347,12 @@ def test_folders_of_killed_builds_are_removed(monkeypatch, fresh, tmp_path, gold
     pid_file = tmp_path / "cc.pid"
     hung = script(tmp_path / "hung-cc", f"echo $$ > {pid_file}\nexec sleep 60\n")
     env = {k: v for k, v in os.environ.items() if not k.startswith("SWARM_ENVS_")}
-    env.update(PYTHONPATH=str(ROOT), SWARM_ENVS_CACHE=str(fresh), CC=str(hung))
+    env.update(
+        SWARM_ENVS_NATIVE_PREBUILT="0",
+        PYTHONPATH=str(ROOT),
+        SWARM_ENVS_CACHE=str(fresh),
+        CC=str(hung),
+    )
     code = "from swarm_envs.envs.cores.native import native_support; native_support()"
     child = subprocess.Popen([sys.executable, "-c", code], env=env)
     try:

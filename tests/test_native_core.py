@@ -36,10 +36,12 @@ needs_native = pytest.mark.skipif(not SUPPORTED, reason=f"C step unavailable: {W
 
 @pytest.fixture
 def fresh_library(monkeypatch, tmp_path):
-    """The loader's state reset (and restored afterwards), its cache in ``tmp_path``."""
+    """The loader's state reset (and restored afterwards), its cache in ``tmp_path``, the
+    libraries built at install ignored."""
     monkeypatch.setattr(build, "_LIBRARIES", {})
     monkeypatch.setattr(build, "_FAILURES", {})
     monkeypatch.setenv("SWARM_ENVS_CACHE", str(tmp_path))
+    monkeypatch.setenv(build.PREBUILT_ENV, "0")
     monkeypatch.delenv(build.NATIVE_ENV, raising=False)
     return tmp_path
 
@@ -574,7 +576,8 @@ def test_the_kernel_declares_what_it_implements():
 
 def test_without_a_compiler_auto_warns_and_runs_numpy(monkeypatch, fresh_library):
     monkeypatch.setattr(build, "_compiler", lambda: None)
-    assert resolve_native("auto") == (False, "no C compiler found ($CC, cc, gcc)")
+    why = "no C compiler found ($CC, cc, gcc); SWARM_ENVS_NATIVE_PREBUILT=0"
+    assert resolve_native("auto") == (False, why)
     assert "no C compiler" in NativeSwarmNavCore.unsupported(SwarmConfig())
     from swarm_envs.envs import backends
 

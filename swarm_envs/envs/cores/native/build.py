@@ -1,11 +1,22 @@
-"""Building and loading the C step: compiled at first use into a per-user cache.
+"""Loading the C step: a library built at install, else compiled at first use.
 
-The first use compiles ``fused_step.c`` (with ``fused_step_body.h``,
-``fused_step_stats.h`` and the header :func:`~swarm_envs.envs.cores.native.contract.header`
-generates) with the C compiler (``$CC``, else ``cc`` or ``gcc``) into
-``$SWARM_ENVS_CACHE`` (default ``~/.cache/swarm_envs``) as
-``fused_step-<sources>-<compiler>.so``: ``<sources>`` hashes the sources, the generated
-header, the flags, the machine and, for ``-march=native``, the CPU; ``<compiler>`` the
+``pip install`` (and ``make install``) compiles ``fused_step.c`` (with
+``fused_step_body.h``, ``fused_step_stats.h`` and the header
+:func:`~swarm_envs.envs.cores.native.contract.header` generates) into a few variants
+beside the sources (:mod:`~swarm_envs.envs.cores.native.variants`: on x86-64
+``portable``, ``x86-64-v3`` and ``x86-64-v4``, elsewhere ``portable``). The first load
+picks the best variant this CPU runs (its flags in ``/proc/cpuinfo``), or the one
+``$SWARM_ENVS_NATIVE_ARCH`` names, and loads it after the same check as a cache entry
+below (its record names the sources, header and flags it was built from).
+
+Where no prebuilt library fits (a source tree that was not installed, sources edited
+since the install, another architecture, ``$CFLAGS`` set, an ``-march`` target that is
+not built at install such as ``native``, or ``$SWARM_ENVS_NATIVE_PREBUILT=0``), the
+library is compiled at first use with the C compiler (``$CC``, else ``cc`` or ``gcc``)
+into ``$SWARM_ENVS_CACHE`` (default ``~/.cache/swarm_envs``) as
+``fused_step-<sources>-<compiler>.so``, after a one-time :class:`UserWarning` that says
+why and how long a build takes: ``<sources>`` hashes the sources, the generated header,
+the flags, the machine and, for ``-march=native``, the CPU; ``<compiler>`` the
 compiler's resolved path. Later processes load the cached library at once.
 
 The cache is checked, never trusted: beside each library a record
@@ -25,11 +36,11 @@ of processes of this host that are gone at once, any older than an hour.
 
 Flags: ``-O3 -fno-gcse -fno-gcse-after-reload -fopenmp -fno-math-errno
 -fno-trapping-math -fPIC -shared -march=<arch>``, then the words of ``$CFLAGS``.
-``<arch>`` is ``$SWARM_ENVS_NATIVE_ARCH`` (default ``native``: the best code for this
-CPU; a target such as ``x86-64-v3`` or ``x86-64-v2`` builds code that runs on any CPU of
-that level and exercises the kernel's non-AVX-512 branches). ``portable``
-(:data:`PORTABLE`) gives no ``-march`` at all: the compiler's default target, code for
-any CPU of this architecture (on x86-64: SSE2 only, without AVX or FMA).
+``<arch>`` is ``$SWARM_ENVS_NATIVE_ARCH`` (where a build at first use runs without it:
+``native``, the best code for this CPU; a target such as ``x86-64-v3`` builds code that
+runs on any CPU of that level and exercises the kernel's non-AVX-512 branches).
+``portable`` (:data:`PORTABLE`) gives no ``-march`` at all: the compiler's default
+target, code for any CPU of this architecture (on x86-64: SSE2 only, without AVX or FMA).
 
 Threads: the kernel spreads the swarms over OpenMP threads. It links ``libgomp.so.1``;
 in a process that imported torch that is torch's own copy (same soname), so the step
@@ -37,8 +48,8 @@ runs on torch's thread pool and follows ``torch.set_num_threads``. Every swarm i
 stepped by one thread in the same way, so the results do not depend on the thread count.
 
 ``SWARM_ENVS_NATIVE`` (``0``/``1``/``auto``) overrides the automatic choice (``0``:
-never; ``1``: required, an error where it cannot be built). Where no compiler works,
-:func:`native_support` says why.
+never; ``1``: required, an error where it cannot be loaded or built). Where no compiler
+works and nothing fits, :func:`native_support` says why.
 """
 
 from __future__ import annotations
@@ -50,9 +61,7 @@ import json
 import logging
 import math
 import os
-import platform
 import shlex
-import shutil
 import signal
 import subprocess
 import sys
@@ -66,8 +75,10 @@ from pathlib import Path
 from typing import Any
 
 from swarm_envs.envs.cores.native import cache as store
+from swarm_envs.envs.cores.native import variants
 from swarm_envs.envs.cores.native.cache import LEFTOVER_AGE
 from swarm_envs.envs.cores.native.contract import KernelInfo, header, layout_hash
+from swarm_envs.envs.cores.native.variants import BASE_FLAGS, PORTABLE
 
 __all__ = [
     "ARCH_ENV",
@@ -77,11 +88,14 @@ __all__ = [
     "LEFTOVER_AGE",
     "NATIVE_ENV",
     "PORTABLE",
+    "PREBUILT_ENV",
     "Library",
     "build_flags",
     "compiler_timeout",
     "load_library",
     "native_support",
+    "prebuilt_dir",
+    "prebuilt_support",
     "resolve_native",
 ]
 
@@ -89,12 +103,12 @@ logger = logging.getLogger(__name__)
 
 #: Environment variable overriding the automatic choice: ``0``, ``1`` or ``auto``.
 NATIVE_ENV = "SWARM_ENVS_NATIVE"
-#: Environment variable naming the ``-march`` target (default ``native``), or
-#: :data:`PORTABLE`.
+#: Environment variable naming the variant or ``-march`` target (default: the best
+#: prebuilt variant this CPU runs, else ``native``), or :data:`PORTABLE`.
 ARCH_ENV = "SWARM_ENVS_NATIVE_ARCH"
-#: The :data:`ARCH_ENV` value that builds for the compiler's default target (no
-#: ``-march``): a library that runs on any CPU of the architecture.
-PORTABLE = "portable"
+#: Environment variable that, set to ``0``, ignores the libraries built at install (the
+#: C step is then built at first use into the cache).
+PREBUILT_ENV = "SWARM_ENVS_NATIVE_PREBUILT"
 #: Environment variable naming the cache folder (default ``~/.cache/swarm_envs``).
 CACHE_ENV = "SWARM_ENVS_CACHE"
 #: Environment variable limiting a build's time, in seconds.
@@ -103,21 +117,10 @@ CC_TIMEOUT_ENV = "SWARM_ENVS_CC_TIMEOUT"
 #: as one compiler run over the whole kernel is long (``docs/performance.md`` gives its
 #: time), and a busy machine stretches it; a hung compiler is still stopped.
 DEFAULT_CC_TIMEOUT = 600.0
-#: The fixed flags. Without AVX-512 the kernel's 64-byte vectors become several narrower
-#: registers each, and GCC's RTL partial redundancy elimination (``-fgcse``) and load CSE
-#: after register allocation (``-fgcse-after-reload``) then take most of a build's time
-#: over the result; the vectorised loops do not need them (``docs/performance.md``).
-_BASE_FLAGS = (
-    "-O3",
-    "-fno-gcse",
-    "-fno-gcse-after-reload",
-    "-fopenmp",
-    "-fno-math-errno",
-    "-fno-trapping-math",
-    "-fPIC",
-    "-shared",
-)
-_SOURCES = ("fused_step.c", "fused_step_body.h", "fused_step_stats.h")
+#: What a build at first use usually takes, for the warning that announces it (the build
+#: times of ``docs/performance.md``, "Building the C step").
+BUILD_TIME = "20-40 s of CPU"
+_SOURCES = variants.SOURCES
 
 _LOCK = threading.Lock()
 _LIBRARIES: dict[tuple[str, ...], Library] = {}
@@ -128,12 +131,13 @@ _WARNED: set[str] = set()
 class Library:
     """A loaded C step: its two entry points and what it declares it implements.
 
-    ``path`` is the cached file whose checked bytes were loaded (from an in-memory copy
-    where possible, so the file may change later without affecting this library).
+    ``path`` is the file whose checked bytes were loaded (from an in-memory copy where
+    possible, so the file may change later without affecting this library); ``variant``
+    names the prebuilt variant it is, or is None for a library of the cache.
     """
 
-    def __init__(self, lib: ctypes.CDLL, path: Path) -> None:
-        self.lib, self.path = lib, path
+    def __init__(self, lib: ctypes.CDLL, path: Path, variant: str | None = None) -> None:
+        self.lib, self.path, self.variant = lib, path, variant
         names = ("physics", "stats", "obs_layouts", "statuses")
         for name in names:
             getattr(lib, f"fused_step_{name}").restype = ctypes.c_char_p
@@ -152,24 +156,33 @@ class Library:
             fn.argtypes = args + [ctypes.c_void_p] * 15
 
 
-def build_flags() -> tuple[str, ...]:
-    """The compiler flags: the fixed ones, ``-march`` from :data:`ARCH_ENV` (none for
-    :data:`PORTABLE`), ``$CFLAGS``."""
-    arch = os.environ.get(ARCH_ENV, "native").strip() or "native"
-    target = () if arch == PORTABLE else (f"-march={arch}",)
-    extra = tuple(shlex.split(os.environ.get("CFLAGS", "")))
-    return (*_BASE_FLAGS, *target, *extra)
+def _requested_arch() -> str | None:
+    return os.environ.get(ARCH_ENV, "").strip() or None
+
+
+def _extra_flags() -> tuple[str, ...]:
+    return tuple(shlex.split(os.environ.get("CFLAGS", "")))
+
+
+def build_flags(arch: str | None = None) -> tuple[str, ...]:
+    """The compiler flags of a build for ``arch`` (default: :data:`ARCH_ENV`, else
+    ``native``): the fixed ones, ``-march=<arch>`` (none for :data:`PORTABLE`),
+    ``$CFLAGS``."""
+    arch = arch or _requested_arch() or "native"
+    return (*BASE_FLAGS, *variants.arch_flags(arch), *_extra_flags())
 
 
 def _source_dir() -> Path:
     return Path(str(resources.files("swarm_envs.envs.cores") / "native"))
 
 
+def prebuilt_dir() -> Path:
+    """The folder of the libraries built at install (``lib/`` beside the sources)."""
+    return _source_dir() / variants.LIB_DIR
+
+
 def _compiler() -> str | None:
-    for name in (os.environ.get("CC"), "cc", "gcc"):
-        if name and shutil.which(name):
-            return shutil.which(name)
-    return None
+    return variants.find_compiler()
 
 
 def _cache_dir() -> Path:
@@ -202,32 +215,13 @@ def compiler_timeout() -> float:
 def _source_key(flags: tuple[str, ...]) -> str:
     """What a library is built from, without the compiler: the sources, the generated
     header, the flags, the machine and, for ``-march=native``, the CPU (hex SHA-256)."""
-    src = _source_dir()
-    h = hashlib.sha256()
-    for name in _SOURCES:
-        h.update((src / name).read_bytes())
-    h.update(header().encode())
-    h.update(" ".join(flags).encode())
-    h.update(platform.machine().encode())
-    if "-march=native" in flags:
-        h.update(_cpu_flags().encode())
-    return h.hexdigest()
+    return variants.source_key(_source_dir(), header(), flags)
 
 
 def _library_path(cache: Path, key: str, compiler: str) -> Path:
     """``fused_step-<sources>-<compiler>.so``: one library per source key and compiler."""
     tag = hashlib.sha256(os.path.realpath(compiler).encode()).hexdigest()[:8]
     return cache / f"fused_step-{key[:16]}-{tag}.so"
-
-
-def _cpu_flags() -> str:
-    """The CPU's model and feature flags (``-march=native`` code is built for them)."""
-    try:
-        with open("/proc/cpuinfo") as fh:
-            lines = [ln for ln in fh if ln.startswith(("flags", "model name"))]
-        return "".join(sorted(set(lines)))
-    except OSError:
-        return platform.processor()
 
 
 # --------------------------------------------------------------------------- building
@@ -273,15 +267,7 @@ def _build(compiler: str, flags: tuple[str, ...], key: str, target: Path, timeou
         )
         data = out.read_bytes()
         store.fsync_path(out)
-        record = {
-            "format": store.RECORD_FORMAT,
-            "key": key,
-            "layout": layout_hash(),
-            "size": len(data),
-            "sha256": hashlib.sha256(data).hexdigest(),
-            "compiler": os.path.realpath(compiler),
-            "flags": list(flags),
-        }
+        record = variants.record(key, layout_hash(), data, compiler, flags)
         record_tmp = Path(tmp) / "record.json"
         store.write_durably(record_tmp, json.dumps(record, indent=1).encode())
         store.record_path(target).unlink(missing_ok=True)  # it described the file replaced now
@@ -323,10 +309,11 @@ def _build_lock(target: Path, timeout: float) -> Iterator[None]:
 
 
 def _rebuilt(
-    compiler: str, flags: tuple[str, ...], key: str, target: Path, timeout: float
+    compiler: str, flags: tuple[str, ...], key: str, target: Path, timeout: float, reason: str
 ) -> bytes:
     """The bytes of ``target`` after building it, unless another process did meanwhile;
-    a damaged library is replaced with a warning."""
+    a build is announced with a warning that says ``reason`` (why no prebuilt library
+    fits), a damaged library is replaced with a warning that says what was wrong."""
     target.parent.mkdir(parents=True, exist_ok=True)
     with _build_lock(target, timeout):
         data, why = store.verified(target, key)
@@ -334,6 +321,12 @@ def _rebuilt(
             return data
         if why != store.MISSING:
             _warn_once(f"the cached C step {target} was damaged ({why}); rebuilding it")
+        else:
+            march = " ".join(f for f in flags if f.startswith("-march")) or "(portable)"
+            _warn_once(
+                f"building the C step now, as {reason}: {os.path.basename(compiler)} "
+                f"{march} into {target.parent}, once (a build usually takes {BUILD_TIME})"
+            )
         start = time.perf_counter()
         _build(compiler, flags, key, target, timeout)
         logger.info("built %s in %.1f s", target, time.perf_counter() - start)
@@ -346,12 +339,57 @@ def _rebuilt(
 # --------------------------------------------------------------------------- loading
 
 
-def _open(data: bytes, path: Path) -> Library:
+def _open(data: bytes, path: Path, variant: str | None = None) -> Library:
     lib = store.dlopen_private(data, path)
     lib.fused_step_layout.restype = ctypes.c_longlong
     if lib.fused_step_layout() != layout_hash():
         raise RuntimeError(f"{path} was built for another parameter layout; delete it")
-    return Library(lib, path)
+    return Library(lib, path, variant)
+
+
+def _prebuilt_path(variant: str) -> Path:
+    return prebuilt_dir() / f"fused_step-{variant}.so"
+
+
+def _prebuilt(variant: str) -> tuple[bytes | None, str]:
+    """The checked bytes of the prebuilt ``variant`` (its record names these sources,
+    this header and the variant's flags), else ``(None, why)``."""
+    path = _prebuilt_path(variant)
+    data, why = store.verified(path, _source_key((*BASE_FLAGS, *variants.arch_flags(variant))))
+    if data is None:
+        if why == store.MISSING:
+            return None, f"{variant} was not built at install (no {path})"
+        return None, f"the prebuilt {variant} library {path} does not fit: {why}"
+    return data, "intact"
+
+
+def _prebuilt_choice(arch: str | None) -> tuple[str | None, str]:
+    """The prebuilt variant to load for ``arch`` (None: the best this CPU runs), else
+    ``(None, why not)``.
+
+    Raises:
+        RuntimeError: ``arch`` names a variant that this CPU cannot run.
+    """
+    if os.environ.get(PREBUILT_ENV, "").strip() == "0":
+        return None, f"{PREBUILT_ENV}=0"
+    if _extra_flags():
+        return None, "$CFLAGS is set"
+    shipped = variants.shipped_variants()
+    cpu = variants.cpu_flags()
+    if arch is not None:
+        if arch not in shipped:
+            built = ", ".join(shipped)
+            return None, f"{ARCH_ENV}={arch} is not a variant built at install ({built})"
+        if cpu and not variants.supports(arch, cpu):
+            raise RuntimeError(f"this CPU cannot run the {arch} C step ({ARCH_ENV}={arch})")
+        return arch, "named"
+    present = [v for v in shipped if _prebuilt_path(v).exists()]
+    chosen = variants.choose_variant(cpu, present)
+    if chosen is None:
+        if not present:
+            return None, f"no C step was built at install (nothing in {prebuilt_dir()})"
+        return None, f"none of the prebuilt variants ({', '.join(present)}) runs on this CPU"
+    return chosen, "the best this CPU runs"
 
 
 def _open_any(cache: Path, key: str) -> Library:
@@ -375,36 +413,49 @@ def _warn_once(message: str) -> None:
         warnings.warn(message, UserWarning, stacklevel=5)  # load_library's caller
 
 
-def _load(flags: tuple[str, ...], timeout: float) -> Library:
+def _load(arch: str | None, timeout: float) -> Library:
     if sys.platform != "linux":
         raise RuntimeError(f"the C step is built on Linux only (this is {sys.platform})")
+    variant, reason = _prebuilt_choice(arch)
+    if variant is not None:
+        data, reason = _prebuilt(variant)
+        if data is not None:
+            return _open(data, _prebuilt_path(variant), variant)
+    flags = build_flags(arch)
     cache, key = _cache_dir(), _source_key(flags)
     store.clean_leftovers(cache)
     compiler = _compiler()
     if compiler is None:
-        return _open_any(cache, key)
+        try:
+            return _open_any(cache, key)
+        except RuntimeError as err:
+            raise RuntimeError(f"{err}; {reason}") from None
     target = _library_path(cache, key, compiler)
     data, _ = store.verified(target, key)
     if data is None:
-        data = _rebuilt(compiler, flags, key, target, timeout)
+        data = _rebuilt(compiler, flags, key, target, timeout, reason)
     return _open(data, target)
 
 
 def load_library() -> Library:
-    """The C step for the current flags, built on first use; ``RuntimeError`` with the
-    reason where it cannot be built or loaded.
+    """The C step for the current settings: the prebuilt variant that :data:`ARCH_ENV`
+    names, or else the best one this CPU runs; where none fits, built at first use into
+    the cache (announced with a one-time warning that says why); ``RuntimeError`` with
+    the reason where it cannot be loaded or built.
 
-    A cached library is loaded only where its record vouches for it (same sources, flags
-    and layout; same size and SHA-256), from a private in-memory copy of the bytes
-    checked; a damaged one is rebuilt (with a warning) or, without a compiler, refused.
-    Without a compiler, an intact library built by any compiler for the same sources
-    and flags is loaded. Outcomes, failures included, are kept for the process.
+    A prebuilt or cached library is loaded only where its record vouches for it (same
+    sources, flags and layout; same size and SHA-256), from a private in-memory copy of
+    the bytes checked; a damaged cached one is rebuilt (with a warning) or, without a
+    compiler, refused. Without a compiler, an intact library built by any compiler for
+    the same sources and flags is loaded. Outcomes, failures included, are kept for the
+    process.
 
     Raises:
         RuntimeError: no intact library and none can be built here, with the reason.
         ValueError: :data:`CC_TIMEOUT_ENV` is not a number of seconds > 0.
     """
-    flags = build_flags()
+    arch = _requested_arch()
+    flags = (arch or "", os.environ.get(PREBUILT_ENV, ""), *_extra_flags())
     timeout = compiler_timeout()
     with _LOCK:
         if flags in _LIBRARIES:
@@ -412,12 +463,27 @@ def load_library() -> Library:
         if flags in _FAILURES:
             raise RuntimeError(_FAILURES[flags])
         try:
-            library = _load(flags, timeout)
+            library = _load(arch, timeout)
         except (OSError, RuntimeError, AttributeError) as err:
             _FAILURES[flags] = str(err)
             raise RuntimeError(_FAILURES[flags]) from err
         _LIBRARIES[flags] = library
         return library
+
+
+def prebuilt_support() -> dict[str, tuple[bool, str]]:
+    """For each variant built at install that this CPU runs: ``(True, "intact")`` where
+    its library is present, fits these sources and loads, else ``(False, why)``."""
+    found: dict[str, tuple[bool, str]] = {}
+    for variant in variants.runnable_variants(variants.cpu_flags()):
+        data, why = _prebuilt(variant)
+        if data is not None:
+            try:
+                _open(data, _prebuilt_path(variant), variant)
+            except (OSError, RuntimeError, AttributeError) as err:
+                data, why = None, f"{_prebuilt_path(variant)} does not load: {err}"
+        found[variant] = (data is not None, why)
+    return found
 
 
 def native_support() -> tuple[bool, str]:

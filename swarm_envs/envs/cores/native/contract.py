@@ -22,7 +22,10 @@ Generated too, each from its one Python definition:
 - the return codes (``STEP_<name>``, :class:`StepCode`) and the flag ``STEP_UNSOUND``
   (:data:`UNSOUND`); :func:`step_error` turns a code into its exception by name.
 
-The generated header is part of the build (and of the cache key); the C code refers to
+The generated header is part of the build (and of the cache key); a copy of it is
+committed as ``include/step_params.h`` for the builds at install, which run without the
+package's dependencies (``python -m swarm_envs.envs.cores.native.write_header`` rewrites
+it; a test holds it equal to :func:`header`). The C code refers to
 fields, columns, statuses and codes by name, so one renamed or removed on the Python
 side fails the build. The other direction: the kernel declares the physics parameters,
 statistics and observation layout it implements (:class:`KernelInfo`, read from the
@@ -45,6 +48,7 @@ import math
 import typing
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -331,6 +335,19 @@ def header() -> str:
     the agents' statuses and flags, the layout hash."""
     lines = [*_header_body(), f"#define STEP_LAYOUT_HASH {layout_hash()}LL", "#endif"]
     return "\n".join(lines) + "\n"
+
+
+def header_path() -> Path:
+    """The committed copy of :func:`header` that the builds at install compile against."""
+    return Path(__file__).resolve().parent / "include" / "step_params.h"
+
+
+def write_header(path: Path | None = None) -> Path:
+    """Write :func:`header` to ``path`` (default :func:`header_path`); returns the path."""
+    path = path or header_path()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(header())
+    return path
 
 
 def params_struct() -> type[ctypes.Structure]:

@@ -10,18 +10,20 @@
  * The parameters arrive in StepParams; the output columns PK_*, the return codes STEP_*,
  * the agents' statuses STATUS_* and their flags AG_* are named in the header
  * step_params.h that swarm_envs/envs/cores/native/contract.py generates from the Python
- * definitions at build time. What this kernel implements it declares below
- * (KERNEL_PHYSICS, KERNEL_STATS, KERNEL_OBS_LAYOUTS, KERNEL_STATUSES); Python refuses
- * configs that need more.
+ * definitions (a copy is committed in include/ for the builds at install). What this
+ * kernel implements it declares below (KERNEL_PHYSICS, KERNEL_STATS, KERNEL_OBS_LAYOUTS,
+ * KERNEL_STATUSES); Python refuses configs that need more.
  *
- * Compiled at first use by swarm_envs/envs/cores/native/build.py with the system C compiler
- * (-O3 -march=<SWARM_ENVS_NATIVE_ARCH, default native; none where it is "portable">
- * -fopenmp, plus $CFLAGS): the loops over pairs are vectorised (float32 with the
- * inlined exp_f32 below; float64 calls glibc's vector exp, libmvec, declared SIMD), and
- * the swarms are spread over OpenMP threads. Called through ctypes. The GCC vector
- * extensions used (vector_size, __builtin_shuffle, __builtin_convertvector) lower to
- * narrower vectors or scalars where AVX-512 is missing; AVX-512 gets min/max intrinsics
- * for the k-NN keys and compressed stores for the observations.
+ * Compiled with the system C compiler (-O3 -fopenmp ...) at install, in the variants of
+ * swarm_envs/envs/cores/native/variants.py (on x86-64: -march=x86-64-v4, x86-64-v3 and
+ * none, "portable"), or where none fits at first use by build.py (-march=
+ * <SWARM_ENVS_NATIVE_ARCH, default native>, plus $CFLAGS): the loops over pairs are
+ * vectorised (float32 with the inlined exp_f32 below; float64 calls glibc's vector exp,
+ * libmvec, declared SIMD), and the swarms are spread over OpenMP threads. Called through
+ * ctypes. The GCC vector extensions used (vector_size, __builtin_shuffle,
+ * __builtin_convertvector) lower to narrower vectors or scalars where AVX-512 is
+ * missing; AVX-512 gets min/max intrinsics for the k-NN keys and compressed stores for
+ * the observations.
  */
 #include <math.h>
 #include <stdint.h>
@@ -156,6 +158,7 @@ static inline vkey key_max(vkey a, vkey b) { vkey lt = (vkey)(a < b); return (b 
                                         _mm256_castps_pd(b), 1))
 #endif
 #define KNN_BLOCK knn_block_f32
+#define KNN_ALL knn_all_f32
 #define FUSED_STEP fused_step_f32
 #include "fused_step_body.h"
 #undef REAL
@@ -169,6 +172,7 @@ static inline vkey key_max(vkey a, vkey b) { vkey lt = (vkey)(a < b); return (b 
 #undef STABLE_SUBSTEP
 #undef SWARM_STATS
 #undef KNN_BLOCK
+#undef KNN_ALL
 #undef KNN_KEYS
 #undef OBS_PAIRS_AVX512
 #undef FUSED_STEP
@@ -194,6 +198,7 @@ typedef int64_t vindex_f64 __attribute__((vector_size(64)));
 #define STABLE_SUBSTEP stable_substep_f64
 #define SWARM_STATS swarm_stats_f64
 #define KNN_BLOCK knn_block_f64
+#define KNN_ALL knn_all_f64
 #define FUSED_STEP fused_step_f64
 #include "fused_step_body.h"
 

@@ -99,6 +99,29 @@ static inline __attribute__((always_inline)) void KNN_BLOCK(
         }
 }
 
+/* KNN_BLOCK for every block of agents, the usual list lengths instantiated with a
+ * constant K so that the lists stay in registers. One function per floating type, not
+ * inlined into FUSED_SWARM: the search does not depend on the dimension, and a copy in
+ * each dimension's FUSED_SWARM would double its share of the build time for nothing. */
+static __attribute__((noinline)) void KNN_ALL(const int64_t k_sort, const int64_t nb,
+                                              const int64_t N, const REAL *rho,
+                                              const VINDEX *rot, REAL *near_d,
+                                              int32_t *near_i) {
+    for (int64_t I = 0; I < nb; I++) {
+        switch (k_sort) {
+        case 1: KNN_BLOCK(1, I, nb, N, rho, rot, near_d, near_i); break;
+        case 2: KNN_BLOCK(2, I, nb, N, rho, rot, near_d, near_i); break;
+        case 3: KNN_BLOCK(3, I, nb, N, rho, rot, near_d, near_i); break;
+        case 4: KNN_BLOCK(4, I, nb, N, rho, rot, near_d, near_i); break;
+        case 5: KNN_BLOCK(5, I, nb, N, rho, rot, near_d, near_i); break;
+        case 6: KNN_BLOCK(6, I, nb, N, rho, rot, near_d, near_i); break;
+        case 7: KNN_BLOCK(7, I, nb, N, rho, rot, near_d, near_i); break;
+        case 8: KNN_BLOCK(8, I, nb, N, rho, rot, near_d, near_i); break;
+        default: KNN_BLOCK(k_sort, I, nb, N, rho, rot, near_d, near_i); break;
+        }
+    }
+}
+
 /* swarm_envs.physics.integrators.stable_substep in REAL, as numpy computes it in the
  * state's dtype: h* = 4·STEP_SAFETY / (γ + √(γ² + 4ω²)); inf where both rates are 0 or one is NaN
  * (the non-finite state then takes one substep, and the guard sees it), 0 where one is
@@ -502,24 +525,8 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
     const REAL collisions = FLOOR((REAL)close_pairs * (REAL)0.5);
 
     /* 3. The k_sort nearest neighbours of every agent, ordered by (ρ, j): agents in blocks
-     * of LANES, each candidate inserted into the sorted lists of its lane (KNN_BLOCK; the
-     * usual list lengths are instantiated with constant K, so the lists stay in
-     * registers). */
-    if (N > 1) {
-        for (int64_t I = 0; I < nb; I++) {
-            switch (k_sort) {
-            case 1: KNN_BLOCK(1, I, nb, N, rho, rot, near_d, near_i); break;
-            case 2: KNN_BLOCK(2, I, nb, N, rho, rot, near_d, near_i); break;
-            case 3: KNN_BLOCK(3, I, nb, N, rho, rot, near_d, near_i); break;
-            case 4: KNN_BLOCK(4, I, nb, N, rho, rot, near_d, near_i); break;
-            case 5: KNN_BLOCK(5, I, nb, N, rho, rot, near_d, near_i); break;
-            case 6: KNN_BLOCK(6, I, nb, N, rho, rot, near_d, near_i); break;
-            case 7: KNN_BLOCK(7, I, nb, N, rho, rot, near_d, near_i); break;
-            case 8: KNN_BLOCK(8, I, nb, N, rho, rot, near_d, near_i); break;
-            default: KNN_BLOCK(k_sort, I, nb, N, rho, rot, near_d, near_i); break;
-            }
-        }
-    }
+     * of LANES, each candidate inserted into the sorted lists of its lane (KNN_ALL). */
+    if (N > 1) KNN_ALL(k_sort, nb, N, rho, rot, near_d, near_i);
 
     /* 4. Observations (B, N, obs_dim), float32, clipped to ±obs_bound. Every agent j's
      * position, velocity, a 1 (the slot mask) and, with observe_status, its status flag
