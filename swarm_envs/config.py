@@ -339,7 +339,7 @@ class SwarmConfig:
     backend: str = "auto"
     """How a step is computed, one of :data:`BACKENDS`: ``"numpy"`` (dense, every
     model), ``"cutoff"`` (cut-off + cell list, large swarms), ``"native"`` (the step in
-    C, built at first use), ``"torch"`` (one fused, compiled step; CPU or CUDA) or
+    C, compiled at install), ``"torch"`` (one fused, compiled step; CPU or CUDA) or
     ``"auto"``, which picks by measured speed among the backends that support the config
     (``swarm_envs.envs.backends.select_backend``). Results agree to float tolerance
     (``"cutoff"``: up to its documented cut-off error). A named backend that cannot run

@@ -12,9 +12,9 @@ backend      what it is
              arrays; every ``dynamics`` and integrator. The reference.
 ``cutoff``   :class:`~swarm_envs.envs.cores.cutoff.core.CutoffSwarmNavCore`: a cut-off
              radius and an O(N) cell list (social potential). Large swarms.
-``native``   :class:`~swarm_envs.envs.cores.native.NativeSwarmNavCore`: the step in C, built
-             at first use with the system C compiler (social potential, semi-implicit
-             Euler, CPU).
+``native``   :class:`~swarm_envs.envs.cores.native.NativeSwarmNavCore`: the step in C, compiled
+             at install with the system C compiler (at first use where no library
+             built at install fits; social potential, CPU).
 ``torch``    :class:`~swarm_envs.envs.cores.torch.core.TorchSwarmNavCore`: the step as one
              torch function, compiled where possible; CPU or ``device="cuda"`` (social
              potential, semi-implicit Euler).
