@@ -125,7 +125,11 @@ def _auto_by_speed(cfg: SwarmConfig, batch: int) -> tuple[str, str | None]:
     if cfg.device != "cpu":
         return "torch", None
     implemented = model_spec(cfg.dynamics).backends
-    if "cutoff" in implemented and cfg.n_agents >= CUTOFF_MIN_AGENTS:
+    if (
+        "cutoff" in implemented
+        and cfg.n_agents >= CUTOFF_MIN_AGENTS
+        and unsupported(cfg, "cutoff") is None
+    ):
         return "cutoff", None
     why = unsupported(cfg, "native")
     if why is None:

@@ -1,6 +1,6 @@
 """Time stepping for the second-order force models: ``ṙ = v``, ``m v̇ = F(r, v) + u``.
 
-Two explicit schemes, both one force evaluation per step:
+Three schemes, each one force evaluation per step:
 
 ``"semi_implicit_euler"`` (symplectic Euler, the default)
     ``v_{n+1} = v_n + dt (F(r_n, v_n) + u)/m``, ``r_{n+1} = r_n + dt v_{n+1}``.
@@ -15,6 +15,15 @@ Two explicit schemes, both one force evaluation per step:
     ``2v_{n+½} − v_n = v_{n+1} + O(dt²)``, which keeps the scheme explicit and of
     order 2; the end-of-step passive force is reused for the next step's first kick.
     A control ``u`` is held constant over each step (zero-order hold).
+
+``"implicit_damping_euler"`` (symplectic Euler with the damping implicit)
+    ``v_{n+1} = v_n + dt (F(r_n, v_n) + u) / (m + dt c_i)``, ``r_{n+1} = r_n + dt v_{n+1}``,
+    with ``c_i ≥ 0`` per agent the damping it treats implicitly
+    (:func:`~swarm_envs.physics.social_potential.damping_rates`: the positive part of
+    the dissipation's rate plus the alignment's row sum ``Σ_j w(ρ_ij)``). It is
+    semi-implicit Euler with the term ``−c_i v_i`` taken at ``v_{n+1}`` instead of
+    ``v_n`` (the explicit force keeps ``−c_i v_n``, which cancels): consistent, of order
+    1, and exactly the semi-implicit Euler step where ``c_i = 0``.
 
 Damping is applied per unit of time (``−β v`` inside the force), so halving ``dt``
 converges to the same trajectory. The measured orders are checked in the tests.
@@ -42,6 +51,25 @@ step, so a mode is a map of ``(q, v, f)`` whose characteristic polynomial is
 factor 2, a further margin against the state changing within a substep). An environment
 step of length ``dt`` is split into ``n = ⌈τ/h*⌉`` equal substeps of what remains of it
 (:func:`substep_plan`), re-planned after every substep from the new state.
+
+Implicit damping. Linearised, the velocity damping is ``D = βI + D_w`` (per unit mass),
+``D_w = Σ_{pairs} (e_i − e_j)(e_i − e_j)ᵀ ⊗ w_ij u uᵀ`` the alignment's, and
+``"implicit_damping_euler"`` divides by ``P = I + hC`` with ``C = diag(c_i)``. Its
+damping alone maps ``v ↦ P⁻¹(P − hD) v``, similar to ``I − h P^{-½} D P^{-½}``: the
+eigenvalues are real and at most 1, and above −1 exactly when ``h(D − 2C) < 2I``, which
+holds at every ``h`` since ``2C − D ⪰ βI + Σ_{pairs} (e_i + e_j)(e_i + e_j)ᵀ ⊗ w_ij u uᵀ
+⪰ 0`` (``c_i ≥ β + Σ_j w_ij``): the damping is unconditionally stable. On one mode
+(stiffness ``ω²``, damping ``γ``, implicit coefficient ``c`` with ``γ ≤ 2c``) the step is
+a map of trace ``2 − (h²ω² + hγ)/(1 + hc)`` and determinant ``1 − hγ/(1 + hc)``, stable
+(Jury) exactly when ``h²ω² + 2hγ < 4(1 + hc)``: at least whenever ``hω < 2``, whatever
+the damping. Its rule is ``h* = 0.9 · 2/ω`` (:func:`stable_substep` with ``c = 0``),
+with ``ω²`` the block bound of
+:func:`~swarm_envs.physics.social_potential.stiffness_rate` (the exact norms of the
+pairs' Hessian blocks, block Gershgorin, and the largest eigenvalue of each agent's own
+block bounded from its trace and Frobenius norm), tighter than the Gershgorin sum of
+:func:`~swarm_envs.physics.social_potential.pair_rates` that the two explicit schemes
+keep. A negative dissipation rate (self-propulsion below ``v₀/√3``) stays explicit: it
+is a growth of the model itself, not of the scheme.
 """
 
 from __future__ import annotations
@@ -56,6 +84,7 @@ from swarm_envs.physics._validation import check_goal, check_run, check_state
 from swarm_envs.physics.social_potential import (
     PairGeometry,
     SocialPotentialParams,
+    damping_rates,
     forces,
     pair_geometry,
 )
@@ -63,7 +92,7 @@ from swarm_envs.physics.social_potential import (
 if TYPE_CHECKING:
     import torch
 
-INTEGRATORS = ("semi_implicit_euler", "velocity_verlet")
+INTEGRATORS = ("semi_implicit_euler", "velocity_verlet", "implicit_damping_euler")
 
 #: A control is a fixed array broadcastable to ``(..., N, d)`` or a function
 #: ``control(t, x, v) -> array`` evaluated once per step (zero-order hold).
@@ -82,7 +111,11 @@ STEP_SAFETY = 0.9
 
 #: The weight ``c`` of the damping rate in each integrator's stability edge
 #: ``h²ω² + 2c·hγ < 4`` (module docstring).
-_DAMPING_WEIGHT = {"semi_implicit_euler": 1.0, "velocity_verlet": 2.0}
+_DAMPING_WEIGHT = {
+    "semi_implicit_euler": 1.0,
+    "velocity_verlet": 2.0,
+    "implicit_damping_euler": 0.0,
+}
 
 
 def stable_substep(
@@ -97,7 +130,9 @@ def stable_substep(
     Elementwise on numpy arrays or torch tensors (``xp``: ``np`` or ``torch``). ``inf``
     where both rates are 0 (any step is stable) and, so that a non-finite state takes
     one substep and is caught by the caller's finiteness check, where a rate is NaN;
-    0 where a rate is ``inf`` (no step is stable).
+    0 where a rate is ``inf`` (no step is stable). ``c = 0`` for
+    ``"implicit_damping_euler"``, whose damping is unconditionally stable:
+    ``h* = σ · 2/ω``, and ``γ`` is not read.
 
     >>> round(float(stable_substep(np.float64(100.0), np.float64(0.0))), 6)  # hω < 2, ω = 10
     0.18
@@ -109,6 +144,10 @@ def stable_substep(
     """
     _check_integrator(integrator)
     c = _DAMPING_WEIGHT[integrator]
+    if c == 0.0:
+        den = 2.0 * xp.sqrt(omega2)
+        ok = den > 0
+        return xp.where(ok, (4.0 * STEP_SAFETY) / xp.where(ok, den, 1.0), math.inf)
     cg = gamma if c == 1.0 else c * gamma
     den = cg + xp.sqrt(cg * cg + 4.0 * omega2)
     ok = den > 0
@@ -193,6 +232,40 @@ def euler_update(
         accel = accel / m
     v_new = v + dt * accel
     return x + dt * v_new, v_new
+
+
+def implicit_damping_update(
+    x: Any, v: Any, accel: Any, dt: Any, m: float, damping: Any
+) -> tuple[Any, Any]:
+    """The ``"implicit_damping_euler"`` update with the force ``accel`` (passive +
+    control) and the implicit damping ``damping`` ``(..., N)`` (``c_i``,
+    :func:`~swarm_envs.physics.social_potential.damping_rates`):
+    ``v' = v + dt · accel/(m + dt c_i)``, ``x' = x + dt v'``. numpy arrays or torch
+    tensors; ``dt`` as in :func:`euler_update`."""
+    v_new = v + accel * (dt / (m + dt * damping[..., None]))
+    return x + dt * v_new, v_new
+
+
+def implicit_damping_step(
+    x: Any,
+    v: Any,
+    params: SocialPotentialParams,
+    *,
+    dt: float,
+    goal: Any | None = None,
+    control: Any | None = None,
+    geometry: PairGeometry | None = None,
+) -> tuple[Any, Any]:
+    """One ``"implicit_damping_euler"`` step of the social potential model (the module
+    docstring; :func:`implicit_damping_update` with
+    :func:`~swarm_envs.physics.social_potential.damping_rates` of ``(x, v)``); the
+    arguments as :func:`step`."""
+    geo = pair_geometry(x) if geometry is None else geometry
+    accel = forces(x, v, params, goal, geometry=geo)
+    if control is not None:
+        accel = accel + control
+    damping = damping_rates(geo, v, params)
+    return implicit_damping_update(x, v, accel, dt, params.m, damping)
 
 
 def step(
@@ -313,9 +386,10 @@ def simulate(
         u = control(n * dt, xn, vn) if callable(control) else control
         return np.asarray(u, dtype=x.dtype)
 
-    if integrator == "semi_implicit_euler":
+    if integrator != "velocity_verlet":
+        one = step if integrator == "semi_implicit_euler" else implicit_damping_step
         for n in range(steps):
-            x, v = step(x, v, params, dt=dt, goal=goal, control=control_at(n, x, v))
+            x, v = one(x, v, params, dt=dt, goal=goal, control=control_at(n, x, v))
             xs[n + 1], vs[n + 1] = x, v
         return xs, vs
 
