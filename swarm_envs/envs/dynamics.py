@@ -289,6 +289,7 @@ class SocialPotentialDynamics(Dynamics):
                 total = self._mobile_force(fr if ur is None else fr + ur, None if every else rows)
                 if self._implicit:
                     cr = self._damping if every else self._damping[rows]
+                    cr = cr[..., None].astype(self.dtype, copy=False)
                     xr, vr = implicit_damping_update(xr, vr, total, hb, cfg.physics.m, cr)
                 else:
                     xr, vr = euler_update(xr, vr, total, hb, cfg.physics.m)

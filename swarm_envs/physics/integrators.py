@@ -238,11 +238,12 @@ def implicit_damping_update(
     x: Any, v: Any, accel: Any, dt: Any, m: float, damping: Any
 ) -> tuple[Any, Any]:
     """The ``"implicit_damping_euler"`` update with the force ``accel`` (passive +
-    control) and the implicit damping ``damping`` ``(..., N)`` (``c_i``,
-    :func:`~swarm_envs.physics.social_potential.damping_rates`):
+    control) and the implicit damping ``damping`` (``c_i``,
+    :func:`~swarm_envs.physics.social_potential.damping_rates`, broadcastable to ``x``:
+    ``(..., N, 1)`` for ``(..., N, d)`` arrays, ``(..., N)`` for one component):
     ``v' = v + dt · accel/(m + dt c_i)``, ``x' = x + dt v'``. numpy arrays or torch
     tensors; ``dt`` as in :func:`euler_update`."""
-    v_new = v + accel * (dt / (m + dt * damping[..., None]))
+    v_new = v + accel * (dt / (m + dt * damping))
     return x + dt * v_new, v_new
 
 
@@ -265,7 +266,7 @@ def implicit_damping_step(
     if control is not None:
         accel = accel + control
     damping = damping_rates(geo, v, params)
-    return implicit_damping_update(x, v, accel, dt, params.m, damping)
+    return implicit_damping_update(x, v, accel, dt, params.m, damping[..., None])
 
 
 def step(

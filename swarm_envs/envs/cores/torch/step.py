@@ -50,15 +50,22 @@ from swarm_envs.envs.task import (
 )
 from swarm_envs.envs.task.agent_status import masks
 from swarm_envs.physics import kinetic_energy
-from swarm_envs.physics.integrators import euler_update, stable_substep, substep_plan
+from swarm_envs.physics.integrators import (
+    euler_update,
+    implicit_damping_update,
+    stable_substep,
+    substep_plan,
+)
 from swarm_envs.physics.social_potential import (
     PairGeometry,
+    damping_rates,
     goal_terms,
     pair_geometry,
     pair_rates,
     pair_terms,
     passive_components,
     present_geometry,
+    stiffness_rate,
 )
 
 if TYPE_CHECKING:
@@ -154,12 +161,39 @@ def _passive(
     return fs, pairs, potential, goal_distance
 
 
-def _stable(geo: PairGeometry, vs: list[torch.Tensor], cfg: SwarmConfig) -> torch.Tensor:
+def _stable(
+    geo: PairGeometry, vs: list[torch.Tensor], cfg: SwarmConfig
+) -> tuple[torch.Tensor, list[torch.Tensor]]:
     """The stable substep ``h*`` ``(B,)`` of the state of ``geo`` with the velocities
-    ``vs`` (the shared rule)."""
+    ``vs`` (the shared rule) and what the state carries beside its force: for
+    ``"implicit_damping_euler"`` the agents' implicit damping ``c_i`` ``(B, N)``
+    (:func:`~swarm_envs.physics.social_potential.damping_rates`), nothing otherwise."""
     p = cfg.physics
+    if cfg.integrator == "implicit_damping_euler":
+        omega2 = stiffness_rate(geo, p, sink=cfg.passive_sink)
+        h = stable_substep(omega2, 0.0 * omega2, torch, integrator=cfg.integrator)
+        return h, [damping_rates(geo, vs, p)]
     omega2, gamma = pair_rates(geo, p, sink=cfg.passive_sink, v=vs)
-    return stable_substep(omega2, gamma, torch)
+    return stable_substep(omega2, gamma, torch), []
+
+
+def _update(
+    x: torch.Tensor,
+    v: torch.Tensor,
+    f: torch.Tensor,
+    a: torch.Tensor,
+    step: torch.Tensor,
+    mobile: torch.Tensor | None,
+    cfg: SwarmConfig,
+    c: int,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Component ``c`` of the integrator's update with the carried passive force ``f``
+    (``(d, B, N)``; with ``"implicit_damping_euler"`` its row ``d`` is the implicit
+    damping) and the control ``u_max a``."""
+    total = _held(f[c] + cfg.u_max * a[..., c], mobile)
+    if cfg.integrator == "implicit_damping_euler":
+        return implicit_damping_update(x[c], v[c], total, step, cfg.physics.m, f[cfg.dim])
+    return euler_update(x[c], v[c], total, step, cfg.physics.m)
 
 
 def _masks(
@@ -231,9 +265,7 @@ def build_advance(cfg: SwarmConfig) -> Callable[..., tuple[torch.Tensor, ...]]:
         keep, step = (h > 0)[:, None], h[:, None]
         xs, vs = [], []
         for c in range(d):
-            xc, vc = euler_update(
-                x[c], v[c], _held(f[c] + cfg.u_max * a[..., c], mobile), step, p.m
-            )
+            xc, vc = _update(x, v, f, a, step, mobile, cfg, c)
             xs.append(torch.where(keep, xc, x[c]))
             vs.append(torch.where(keep, vc, v[c]))
 
@@ -244,7 +276,7 @@ def build_advance(cfg: SwarmConfig) -> Callable[..., tuple[torch.Tensor, ...]]:
         xs, vs = list(x_new.unbind(0)), list(v_new.unbind(0))
         geo = present_geometry(pair_geometry(xs), present)
         fs, pairs, potential, goal_distance = _passive(geo, xs, vs, goal, cfg, energy=True)
-        h_stable = _stable(geo, vs, cfg)
+        h_stable, carried = _stable(geo, vs, cfg)
         xn, vn = x_new.permute(1, 2, 0), v_new.permute(1, 2, 0)
         energy = kinetic_energy(vn, p) + pairs
         if p.C_g > 0:  # the energy statistic includes the sink whenever it exists
@@ -281,7 +313,7 @@ def build_advance(cfg: SwarmConfig) -> Callable[..., tuple[torch.Tensor, ...]]:
         r = reward(cfg.reward, inputs) + torch.zeros(B, dtype=x.dtype, device=x.device)
         # rho is returned (and dropped by the caller) so that the compiler stores it once,
         # in the pair loop, instead of recomputing it in every pass of the ranking.
-        return x_new, v_new, torch.stack(fs), obs, packed, r, rho
+        return x_new, v_new, torch.stack(fs + carried), obs, packed, r, rho
 
     return advance
 
@@ -361,9 +393,7 @@ def build_substep(cfg: SwarmConfig) -> Callable[..., tuple[Any, ...]]:
         keep, step = active[:, None], h.to(x.dtype)[:, None]
         xs, vs = [], []
         for c in range(d):
-            xc, vc = euler_update(
-                x[c], v[c], _held(f[c] + cfg.u_max * a[..., c], mobile), step, p.m
-            )
+            xc, vc = _update(x, v, f, a, step, mobile, cfg, c)
             xs.append(torch.where(keep, xc, x[c]))
             vs.append(torch.where(keep, vc, v[c]))
         used = used + active.to(wide)
@@ -372,7 +402,7 @@ def build_substep(cfg: SwarmConfig) -> Callable[..., tuple[Any, ...]]:
         xs, vs = list(x_new.unbind(0)), list(v_new.unbind(0))
         geo = present_geometry(pair_geometry(xs), present)
         fs, _, _, _ = _passive(geo, xs, vs, goal, cfg, energy=False)
-        h_new = _stable(geo, vs, cfg)
+        h_new, carried = _stable(geo, vs, cfg)
         # The next substep, planned as the next call would plan it: for the fused step
         # when it is every swarm's last.
         h, last, late, wanted = plan_substep(remaining, h_new.to(wide), used, cap, torch)
@@ -380,7 +410,7 @@ def build_substep(cfg: SwarmConfig) -> Callable[..., tuple[Any, ...]]:
         more = (left & ~last).any()
         counts = torch.stack([(over | late).to(wide), torch.maximum(needed, wanted)])
         final = (torch.where(left, h, 0.0).to(x.dtype), (used + left.to(wide)).to(x.dtype), counts)
-        f_new = torch.stack(fs)
+        f_new = torch.stack(fs + carried)
         return x_new, v_new, f_new, h_new, remaining, used, over, needed, more, final
 
     return substep
