@@ -176,8 +176,9 @@ class SocialPotentialDynamics(Dynamics):
     Euler schemes the force ``F(x, v)`` of the current state, computed in :meth:`measure`
     in the same pass over the pairs as the energy; velocity Verlet the force at the
     extrapolated velocity (:func:`~swarm_envs.physics.integrators.verlet_step`).
-    ``"implicit_damping_euler"`` carries the agents' implicit damping ``c_i`` of the
-    current state beside it (:func:`~swarm_envs.physics.social_potential.damping_rates`).
+    ``"implicit_damping_euler"`` carries the agents' implicit damping ``(b_i, w_i)`` of
+    the current state beside it
+    (:func:`~swarm_envs.physics.social_potential.damping_rates`).
 
     Step-size control: the stable substep ``h*`` of the current state (its Gershgorin
     rates, :func:`~swarm_envs.physics.social_potential.pair_rates`, or for
@@ -195,8 +196,8 @@ class SocialPotentialDynamics(Dynamics):
         self._h_stable = np.full(batch, np.inf)  # the stable substep of the current state
         self._verlet = cfg.integrator == "velocity_verlet"
         self._implicit = cfg.integrator == "implicit_damping_euler"
-        # the implicit damping c_i of the current state (implicit_damping_euler)
-        self._damping = np.zeros((batch, cfg.n_agents))
+        # the implicit damping (b_i, w_i) of the current state (implicit_damping_euler)
+        self._damping = np.zeros((2, batch, cfg.n_agents))
         self._sink = cfg.passive_sink
 
     def _physics_goal(self, goal: np.ndarray) -> np.ndarray | None:
@@ -240,11 +241,11 @@ class SocialPotentialDynamics(Dynamics):
         for ``"implicit_damping_euler"`` their implicit damping is stored too."""
         p = self.cfg.physics
         if self._implicit:
-            damping = damping_rates(geometry, v, p)
+            damping = np.stack(damping_rates(geometry, v, p))
             if rows is None:
                 self._damping = damping
             else:
-                self._damping[rows] = damping
+                self._damping[:, rows] = damping
             omega2 = stiffness_rate(geometry, p, sink=self._sink)
             return stable_substep(omega2, 0.0 * omega2, integrator=self.cfg.integrator)
         omega2, gamma = pair_rates(geometry, p, sink=self._sink, v=v)
@@ -288,9 +289,12 @@ class SocialPotentialDynamics(Dynamics):
             else:
                 total = self._mobile_force(fr if ur is None else fr + ur, None if every else rows)
                 if self._implicit:
-                    cr = self._damping if every else self._damping[rows]
-                    cr = cr[..., None].astype(self.dtype, copy=False)
-                    xr, vr = implicit_damping_update(xr, vr, total, hb, cfg.physics.m, cr)
+                    own, align = self._damping if every else self._damping[:, rows]
+                    if self.mobile is not None:  # an agent held at rest: no increment
+                        align = np.where(self.mobile if every else self.mobile[rows], align, 0.0)
+                    own = own[..., None].astype(self.dtype, copy=False)
+                    align = align[..., None].astype(self.dtype, copy=False)
+                    xr, vr = implicit_damping_update(xr, vr, total, hb, cfg.physics.m, own, align)
                 else:
                     xr, vr = euler_update(xr, vr, total, hb, cfg.physics.m)
             if every:

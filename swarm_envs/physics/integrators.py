@@ -17,13 +17,20 @@ Three schemes, each one force evaluation per step:
     A control ``u`` is held constant over each step (zero-order hold).
 
 ``"implicit_damping_euler"`` (symplectic Euler with the damping implicit)
-    ``v_{n+1} = v_n + dt (F(r_n, v_n) + u) / (m + dt c_i)``, ``r_{n+1} = r_n + dt v_{n+1}``,
-    with ``c_i ≥ 0`` per agent the damping it treats implicitly
-    (:func:`~swarm_envs.physics.social_potential.damping_rates`: the positive part of
-    the dissipation's rate plus the alignment's row sum ``Σ_j w(ρ_ij)``). It is
-    semi-implicit Euler with the term ``−c_i v_i`` taken at ``v_{n+1}`` instead of
-    ``v_n`` (the explicit force keeps ``−c_i v_n``, which cancels): consistent, of order
-    1, and exactly the semi-implicit Euler step where ``c_i = 0``.
+    ``v_{n+1} = v_n + dt (a_i + w_i s) / (m + dt c_i)``, ``r_{n+1} = r_n + dt v_{n+1}``,
+    with ``a_i = F_i(r_n, v_n) + u_i`` and, per agent
+    (:func:`~swarm_envs.physics.social_potential.damping_rates`), the implicit
+    dissipation ``b_i`` (the positive part of its rate), the alignment's row sum
+    ``w_i = Σ_j w(ρ_ij)`` and ``c_i = b_i + w_i``; per swarm the velocity
+    ``s = dt Σ_i w_i a_i/(m + dt c_i) / Σ_i w_i (m + dt b_i)/(m + dt c_i)``, the weighted
+    mean increment that the alignment leaves alone (:func:`implicit_damping_update`).
+    Each agent's increment ``Δv_i`` solves ``m Δv_i = dt a_i − dt b_i Δv_i
+    − dt w_i (Δv_i − s)`` with ``Σ_i w_i (Δv_i − s) = 0``: the damping's terms taken at
+    the new velocity, the alignment's against the collective increment ``s``, so that
+    a swarm driven as a whole (goal, control) accelerates as the force says and the
+    pair forces keep the momentum (``Σ_i m Δv_i = dt Σ_i a_i`` without dissipation).
+    Consistent, of order 1, and exactly the semi-implicit Euler step where
+    ``b = w = 0``.
 
 Damping is applied per unit of time (``−β v`` inside the force), so halving ``dt``
 converges to the same trajectory. The measured orders are checked in the tests.
@@ -52,17 +59,22 @@ factor 2, a further margin against the state changing within a substep). An envi
 step of length ``dt`` is split into ``n = ⌈τ/h*⌉`` equal substeps of what remains of it
 (:func:`substep_plan`), re-planned after every substep from the new state.
 
-Implicit damping. Linearised, the velocity damping is ``D = βI + D_w`` (per unit mass),
-``D_w = Σ_{pairs} (e_i − e_j)(e_i − e_j)ᵀ ⊗ w_ij u uᵀ`` the alignment's, and
-``"implicit_damping_euler"`` divides by ``P = I + hC`` with ``C = diag(c_i)``. Its
-damping alone maps ``v ↦ P⁻¹(P − hD) v``, similar to ``I − h P^{-½} D P^{-½}``: the
-eigenvalues are real and at most 1, and above −1 exactly when ``h(D − 2C) < 2I``, which
-holds at every ``h`` since ``2C − D ⪰ βI + Σ_{pairs} (e_i + e_j)(e_i + e_j)ᵀ ⊗ w_ij u uᵀ
-⪰ 0`` (``c_i ≥ β + Σ_j w_ij``): the damping is unconditionally stable. On one mode
-(stiffness ``ω²``, damping ``γ``, implicit coefficient ``c`` with ``γ ≤ 2c``) the step is
-a map of trace ``2 − (h²ω² + hγ)/(1 + hc)`` and determinant ``1 − hγ/(1 + hc)``, stable
-(Jury) exactly when ``h²ω² + 2hγ < 4(1 + hc)``: at least whenever ``hω < 2``, whatever
-the damping. Its rule is ``h* = 0.9 · 2/ω`` (:func:`stable_substep` with ``c = 0``),
+Implicit damping. Linearised, the velocity damping is ``D = B + D_w`` (unit mass),
+``B = diag(b_i)`` the dissipation's and ``D_w = Σ_{pairs} (e_i − e_j)(e_i − e_j)ᵀ ⊗ w_ij
+u uᵀ`` the alignment's. ``"implicit_damping_euler"`` maps an explicit increment ``e``
+to ``Δv = T e`` with ``T = P⁻¹ + h P⁻¹ w wᵀ P⁻¹ / Z`` (per component), ``P = I + hC``,
+``C = diag(c_i)``, ``Z = Σ_i w_i (1 + h b_i)/(1 + h c_i)``: symmetric positive
+definite, with ``T⁻¹ = P − h w wᵀ / Σ_i w_i`` (Sherman–Morrison). Its damping alone maps
+``v ↦ (I − hTD) v``, similar to ``I − h T^{½} D T^{½}``: real eigenvalues, at most 1,
+above −1 exactly when ``hD < 2T⁻¹``. That holds at every ``h``: ``D_w ⪯ L_w ⊗ I`` (the
+Laplacian of the weights ``w_ij``) and ``L_w ⪯ 2W − 2 w wᵀ/Σ_i w_i`` (``W = diag(w_i)``;
+the difference is the signless Laplacian ``Σ_{pairs} w_ij (e_i + e_j)(e_i + e_j)ᵀ``
+less ``2 w wᵀ/Σ w``, positive semi-definite by Cauchy–Schwarz, as
+``w·q = Σ_{pairs} w_ij (q_i + q_j)``), so ``hD − 2T⁻¹ ⪯ −2I − hB ≺ 0``: the damping is
+unconditionally stable. On one mode (stiffness ``ω²``, damping ``γ``, implicit
+coefficient ``c`` with ``γ ≤ 2c``) the step is a map of trace
+``2 − (h²ω² + hγ)/(1 + hc)`` and determinant ``1 − hγ/(1 + hc)``, stable (Jury) exactly
+when ``h²ω² + 2hγ < 4(1 + hc)``: at least whenever ``hω < 2``, whatever the damping. Its rule is ``h* = 0.9 · 2/ω`` (:func:`stable_substep` with ``c = 0``),
 with ``ω²`` the block bound of
 :func:`~swarm_envs.physics.social_potential.stiffness_rate` (the exact norms of the
 pairs' Hessian blocks, block Gershgorin, and the largest eigenvalue of each agent's own
@@ -80,6 +92,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from swarm_envs._array import namespace
 from swarm_envs.physics._validation import check_goal, check_run, check_state
 from swarm_envs.physics.social_potential import (
     PairGeometry,
@@ -235,15 +248,29 @@ def euler_update(
 
 
 def implicit_damping_update(
-    x: Any, v: Any, accel: Any, dt: Any, m: float, damping: Any
+    x: Any, v: Any, accel: Any, dt: Any, m: float, own: Any, align: Any, axis: int = -2
 ) -> tuple[Any, Any]:
-    """The ``"implicit_damping_euler"`` update with the force ``accel`` (passive +
-    control) and the implicit damping ``damping`` (``c_i``,
-    :func:`~swarm_envs.physics.social_potential.damping_rates`, broadcastable to ``x``:
-    ``(..., N, 1)`` for ``(..., N, d)`` arrays, ``(..., N)`` for one component):
-    ``v' = v + dt · accel/(m + dt c_i)``, ``x' = x + dt v'``. numpy arrays or torch
-    tensors; ``dt`` as in :func:`euler_update`."""
-    v_new = v + accel * (dt / (m + dt * damping))
+    """The ``"implicit_damping_euler"`` update (the module docstring) with the force
+    ``accel`` (passive + control) and the agents' implicit dissipation ``own`` (``b_i``)
+    and alignment row sums ``align`` (``w_i``;
+    :func:`~swarm_envs.physics.social_potential.damping_rates`; 0 for an agent held at
+    rest, whose ``accel`` is 0 too):
+
+    ``s = dt Σ_i w_i a_i/(m + dt c_i) / Σ_i w_i (m + dt b_i)/(m + dt c_i)`` (0 where no
+    agent aligns), ``v' = v + dt (a_i + w_i s)/(m + dt c_i)``, ``x' = x + dt v'``.
+
+    numpy arrays or torch tensors: ``x, v, accel`` ``(..., N, d)`` with ``own, align``
+    ``(..., N, 1)`` and ``axis=-2`` (the agents' axis), or one component ``(..., N)``
+    with ``own, align`` ``(..., N)`` and ``axis=-1``; ``dt`` as in
+    :func:`euler_update`, broadcastable to ``x``.
+    """
+    xp = namespace(x)
+    den = m + dt * (own + align)
+    num = xp.sum(align * dt * accel / den, axis=axis)
+    z = xp.sum(align * (m + dt * own) / den, axis=axis)
+    s = xp.where(z > 0, num / xp.where(z > 0, z, 1.0), 0.0)
+    s = s[..., None, :] if axis == -2 else s[..., None]
+    v_new = v + dt * (accel + align * s) / den
     return x + dt * v_new, v_new
 
 
@@ -265,8 +292,8 @@ def implicit_damping_step(
     accel = forces(x, v, params, goal, geometry=geo)
     if control is not None:
         accel = accel + control
-    damping = damping_rates(geo, v, params)
-    return implicit_damping_update(x, v, accel, dt, params.m, damping[..., None])
+    own, align = damping_rates(geo, v, params)
+    return implicit_damping_update(x, v, accel, dt, params.m, own[..., None], align[..., None])
 
 
 def step(

@@ -625,15 +625,17 @@ def stiffness_rate(
     return omega2
 
 
-def damping_rates(geometry: PairGeometry, v: Array, params: SocialPotentialParams) -> Array:
-    """The damping treated implicitly by ``"implicit_damping_euler"``, per agent
-    ``(..., N)`` (times the mass): ``c_i = D_i⁺ + Σ_{j≠i} w(ρ_ij)``.
+def damping_rates(
+    geometry: PairGeometry, v: Array, params: SocialPotentialParams
+) -> tuple[Array, Array]:
+    """The damping treated implicitly by ``"implicit_damping_euler"``, per agent (times
+    the mass): ``(b_i, a_i)``, each ``(..., N)``.
 
-    ``D_i`` is the dissipation's rate of agent i: ``β``, or with self-propulsion the
-    largest eigenvalue ``3β|v_i|² − α`` of its Jacobian (:func:`dissipation_rate`), of
-    which only the positive part is implicit (a negative rate, energy injected, stays
-    explicit); ``Σ_j w(ρ_ij)`` bounds the alignment's damping of agent i
-    (:func:`rate_law`). ``v``: velocities ``(..., N, d)`` or components.
+    ``b_i = D_i⁺``, the positive part of agent i's dissipation rate ``D_i``: ``β``, or
+    with self-propulsion the largest eigenvalue ``3β|v_i|² − α`` of its Jacobian
+    (:func:`dissipation_rate`; a negative rate, energy injected, stays explicit);
+    ``a_i = Σ_{j≠i} w(ρ_ij)``, the alignment's row sum (:func:`rate_law`), which bounds
+    its damping of agent i. ``v``: velocities ``(..., N, d)`` or components.
     """
     p = params
     rho = geometry.rho
@@ -647,9 +649,9 @@ def damping_rates(geometry: PairGeometry, v: Array, params: SocialPotentialParam
     else:
         own = p.beta + 0.0 * vs[0]
     if p.C_o == 0:
-        return own
+        return own, 0.0 * own
     w = p.C_o * xp.exp(rho * (-1.0 / p.l_o))
-    return own + (xp.sum(w, axis=-1) - p.C_o)
+    return own, xp.clip(xp.sum(w, axis=-1) - p.C_o, 0.0, None)
 
 
 def goal_terms(

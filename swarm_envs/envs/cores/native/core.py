@@ -175,11 +175,11 @@ class NativeSwarmNavCore(TaskCore):
     # ------------------------------------------------------------------ the C step
     def _buffers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Zeroed ``(x, v, f)`` state buffers, ``(d, B, N)`` each; with
-        ``"implicit_damping_euler"`` ``f`` has a row ``d`` more: the agents' implicit
-        damping ``c_i``, carried like the passive force."""
+        ``"implicit_damping_euler"`` ``f`` has two rows more: the agents' implicit
+        damping ``(b_i, w_i)`` (``damping_rates``), carried like the passive force."""
         cfg = self.cfg
         shape = (cfg.dim, self.batch, cfg.n_agents)
-        rows = cfg.dim + int(cfg.integrator == "implicit_damping_euler")
+        rows = cfg.dim + 2 * int(cfg.integrator == "implicit_damping_euler")
         f = np.zeros((rows, self.batch, cfg.n_agents), self.dtype)
         return np.zeros(shape, self.dtype), np.zeros(shape, self.dtype), f
 

@@ -153,10 +153,11 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
     const REAL alpha = (REAL)P->physics_alpha;
     const REAL three_beta = (REAL)(3.0 * P->physics_beta);
     const int friction = !rayleigh && beta > 0;
-    /* integrator='implicit_damping_euler' (integrators.implicit_damping_update): the
-     * update divides by m + h c_i, c_i the agent's implicit damping (damping_rates:
-     * the positive part of its dissipation rate plus Σ_j w_ij), carried as the row d
-     * of f; its rule is the block bound (stiffness_law, block_bound, stiffness_rate):
+    /* integrator='implicit_damping_euler' (integrators.implicit_damping_update): each
+     * agent's implicit dissipation b_i and alignment row sum w_i (damping_rates) are
+     * carried as the rows d and d + 1 of f (ks and ws in the scratch after a pass);
+     * Δv_i = h (a_i + w_i s)/(m + h (b_i + w_i)) with the swarm's collective increment
+     * s. Its rule is the block bound (stiffness_law, block_bound, stiffness_rate):
      * ω² = max_i [Σ_j k_ij + λ̄(Q_i)] / m, Q_i = Σ_j p_ij u uᵀ, and h* = 0.9 · 2/ω. */
     const int block = P->implicit_damping != 0;
     const int64_t nq = d == 2 ? 3 : 6; /* Q_i: 00, 01, 11 (, 02, 12, 22) */
@@ -221,18 +222,42 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
                 h = tau / n;
             }
             const REAL hr = (REAL)h;
+            /* implicit_damping_euler: b_i, w_i of the current state, and s (per
+             * component) over the agents that move (an agent held at rest: w_i = 0) */
+            const REAL *own_in = first ? f + (d * B + b) * N : ks;
+            const REAL *al_in = first ? f + ((d + 1) * B + b) * N : ws;
+            REAL sv[3] = {0, 0, 0};
+            if (block) {
+                REAL num[3] = {0, 0, 0}, z = 0;
+                for (int64_t i = 0; i < N; i++) {
+                    const int held = masked && !(alive[i] & AG_MOBILE);
+                    const REAL al = held ? 0 : al_in[i];
+                    const REAL den = m + hr * (own_in[i] + al);
+                    z += al * (m + hr * own_in[i]) / den;
+                    for (int64_t c = 0; c < d; c++) {
+                        const REAL *fc = first ? f + (c * B + b) * N : fs + c * S;
+                        REAL accel = fc[i] + u_max * UNIT_CLIP(ab[i * d + c]);
+                        if (held) accel = 0;
+                        num[c] += al * hr * accel / den;
+                    }
+                }
+                for (int64_t c = 0; c < d; c++) sv[c] = z > 0 ? num[c] / z : 0;
+            }
             for (int64_t c = 0; c < d; c++) {
                 const int64_t at = (c * B + b) * N;
                 const REAL *xc = first ? x + at : xs + c * S, *vc = first ? v + at : vs + c * S;
                 const REAL *fc = first ? f + at : fs + c * S;
-                const REAL *cc = first ? f + (d * B + b) * N : ws; /* c_i (block only) */
                 REAL *xn = xs + c * S, *vn = vs + c * S;
                 if (block) {
+                    const REAL sc = sv[c];
 #pragma omp simd
                     for (int64_t i = 0; i < N; i++) {
                         REAL accel = fc[i] + u_max * UNIT_CLIP(ab[i * d + c]);
-                        if (masked) accel = alive[i] & AG_MOBILE ? accel : 0;
-                        vn[i] = vc[i] + accel * (hr / (m + hr * cc[i]));
+                        const int held = masked && !(alive[i] & AG_MOBILE);
+                        if (held) accel = 0;
+                        const REAL al = held ? 0 : al_in[i];
+                        const REAL den = m + hr * (own_in[i] + al);
+                        vn[i] = vc[i] + hr * (accel + al * sc) / den;
                         xn[i] = xc[i] + hr * vn[i];
                     }
                 } else {
@@ -515,7 +540,8 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
          * sum or speed makes ω² NaN (h* is then inf, as numpy's is for a NaN rate). */
         if (block) {
             /* ω² = max_i [Σ_j k_ij + λ̄(Q_i)] / m (block_bound), h* = 0.9 · 2/ω; the
-             * agents' implicit damping c_i = D_i⁺ + Σ_j w_ij into ws (damping_rates). */
+             * agents' implicit dissipation b_i = D_i⁺ into ks once read (damping_rates;
+             * ws keeps their alignment row sums w_i). */
             REAL bmax = 0;
             int bnan = 0;
             for (int64_t i = 0; i < N; i++) {
@@ -543,7 +569,7 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
                     own = three_beta * s2 - alpha;
                     own = own > 0 ? own : 0;
                 }
-                ws[i] = own + ws[i];
+                ks[i] = own;
             }
             REAL omega2 = bnan | speed_nan ? (REAL)NAN : bmax / m;
             if (physics_goal) omega2 = omega2 + omega2_sink;
@@ -767,7 +793,10 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
             f_out[(c * B + b) * N + i] = fs[c * S + i];
         }
     if (block)
-        for (int64_t i = 0; i < N; i++) f_out[(d * B + b) * N + i] = ws[i];
+        for (int64_t i = 0; i < N; i++) {
+            f_out[(d * B + b) * N + i] = ks[i];
+            f_out[((d + 1) * B + b) * N + i] = ws[i];
+        }
     h_out[b] = hs;
     return unsound;
 }

@@ -224,9 +224,9 @@ class TorchSwarmNavCore(TaskCore):
         self._columns = StatisticColumns(self.dtype)
         zeros = self._zeros
         # State component first, (d, B, N): the layout the fused step vectorises.
-        # With "implicit_damping_euler" the force carries a row d more: each agent's
-        # implicit damping (build_advance).
-        rows = d + int(cfg.integrator == "implicit_damping_euler")
+        # With "implicit_damping_euler" the force carries two rows more: each agent's
+        # implicit damping (b_i, w_i) (build_advance).
+        rows = d + 2 * int(cfg.integrator == "implicit_damping_euler")
         self._x, self._v, self._f = zeros(d, B, N), zeros(d, B, N), zeros(rows, B, N)
         self._goal = zeros(B, d)
         P = len(PACKED_KEYS)

@@ -166,13 +166,14 @@ def _stable(
 ) -> tuple[torch.Tensor, list[torch.Tensor]]:
     """The stable substep ``h*`` ``(B,)`` of the state of ``geo`` with the velocities
     ``vs`` (the shared rule) and what the state carries beside its force: for
-    ``"implicit_damping_euler"`` the agents' implicit damping ``c_i`` ``(B, N)``
-    (:func:`~swarm_envs.physics.social_potential.damping_rates`), nothing otherwise."""
+    ``"implicit_damping_euler"`` the agents' implicit damping ``b_i, w_i`` ``(B, N)``
+    each (:func:`~swarm_envs.physics.social_potential.damping_rates`), nothing
+    otherwise."""
     p = cfg.physics
     if cfg.integrator == "implicit_damping_euler":
         omega2 = stiffness_rate(geo, p, sink=cfg.passive_sink)
         h = stable_substep(omega2, 0.0 * omega2, torch, integrator=cfg.integrator)
-        return h, [damping_rates(geo, vs, p)]
+        return h, list(damping_rates(geo, vs, p))
     omega2, gamma = pair_rates(geo, p, sink=cfg.passive_sink, v=vs)
     return stable_substep(omega2, gamma, torch), []
 
@@ -188,11 +189,12 @@ def _update(
     c: int,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Component ``c`` of the integrator's update with the carried passive force ``f``
-    (``(d, B, N)``; with ``"implicit_damping_euler"`` its row ``d`` is the implicit
-    damping) and the control ``u_max a``."""
+    (``(d, B, N)``; with ``"implicit_damping_euler"`` its rows ``d, d + 1`` are the
+    implicit damping ``b_i, w_i``) and the control ``u_max a``."""
     total = _held(f[c] + cfg.u_max * a[..., c], mobile)
     if cfg.integrator == "implicit_damping_euler":
-        return implicit_damping_update(x[c], v[c], total, step, cfg.physics.m, f[cfg.dim])
+        own, align = f[cfg.dim], _held(f[cfg.dim + 1], mobile)
+        return implicit_damping_update(x[c], v[c], total, step, cfg.physics.m, own, align, -1)
     return euler_update(x[c], v[c], total, step, cfg.physics.m)
 
 
