@@ -177,15 +177,12 @@ def table(rows: list[dict[str, Any]]) -> str:
     for r in rows:
         ref = "numpy" not in r
 
-        def num(key: str, spec: str) -> str:
+        def num(key: str, spec: str, r: dict[str, Any] = r, ref: bool = ref) -> str:
             return "" if ref else format(r[key], spec)
 
         speed = "" if ref else f"{fmt(r['numpy'][0])} ({r['numpy'][1]:.1f})"
-        c = (
-            ""
-            if ref or r["native"][0] != r["native"][0]
-            else f"{fmt(r['native'][0])} ({r['native'][1]:.1f})"
-        )
+        native = r.get("native", (float("nan"), 0.0))
+        c = "" if native[0] != native[0] else f"{fmt(native[0])} ({native[1]:.1f})"
         lines.append(
             f"| {r['config']} ({r['batch']} × {r['n_agents']}) | {r['rule']} | "
             f"{r['substeps']:.2f} | {speed} | {c} | {num('pos_err', '.3g')} | "

@@ -74,8 +74,9 @@ less ``2 w wᵀ/Σ w``, positive semi-definite by Cauchy–Schwarz, as
 unconditionally stable. On one mode (stiffness ``ω²``, damping ``γ``, implicit
 coefficient ``c`` with ``γ ≤ 2c``) the step is a map of trace
 ``2 − (h²ω² + hγ)/(1 + hc)`` and determinant ``1 − hγ/(1 + hc)``, stable (Jury) exactly
-when ``h²ω² + 2hγ < 4(1 + hc)``: at least whenever ``hω < 2``, whatever the damping. Its rule is ``h* = 0.9 · 2/ω`` (:func:`stable_substep` with ``c = 0``),
-with ``ω²`` the block bound of
+when ``h²ω² + 2hγ < 4(1 + hc)``: at least whenever ``hω < 2``, whatever the damping.
+Its rule is ``h* = 0.9 · 2/ω`` (:func:`stable_substep` with ``c = 0``), with ``ω²`` the
+block bound of
 :func:`~swarm_envs.physics.social_potential.stiffness_rate` (the exact norms of the
 pairs' Hessian blocks, block Gershgorin, and the largest eigenvalue of each agent's own
 block bounded from its trace and Frobenius norm), tighter than the Gershgorin sum of

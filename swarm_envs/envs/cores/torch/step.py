@@ -370,7 +370,6 @@ def build_substep(cfg: SwarmConfig) -> Callable[..., tuple[Any, ...]]:
     statistics, no observations: the numpy core's
     :meth:`~swarm_envs.envs.dynamics.SocialPotentialDynamics.step`, one substep per call.
     """
-    p = cfg.physics
     d, cap = cfg.dim, float(cfg.max_substeps)
     physics_masks = cfg.perturbations.needs_masks
 
