@@ -79,6 +79,19 @@ SUBSTEP_CONFIGS = (
         n_agents=10, n_neighbors=3, dt=0.3, init_speed=4.0, physics=SocialPotentialParams(alpha=1.0)
     ),
     SwarmConfig(n_agents=10, dt=0.5, max_substeps=4, on_unstable="truncate"),
+    # the implicit damping and its block rule (docs/models.md §7)
+    SwarmConfig(n_agents=24, dt=0.3, integrator="implicit_damping_euler"),
+    SwarmConfig(
+        n_agents=10, dt=0.5, dim=3, goal_in_physics=True, integrator="implicit_damping_euler"
+    ),
+    SwarmConfig(
+        n_agents=10,
+        n_neighbors=3,
+        dt=0.3,
+        init_speed=4.0,
+        physics=SocialPotentialParams(alpha=1.0),
+        integrator="implicit_damping_euler",
+    ),
 )
 
 
@@ -156,6 +169,15 @@ PERTURBED_CONFIGS = (
         perturbations=Perturbations(
             failed_fraction=0.3, failure_time=[0, 3], join_fraction=0.2, join_time=[1, 5]
         ),
+    ),
+)
+
+#: The frozen/joining and the self-propelled ones again with the implicit damping.
+PERTURBED_CONFIGS = (
+    *PERTURBED_CONFIGS,
+    *(
+        dataclasses.replace(cfg, integrator="implicit_damping_euler")
+        for cfg in PERTURBED_CONFIGS[1::2]
     ),
 )
 

@@ -600,8 +600,9 @@ def stiffness_rate(
     negative parts of the blocks dropped (:func:`stiffness_law`) and block Gershgorin
     (Feingold & Varga 1962), its largest eigenvalue is at most
     ``max_i [λ_max(Σ_j B⁺_ij) + Σ_j ‖B⁺_ij‖]``, which :func:`block_bound` bounds per
-    agent; ``ω²`` is that over the mass. Never more than ``(2/m) max_i Σ_j b_ij``, the
-    Gershgorin bound of the same blocks. ``sink=True`` adds the goal sink's curvature
+    agent; ``ω²`` is that over the mass. In 2-D never more than
+    ``(2/m) max_i Σ_j b_ij``, the Gershgorin bound of the same blocks (``λ̄`` is then
+    exact). ``sink=True`` adds the goal sink's curvature
     ``C_g/l_g²`` (over the mass), as :func:`pair_rates`.
     """
     p = params
