@@ -9,7 +9,10 @@ For the navigation (``configs/env/paper_navigation.yaml`` at N = 32 and 128), la
 (``configs/env/large_swarm.yaml`` at ``--large-n`` agents) and mill
 (``configs/env/mill.yaml``) configs, each integrator (and its step-size rule,
 ``docs/models.md`` §7) integrates the same seeded starts for ``--steps`` steps of
-``dt`` with zero actions (the passive physics). Printed per row:
+``dt`` with zero actions (the passive physics), and the navigation swarm of 32 once more
+driven as a whole by a constant action (``--drive`` along x, a fraction of ``u_max``), the
+case in which an implicit treatment of the alignment that resists the swarm's collective
+acceleration would show. Printed per row:
 
 - ``substeps``: mean substeps per step;
 - ``numpy`` / ``C``: agent-steps per second of the numpy core and of the C step
@@ -45,12 +48,13 @@ from swarm_envs.envs.cores.numpy import SwarmNavCore
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from compare import fmt, machine, swarm_state  # benchmarks/ is not a package
 
-#: (name, config file, overrides)
-CONFIGS: tuple[tuple[str, str, dict[str, Any]], ...] = (
-    ("navigation N=32", "configs/env/paper_navigation.yaml", {"n_agents": 32}),
-    ("navigation N=128", "configs/env/paper_navigation.yaml", {"n_agents": 128}),
-    ("large swarm", "configs/env/large_swarm.yaml", {}),
-    ("mill", "configs/env/mill.yaml", {}),
+#: (name, config file, overrides, driven by a constant action)
+CONFIGS: tuple[tuple[str, str, dict[str, Any], bool], ...] = (
+    ("navigation N=32", "configs/env/paper_navigation.yaml", {"n_agents": 32}, False),
+    ("navigation N=32 driven", "configs/env/paper_navigation.yaml", {"n_agents": 32}, True),
+    ("navigation N=128", "configs/env/paper_navigation.yaml", {"n_agents": 128}, False),
+    ("large swarm", "configs/env/large_swarm.yaml", {}, False),
+    ("mill", "configs/env/mill.yaml", {}, False),
 )
 
 #: (row name, integrator, fraction of dt): the old and the new rule, and the new one at
@@ -84,10 +88,12 @@ def core_for(cfg: SwarmConfig, batch: int, native: bool) -> Any:
     return core
 
 
-def run(cfg: SwarmConfig, batch: int, steps: int, native: bool) -> dict[str, Any]:
-    """Integrate ``steps`` steps with zero actions; the end state and the mean substeps."""
+def run(cfg: SwarmConfig, batch: int, steps: int, native: bool, drive: float) -> dict[str, Any]:
+    """Integrate ``steps`` steps with the action ``drive`` along x for every agent (0:
+    the passive physics); the end state and the mean substeps."""
     core = core_for(cfg, batch, native)
     zero = np.zeros((batch, cfg.n_agents, cfg.dim))
+    zero[..., 0] = drive
     e0 = core.stats()["energy"].copy()
     substeps = 0.0
     for _ in range(steps):
@@ -117,18 +123,21 @@ def rate(cfg: SwarmConfig, batch: int, native: bool, seconds: float) -> tuple[fl
     return n * batch * cfg.n_agents / wall, cpu / wall
 
 
-def rows_for(name: str, path: str, overrides: dict[str, Any], args: argparse.Namespace) -> list:
+def rows_for(
+    name: str, path: str, overrides: dict[str, Any], driven: bool, args: argparse.Namespace
+) -> list:
     native = native_support()[0]
+    drive = args.drive if driven else 0.0
     batch = 1 if name == "large swarm" else args.batch
     if name == "large swarm":
         overrides = {**overrides, "n_agents": args.large_n}
     ref_cfg = config(path, overrides, "semi_implicit_euler", args.refine)
-    ref = run(ref_cfg, batch, args.steps * args.refine, native)
+    ref = run(ref_cfg, batch, args.steps * args.refine, native, drive)
     ref_state = swarm_state(ref["x"], ref["v"])
     out = []
     for label, integrator, div in RULES:
         cfg = config(path, overrides, integrator, div)
-        res = run(cfg, batch, args.steps * div, native)
+        res = run(cfg, batch, args.steps * div, native, drive)
         err = float(np.sqrt(((res["x"] - ref["x"]) ** 2).sum(-1).mean()))
         de_ref = ref["stats"]["energy"] - ref["e0"]
         de = (res["stats"]["energy"] - ref["stats"]["energy"]) / np.where(de_ref != 0, de_ref, 1)
@@ -200,17 +209,18 @@ def main() -> None:
     parser.add_argument("--batch", type=int, default=8)
     parser.add_argument("--large-n", type=int, default=1000)
     parser.add_argument("--seconds", type=float, default=1.0)
-    parser.add_argument("--configs", default=",".join(name for name, _, _ in CONFIGS))
+    parser.add_argument("--drive", type=float, default=0.25)
+    parser.add_argument("--configs", default=",".join(name for name, *_ in CONFIGS))
     parser.add_argument("--json")
     args = parser.parse_args()
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     wanted = set(args.configs.split(","))
     rows = []
-    for name, path, overrides in CONFIGS:
+    for name, path, overrides, driven in CONFIGS:
         if name in wanted:
-            rows += rows_for(name, path, overrides, args)
+            rows += rows_for(name, path, overrides, driven, args)
             print(table(rows[-len(RULES) - 1 :]), flush=True)
-    print(f"\n{machine()}; {args.steps} steps of dt, zero actions\n")
+    print(f"\n{machine()}; {args.steps} steps of dt; drive {args.drive}\n")
     print(table(rows))
     if args.json:
         with open(args.json, "w") as fh:
