@@ -630,12 +630,12 @@ def damping_rates(
     geometry: PairGeometry, v: Array, params: SocialPotentialParams
 ) -> tuple[Array, Array]:
     """The damping treated implicitly by ``"implicit_damping_euler"``, per agent (times
-    the mass): ``(b_i, a_i)``, each ``(..., N)``.
+    the mass): ``(b_i, w_i)``, each ``(..., N)``.
 
     ``b_i = D_i⁺``, the positive part of agent i's dissipation rate ``D_i``: ``β``, or
     with self-propulsion the largest eigenvalue ``3β|v_i|² − α`` of its Jacobian
     (:func:`dissipation_rate`; a negative rate, energy injected, stays explicit);
-    ``a_i = Σ_{j≠i} w(ρ_ij)``, the alignment's row sum (:func:`rate_law`), which bounds
+    ``w_i = Σ_{j≠i} w(ρ_ij)``, the alignment's row sum (:func:`rate_law`), which bounds
     its damping of agent i. ``v``: velocities ``(..., N, d)`` or components.
     """
     p = params
