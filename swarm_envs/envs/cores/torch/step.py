@@ -184,18 +184,29 @@ def _update(
     f: torch.Tensor,
     a: torch.Tensor,
     step: torch.Tensor,
+    keep: torch.Tensor,
     mobile: torch.Tensor | None,
     cfg: SwarmConfig,
-    c: int,
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """Component ``c`` of the integrator's update with the carried passive force ``f``
+) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
+    """The integrator's update of every component with the carried passive force ``f``
     (``(d, B, N)``; with ``"implicit_damping_euler"`` its rows ``d, d + 1`` are the
-    implicit damping ``b_i, w_i``) and the control ``u_max a``."""
-    total = _held(f[c] + cfg.u_max * a[..., c], mobile)
+    implicit damping ``b_i, w_i``) and the control ``u_max a``, the swarms where ``keep``
+    is false left as they are: the new ``(x, v)`` as lists of components. The implicit
+    damping updates the components together (one sum over the agents for all of them;
+    TorchInductor's vectorised CPU code summed them wrongly per component)."""
+    d, m = cfg.dim, cfg.physics.m
     if cfg.integrator == "implicit_damping_euler":
-        own, align = f[cfg.dim], _held(f[cfg.dim + 1], mobile)
-        return implicit_damping_update(x[c], v[c], total, step, cfg.physics.m, own, align, -1)
-    return euler_update(x[c], v[c], total, step, cfg.physics.m)
+        total = _held(f[:d] + cfg.u_max * a.permute(2, 0, 1), mobile)
+        align = _held(f[d + 1], mobile)
+        xn, vn = implicit_damping_update(x, v, total, step, m, f[d], align, -1)
+        xn, vn = torch.where(keep, xn, x), torch.where(keep, vn, v)
+        return list(xn.unbind(0)), list(vn.unbind(0))
+    xs, vs = [], []
+    for c in range(d):
+        xc, vc = euler_update(x[c], v[c], _held(f[c] + cfg.u_max * a[..., c], mobile), step, m)
+        xs.append(torch.where(keep, xc, x[c]))
+        vs.append(torch.where(keep, vc, v[c]))
+    return xs, vs
 
 
 def _masks(
@@ -243,7 +254,7 @@ def build_advance(cfg: SwarmConfig) -> Callable[..., tuple[torch.Tensor, ...]]:
     """
     xp = torch_namespace()
     p = cfg.physics
-    N, d = cfg.n_agents, cfg.dim
+    N = cfg.n_agents
     k_rank = ranked_neighbors(cfg)
     physics_masks = cfg.perturbations.needs_masks
 
@@ -265,11 +276,7 @@ def build_advance(cfg: SwarmConfig) -> Callable[..., tuple[torch.Tensor, ...]]:
         B = x.shape[1]
         members, present, mobile = _masks(status, physics_masks)
         keep, step = (h > 0)[:, None], h[:, None]
-        xs, vs = [], []
-        for c in range(d):
-            xc, vc = _update(x, v, f, a, step, mobile, cfg, c)
-            xs.append(torch.where(keep, xc, x[c]))
-            vs.append(torch.where(keep, vc, v[c]))
+        xs, vs = _update(x, v, f, a, step, keep, mobile, cfg)
 
         # The new state stored first, component first (d, B, N), as returned: the pair
         # pass reads it (left to itself, the compiler recomputes the update for every
@@ -370,7 +377,7 @@ def build_substep(cfg: SwarmConfig) -> Callable[..., tuple[Any, ...]]:
     statistics, no observations: the numpy core's
     :meth:`~swarm_envs.envs.dynamics.SocialPotentialDynamics.step`, one substep per call.
     """
-    d, cap = cfg.dim, float(cfg.max_substeps)
+    cap = float(cfg.max_substeps)
     physics_masks = cfg.perturbations.needs_masks
 
     def substep(
@@ -392,11 +399,7 @@ def build_substep(cfg: SwarmConfig) -> Callable[..., tuple[Any, ...]]:
         over, needed = over | late, torch.maximum(needed, wanted)
         active = remaining > 0
         keep, step = active[:, None], h.to(x.dtype)[:, None]
-        xs, vs = [], []
-        for c in range(d):
-            xc, vc = _update(x, v, f, a, step, mobile, cfg, c)
-            xs.append(torch.where(keep, xc, x[c]))
-            vs.append(torch.where(keep, vc, v[c]))
+        xs, vs = _update(x, v, f, a, step, keep, mobile, cfg)
         used = used + active.to(wide)
         remaining = torch.where(active & ~last, remaining - h, 0.0)
         x_new, v_new = torch.stack(xs), torch.stack(vs)
