@@ -42,6 +42,10 @@ class ArrayNamespace:
     def exp(self, a: Array) -> Array:
         return np.exp(a)
 
+    def maximum(self, a: Array, b: Array) -> Array:
+        """The elementwise maximum of two arrays of the same shape."""
+        return np.maximum(a, b)
+
     def exp_temp(self, a: Array) -> Array:
         """``e^a`` for a temporary ``a`` the caller does not read again (numpy writes
         the result into it)."""
@@ -167,6 +171,9 @@ class TorchNamespace(ArrayNamespace):
 
     def exp(self, a: Array) -> Array:
         return self.torch.exp(a)
+
+    def maximum(self, a: Array, b: Array) -> Array:
+        return self.torch.maximum(a, b)
 
     def exp_temp(self, a: Array) -> Array:
         return self.torch.exp(a)

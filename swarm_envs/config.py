@@ -395,10 +395,11 @@ class SwarmConfig:
                 f"{masked} (the other models take failure_mode='passive' and the noise), "
                 f"got dynamics={self.dynamics!r}"
             )
-        if self.perturbations.needs_masks and self.integrator != "semi_implicit_euler":
+        if self.perturbations.needs_masks and self.integrator == "velocity_verlet":
             raise ValueError(
                 f"{owner}.perturbations: removed, frozen, absent and joining agents need "
-                f"integrator='semi_implicit_euler', got {self.integrator!r}"
+                f"integrator='semi_implicit_euler' or 'implicit_damping_euler', got "
+                f"{self.integrator!r}"
             )
         reals: dict[str, dict[str, Any]] = {
             "dt": dict(low=0.0, low_inclusive=False),

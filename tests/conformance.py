@@ -276,7 +276,7 @@ def configs(
     if fields["init_density"] is not None:
         fields.pop("init_radius")  # one of the two sets the start radius
     physical = fields["dynamics"] == "social_potential"
-    if perturb and not (physical and fields["integrator"] == "semi_implicit_euler"):
+    if perturb and not (physical and fields["integrator"] != "velocity_verlet"):
         fields["perturbations"].update(_MASK_DEFAULTS)  # passive failures and noise only
     return config_from_mapping(SwarmConfig, fields)
 

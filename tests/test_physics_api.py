@@ -33,6 +33,7 @@ from swarm_envs.physics import (
     uniform_ball,
     verlet_step,
 )
+from swarm_envs.physics.integrators import implicit_damping_step
 
 FIELDS = [f.name for f in dataclasses.fields(SocialPotentialParams)]
 POSITIVE_FIELDS = {"l_a", "l_r", "l_o", "l_g", "m"}  # strictly positive; the rest >= 0
@@ -412,6 +413,8 @@ def test_callable_control_is_a_zero_order_hold(integrator: str) -> None:
     for n, (*_, u) in enumerate(seen):
         if integrator == "semi_implicit_euler":
             x, v = step(x, v, FULL, dt=0.1, control=u)
+        elif integrator == "implicit_damping_euler":
+            x, v = implicit_damping_step(x, v, FULL, dt=0.1, control=u)
         else:  # carry the passive force between steps, as simulate does
             x, v, f, _ = verlet_step(x, v, f, FULL, dt=0.1, control=u)
         np.testing.assert_allclose(x, xs[n + 1], atol=1e-14)

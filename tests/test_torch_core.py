@@ -435,10 +435,19 @@ def test_compiled_core_matches_plain_core():
 
 
 @pytest.mark.skipif(compile_support("cpu") is not None, reason="torch.compile unavailable")
-def test_compiled_substeps_match_the_numpy_core(monkeypatch):
+@pytest.mark.parametrize("integrator", ["semi_implicit_euler", "implicit_damping_euler"])
+def test_compiled_substeps_match_the_numpy_core(monkeypatch, integrator):
     # Every step needs two substeps for some swarm, and some swarms need more than the
     # cap of 2 (truncated): the compiled substep function, float64, against numpy.
-    cfg = SwarmConfig(n_agents=8, dt=0.3, max_substeps=2, on_unstable="truncate", max_steps=16)
+    dt = 0.3 if integrator == "semi_implicit_euler" else 1.0
+    cfg = SwarmConfig(
+        n_agents=8,
+        dt=dt,
+        max_substeps=2,
+        on_unstable="truncate",
+        max_steps=16,
+        integrator=integrator,
+    )
     compiled = TorchSwarmNavCore(cfg, batch=4, dtype=np.float64, compile=True)
     assert compiled.compiled and compiled._substep.compiled
     calls = count_calls(monkeypatch, compiled._substep)

@@ -125,7 +125,11 @@ def _auto_by_speed(cfg: SwarmConfig, batch: int) -> tuple[str, str | None]:
     if cfg.device != "cpu":
         return "torch", None
     implemented = model_spec(cfg.dynamics).backends
-    if "cutoff" in implemented and cfg.n_agents >= CUTOFF_MIN_AGENTS:
+    if (
+        "cutoff" in implemented
+        and cfg.n_agents >= CUTOFF_MIN_AGENTS
+        and unsupported(cfg, "cutoff") is None
+    ):
         return "cutoff", None
     why = unsupported(cfg, "native")
     if why is None:
@@ -133,7 +137,7 @@ def _auto_by_speed(cfg: SwarmConfig, batch: int) -> tuple[str, str | None]:
     from swarm_envs.envs.cores.native.core import UNAVAILABLE
 
     missing = why if why.startswith(UNAVAILABLE) else None  # not built here: say so
-    if "native" in implemented and cfg.integrator == "semi_implicit_euler":
+    if "native" in implemented and cfg.integrator != "velocity_verlet":
         if batch * cfg.n_agents >= TORCH_MIN_SLOTS and unsupported(cfg, "torch") is None:
             return "torch", missing
         return "numpy", missing

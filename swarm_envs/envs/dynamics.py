@@ -43,7 +43,12 @@ from swarm_envs.physics import (
     uniform_ball,
     verlet_step,
 )
-from swarm_envs.physics.integrators import SubstepBudget, euler_update, stable_substep
+from swarm_envs.physics.integrators import (
+    SubstepBudget,
+    euler_update,
+    implicit_damping_update,
+    stable_substep,
+)
 from swarm_envs.physics.lagrangian import (
     lagrangian_frame,
     lagrangian_value,
@@ -53,11 +58,13 @@ from swarm_envs.physics.lagrangian import (
 from swarm_envs.physics.piecewise import interaction_forces, random_force
 from swarm_envs.physics.social_potential import (
     components,
+    damping_rates,
     goal_terms,
     pair_rates,
     pair_terms,
     passive_components,
     present_geometry,
+    stiffness_rate,
 )
 from swarm_envs.physics.zone import (
     ZoneAgentParams,
@@ -163,15 +170,20 @@ class Dynamics(ABC):
 
 
 class SocialPotentialDynamics(Dynamics):
-    """Mabrouk & McInnes: ``m v̇ = F_i + u_i`` (eq. 13), Euler or velocity Verlet.
+    """Mabrouk & McInnes: ``m v̇ = F_i + u_i`` (eq. 13), by one of the integrators.
 
-    Both integrators carry the passive force from one substep to the next: semi-implicit
-    Euler the force ``F(x, v)`` of the current state, computed in :meth:`measure` in the
-    same pass over the pairs as the energy; velocity Verlet the force at the
+    Every integrator carries the passive force from one substep to the next: the two
+    Euler schemes the force ``F(x, v)`` of the current state, computed in :meth:`measure`
+    in the same pass over the pairs as the energy; velocity Verlet the force at the
     extrapolated velocity (:func:`~swarm_envs.physics.integrators.verlet_step`).
+    ``"implicit_damping_euler"`` carries the agents' implicit damping ``(b_i, w_i)`` of
+    the current state beside it
+    (:func:`~swarm_envs.physics.social_potential.damping_rates`).
 
     Step-size control: the stable substep ``h*`` of the current state (its Gershgorin
-    rates, :func:`~swarm_envs.physics.social_potential.pair_rates`, at the edge of the
+    rates, :func:`~swarm_envs.physics.social_potential.pair_rates`, or for
+    ``"implicit_damping_euler"`` the block bound
+    :func:`~swarm_envs.physics.social_potential.stiffness_rate`, at the edge of the
     integrator's stability, :func:`~swarm_envs.physics.integrators.stable_substep`) is
     carried like the force. A step of ``dt`` takes ``⌈τ/h*⌉`` equal substeps of the time ``τ`` left,
     re-planned after each (:func:`~swarm_envs.physics.integrators.substep_plan`); every
@@ -183,6 +195,9 @@ class SocialPotentialDynamics(Dynamics):
         self._force: np.ndarray | None = None  # the passive force carried to the next step
         self._h_stable = np.full(batch, np.inf)  # the stable substep of the current state
         self._verlet = cfg.integrator == "velocity_verlet"
+        self._implicit = cfg.integrator == "implicit_damping_euler"
+        # the implicit damping (b_i, w_i) of the current state (implicit_damping_euler)
+        self._damping = np.zeros((2, batch, cfg.n_agents))
         self._sink = cfg.passive_sink
 
     def _physics_goal(self, goal: np.ndarray) -> np.ndarray | None:
@@ -219,8 +234,21 @@ class SocialPotentialDynamics(Dynamics):
         mobile = self.mobile if rows is None else self.mobile[rows]
         return np.where(mobile[..., None], f, 0.0).astype(f.dtype, copy=False)
 
-    def _rates(self, geometry: PairGeometry, v: np.ndarray) -> np.ndarray:
-        omega2, gamma = pair_rates(geometry, self.cfg.physics, sink=self._sink, v=v)
+    def _rates(
+        self, geometry: PairGeometry, v: np.ndarray, rows: np.ndarray | None = None
+    ) -> np.ndarray:
+        """The stable substep of the swarms ``rows`` (all: ``None``) at ``(geometry, v)``;
+        for ``"implicit_damping_euler"`` their implicit damping is stored too."""
+        p = self.cfg.physics
+        if self._implicit:
+            damping = np.stack(damping_rates(geometry, v, p))
+            if rows is None:
+                self._damping = damping
+            else:
+                self._damping[:, rows] = damping
+            omega2 = stiffness_rate(geometry, p, sink=self._sink)
+            return stable_substep(omega2, 0.0 * omega2, integrator=self.cfg.integrator)
+        omega2, gamma = pair_rates(geometry, p, sink=self._sink, v=v)
         return stable_substep(omega2, gamma, integrator=self.cfg.integrator)
 
     def _passive(
@@ -260,7 +288,15 @@ class SocialPotentialDynamics(Dynamics):
                 )
             else:
                 total = self._mobile_force(fr if ur is None else fr + ur, None if every else rows)
-                xr, vr = euler_update(xr, vr, total, hb, cfg.physics.m)
+                if self._implicit:
+                    own, align = self._damping if every else self._damping[:, rows]
+                    if self.mobile is not None:  # an agent held at rest: no increment
+                        align = np.where(self.mobile if every else self.mobile[rows], align, 0.0)
+                    own = own[..., None].astype(self.dtype, copy=False)
+                    align = align[..., None].astype(self.dtype, copy=False)
+                    xr, vr = implicit_damping_update(xr, vr, total, hb, cfg.physics.m, own, align)
+                else:
+                    xr, vr = euler_update(xr, vr, total, hb, cfg.physics.m)
             if every:
                 x, v = xr, vr  # new arrays: the caller's are never written
                 if self._verlet:
@@ -280,7 +316,7 @@ class SocialPotentialDynamics(Dynamics):
             )
             if not self._verlet:
                 self._force[rows] = self._passive(xr, vr, None if goal is None else goal[rows], geo)
-            self._h_stable[rows] = self._rates(geo, vr)
+            self._h_stable[rows] = self._rates(geo, vr, rows)
 
     def measure(
         self, x: np.ndarray, v: np.ndarray, goal: np.ndarray, geometry: PairGeometry

@@ -18,7 +18,12 @@ when the env is built, with the reason. Each model's step-size rule
   :func:`~swarm_envs.physics.social_potential.pair_rates` from these sums give the
   substeps an average start needs (:func:`social_potential_substeps`). A config whose
   average start already needs more than ``max_substeps`` is refused; dissipation alone
-  (``γ ≥ β/m``) is part of it.
+  (``γ ≥ β/m``) is part of it. With ``integrator="implicit_damping_euler"`` the rule is
+  the block bound of :func:`~swarm_envs.physics.social_potential.stiffness_rate` and
+  the damping does not limit the step: the agent at the centre has neighbours in every
+  direction, so its ``Q`` is isotropic, ``(N − 1) E[p(ρ)]/d · I``, and its bound
+  ``(N − 1) (E[k(ρ)] + E[p(ρ)]/d)`` (:func:`ball_mean` of
+  :func:`~swarm_envs.physics.social_potential.stiffness_law`).
 - The zone model is a discrete-time model (its turn per step is part of the model) and
   the Lagrangian model has its own safe substep: they have no rule, nothing to predict.
 """
@@ -26,6 +31,7 @@ when the env is built, with the reason. Each model's step-size rule
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -33,8 +39,10 @@ from swarm_envs.config import SwarmConfig
 from swarm_envs.models import model_spec
 from swarm_envs.physics.integrators import stable_substep, substep_plan
 from swarm_envs.physics.piecewise import piecewise_rates
+from swarm_envs.physics.social_potential import RHO_FLOOR, stiffness_law
 
 __all__ = [
+    "ball_mean",
     "ball_mean_decay",
     "check_step_control",
     "piecewise_substeps",
@@ -62,6 +70,21 @@ def ball_mean_decay(radius: float, length: float, dim: int) -> float:
     return float(np.trapezoid(weight, s))
 
 
+def ball_mean(radius: float, fn: Callable[[np.ndarray], np.ndarray], dim: int) -> float:
+    """``E[fn(ρ)]`` for ``ρ`` the distance from the centre of a uniform ``dim``-ball of
+    ``radius`` to a uniform point in it: ``(d/R^d) ∫_0^R fn(ρ) ρ^{d−1} dρ`` (``fn(0)``
+    where ``radius = 0``); ``fn`` is evaluated on an array of distances.
+
+    >>> round(ball_mean(2.0, lambda rho: rho, 2), 6)  # E[ρ] = 2R/3 in a disc
+    1.333333
+    """
+    if radius <= 0:
+        return float(np.asarray(fn(np.zeros(1)))[0])
+    s = np.linspace(0.0, 1.0, _QUADRATURE)
+    weight = dim * s ** (dim - 1) * fn(radius * s)
+    return float(np.trapezoid(weight, s))
+
+
 def start_substeps(cfg: SwarmConfig) -> int:
     """The substeps a step needs at an average start, by the step-size rule of the
     model (``ModelSpec.substeps``); 1 for the models whose needs are not predicted."""
@@ -84,6 +107,19 @@ def social_potential_substeps(cfg: SwarmConfig) -> int:
     """The substeps a step of the social potential model needs at an average start
     (the module docstring)."""
     p, n, R, d = cfg.physics, cfg.n_agents - 1, cfg.start_radius, cfg.dim
+    if cfg.integrator == "implicit_damping_euler":
+
+        def centre(rho: np.ndarray) -> np.ndarray:
+            inv = 1.0 / np.maximum(rho, RHO_FLOOR)
+            k, q = stiffness_law(rho, inv, p.C_a, p.C_r, p.l_a, p.l_r, np.exp, np.maximum)
+            return k + q / d
+
+        omega2 = n * ball_mean(R, centre, d) / p.m
+        if cfg.passive_sink:
+            omega2 += p.C_g / (p.l_g**2 * p.m)
+        h = stable_substep(np.float64(omega2), np.float64(0.0), integrator=cfg.integrator)
+        needed, _ = substep_plan(np.float64(cfg.dt), h)
+        return int(needed) if math.isfinite(needed) else 2**62
     kappa = n * (
         p.C_r / p.l_r**2 * ball_mean_decay(R, p.l_r, d)
         + p.C_a / p.l_a**2 * ball_mean_decay(R, p.l_a, d)

@@ -104,9 +104,17 @@ def stiff_message(
             else f"not H-stable (C*l^{d} = {stability:.3g} <= 1: the swarm contracts "
             "to a density that grows with N)"
         )
+        implicit = (
+            ""
+            if cfg.integrator == "implicit_damping_euler"
+            else "integrator='implicit_damping_euler' (fewer substeps where the damping "
+            "sets them; docs/models.md §7), "
+        )
         remedy = (
-            "an H-stable parameter set (SocialPotentialParams.large_swarm()), a less dense "
-            "start (init_density), " + remedy + ", or, for large N, backend='cutoff' or "
-            "'torch' (each substep cheaper)"
+            "an H-stable parameter set (SocialPotentialParams.large_swarm()), "
+            + implicit
+            + "a less dense start (init_density), "
+            + remedy
+            + ", or, for large N, backend='cutoff' or 'torch' (each substep cheaper)"
         )
     return f"stiff swarm: {cause}. To speed it up: {remedy}. (Said once per config.)"

@@ -1,6 +1,6 @@
 """Time stepping for the second-order force models: ``ṙ = v``, ``m v̇ = F(r, v) + u``.
 
-Two explicit schemes, both one force evaluation per step:
+Three schemes, each one force evaluation per step:
 
 ``"semi_implicit_euler"`` (symplectic Euler, the default)
     ``v_{n+1} = v_n + dt (F(r_n, v_n) + u)/m``, ``r_{n+1} = r_n + dt v_{n+1}``.
@@ -15,6 +15,22 @@ Two explicit schemes, both one force evaluation per step:
     ``2v_{n+½} − v_n = v_{n+1} + O(dt²)``, which keeps the scheme explicit and of
     order 2; the end-of-step passive force is reused for the next step's first kick.
     A control ``u`` is held constant over each step (zero-order hold).
+
+``"implicit_damping_euler"`` (symplectic Euler with the damping implicit)
+    ``v_{n+1} = v_n + dt (a_i + w_i s) / (m + dt c_i)``, ``r_{n+1} = r_n + dt v_{n+1}``,
+    with ``a_i = F_i(r_n, v_n) + u_i`` and, per agent
+    (:func:`~swarm_envs.physics.social_potential.damping_rates`), the implicit
+    dissipation ``b_i`` (the positive part of its rate), the alignment's row sum
+    ``w_i = Σ_j w(ρ_ij)`` and ``c_i = b_i + w_i``; per swarm the velocity
+    ``s = dt Σ_i w_i a_i/(m + dt c_i) / Σ_i w_i (m + dt b_i)/(m + dt c_i)``, the weighted
+    mean increment that the alignment leaves alone (:func:`implicit_damping_update`).
+    Each agent's increment ``Δv_i`` solves ``m Δv_i = dt a_i − dt b_i Δv_i
+    − dt w_i (Δv_i − s)`` with ``Σ_i w_i (Δv_i − s) = 0``: the damping's terms taken at
+    the new velocity, the alignment's against the collective increment ``s``, so that
+    a swarm driven as a whole (goal, control) accelerates as the force says and the
+    pair forces keep the momentum (``Σ_i m Δv_i = dt Σ_i a_i`` without dissipation).
+    Consistent, of order 1, and exactly the semi-implicit Euler step where
+    ``b = w = 0``.
 
 Damping is applied per unit of time (``−β v`` inside the force), so halving ``dt``
 converges to the same trajectory. The measured orders are checked in the tests.
@@ -42,6 +58,31 @@ step, so a mode is a map of ``(q, v, f)`` whose characteristic polynomial is
 factor 2, a further margin against the state changing within a substep). An environment
 step of length ``dt`` is split into ``n = ⌈τ/h*⌉`` equal substeps of what remains of it
 (:func:`substep_plan`), re-planned after every substep from the new state.
+
+Implicit damping. Linearised, the velocity damping is ``D = B + D_w`` (unit mass),
+``B = diag(b_i)`` the dissipation's and ``D_w = Σ_{pairs} (e_i − e_j)(e_i − e_j)ᵀ ⊗ w_ij
+u uᵀ`` the alignment's. ``"implicit_damping_euler"`` maps an explicit increment ``e``
+to ``Δv = T e`` with ``T = P⁻¹ + h P⁻¹ w wᵀ P⁻¹ / Z`` (per component), ``P = I + hC``,
+``C = diag(c_i)``, ``Z = Σ_i w_i (1 + h b_i)/(1 + h c_i)``: symmetric positive
+definite, with ``T⁻¹ = P − h w wᵀ / Σ_i w_i`` (Sherman–Morrison). Its damping alone maps
+``v ↦ (I − hTD) v``, similar to ``I − h T^{½} D T^{½}``: real eigenvalues, at most 1,
+above −1 exactly when ``hD < 2T⁻¹``. That holds at every ``h``: ``D_w ⪯ L_w ⊗ I`` (the
+Laplacian of the weights ``w_ij``) and ``L_w ⪯ 2W − 2 w wᵀ/Σ_i w_i`` (``W = diag(w_i)``;
+the difference is the signless Laplacian ``Σ_{pairs} w_ij (e_i + e_j)(e_i + e_j)ᵀ``
+less ``2 w wᵀ/Σ w``, positive semi-definite by Cauchy–Schwarz, as
+``w·q = Σ_{pairs} w_ij (q_i + q_j)``), so ``hD − 2T⁻¹ ⪯ −2I − hB ≺ 0``: the damping is
+unconditionally stable. On one mode (stiffness ``ω²``, damping ``γ``, implicit
+coefficient ``c`` with ``γ ≤ 2c``) the step is a map of trace
+``2 − (h²ω² + hγ)/(1 + hc)`` and determinant ``1 − hγ/(1 + hc)``, stable (Jury) exactly
+when ``h²ω² + 2hγ < 4(1 + hc)``: at least whenever ``hω < 2``, whatever the damping.
+Its rule is ``h* = 0.9 · 2/ω`` (:func:`stable_substep` with ``c = 0``), with ``ω²`` the
+block bound of
+:func:`~swarm_envs.physics.social_potential.stiffness_rate` (the exact norms of the
+pairs' Hessian blocks, block Gershgorin, and the largest eigenvalue of each agent's own
+block bounded from its trace and Frobenius norm), tighter than the Gershgorin sum of
+:func:`~swarm_envs.physics.social_potential.pair_rates` that the two explicit schemes
+keep. A negative dissipation rate (self-propulsion below ``v₀/√3``) stays explicit: it
+is a growth of the model itself, not of the scheme.
 """
 
 from __future__ import annotations
@@ -52,10 +93,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from swarm_envs._array import namespace
 from swarm_envs.physics._validation import check_goal, check_run, check_state
 from swarm_envs.physics.social_potential import (
     PairGeometry,
     SocialPotentialParams,
+    damping_rates,
     forces,
     pair_geometry,
 )
@@ -63,7 +106,7 @@ from swarm_envs.physics.social_potential import (
 if TYPE_CHECKING:
     import torch
 
-INTEGRATORS = ("semi_implicit_euler", "velocity_verlet")
+INTEGRATORS = ("semi_implicit_euler", "velocity_verlet", "implicit_damping_euler")
 
 #: A control is a fixed array broadcastable to ``(..., N, d)`` or a function
 #: ``control(t, x, v) -> array`` evaluated once per step (zero-order hold).
@@ -82,7 +125,11 @@ STEP_SAFETY = 0.9
 
 #: The weight ``c`` of the damping rate in each integrator's stability edge
 #: ``h²ω² + 2c·hγ < 4`` (module docstring).
-_DAMPING_WEIGHT = {"semi_implicit_euler": 1.0, "velocity_verlet": 2.0}
+_DAMPING_WEIGHT = {
+    "semi_implicit_euler": 1.0,
+    "velocity_verlet": 2.0,
+    "implicit_damping_euler": 0.0,
+}
 
 
 def stable_substep(
@@ -97,7 +144,9 @@ def stable_substep(
     Elementwise on numpy arrays or torch tensors (``xp``: ``np`` or ``torch``). ``inf``
     where both rates are 0 (any step is stable) and, so that a non-finite state takes
     one substep and is caught by the caller's finiteness check, where a rate is NaN;
-    0 where a rate is ``inf`` (no step is stable).
+    0 where a rate is ``inf`` (no step is stable). ``c = 0`` for
+    ``"implicit_damping_euler"``, whose damping is unconditionally stable:
+    ``h* = σ · 2/ω``, and ``γ`` is not read.
 
     >>> round(float(stable_substep(np.float64(100.0), np.float64(0.0))), 6)  # hω < 2, ω = 10
     0.18
@@ -109,6 +158,10 @@ def stable_substep(
     """
     _check_integrator(integrator)
     c = _DAMPING_WEIGHT[integrator]
+    if c == 0.0:
+        den = 2.0 * xp.sqrt(omega2)
+        ok = den > 0
+        return xp.where(ok, (4.0 * STEP_SAFETY) / xp.where(ok, den, 1.0), math.inf)
     cg = gamma if c == 1.0 else c * gamma
     den = cg + xp.sqrt(cg * cg + 4.0 * omega2)
     ok = den > 0
@@ -193,6 +246,55 @@ def euler_update(
         accel = accel / m
     v_new = v + dt * accel
     return x + dt * v_new, v_new
+
+
+def implicit_damping_update(
+    x: Any, v: Any, accel: Any, dt: Any, m: float, own: Any, align: Any, axis: int = -2
+) -> tuple[Any, Any]:
+    """The ``"implicit_damping_euler"`` update (the module docstring) with the force
+    ``accel`` (passive + control) and the agents' implicit dissipation ``own`` (``b_i``)
+    and alignment row sums ``align`` (``w_i``;
+    :func:`~swarm_envs.physics.social_potential.damping_rates`; 0 for an agent held at
+    rest, whose ``accel`` is 0 too):
+
+    ``s = dt Σ_i w_i a_i/(m + dt c_i) / Σ_i w_i (m + dt b_i)/(m + dt c_i)`` (0 where no
+    agent aligns), ``v' = v + dt (a_i + w_i s)/(m + dt c_i)``, ``x' = x + dt v'``.
+
+    numpy arrays or torch tensors: ``x, v, accel`` ``(..., N, d)`` with ``own, align``
+    ``(..., N, 1)`` and ``axis=-2`` (the agents' axis), or one component ``(..., N)``
+    with ``own, align`` ``(..., N)`` and ``axis=-1``; ``dt`` as in
+    :func:`euler_update`, broadcastable to ``x``.
+    """
+    xp = namespace(x)
+    den = m + dt * (own + align)
+    num = xp.sum(align * dt * accel / den, axis=axis)
+    z = xp.sum(align * (m + dt * own) / den, axis=axis)
+    s = xp.where(z > 0, num / xp.where(z > 0, z, 1.0), 0.0)
+    s = s[..., None, :] if axis == -2 else s[..., None]
+    v_new = v + dt * (accel + align * s) / den
+    return x + dt * v_new, v_new
+
+
+def implicit_damping_step(
+    x: Any,
+    v: Any,
+    params: SocialPotentialParams,
+    *,
+    dt: float,
+    goal: Any | None = None,
+    control: Any | None = None,
+    geometry: PairGeometry | None = None,
+) -> tuple[Any, Any]:
+    """One ``"implicit_damping_euler"`` step of the social potential model (the module
+    docstring; :func:`implicit_damping_update` with
+    :func:`~swarm_envs.physics.social_potential.damping_rates` of ``(x, v)``); the
+    arguments as :func:`step`."""
+    geo = pair_geometry(x) if geometry is None else geometry
+    accel = forces(x, v, params, goal, geometry=geo)
+    if control is not None:
+        accel = accel + control
+    own, align = damping_rates(geo, v, params)
+    return implicit_damping_update(x, v, accel, dt, params.m, own[..., None], align[..., None])
 
 
 def step(
@@ -313,9 +415,10 @@ def simulate(
         u = control(n * dt, xn, vn) if callable(control) else control
         return np.asarray(u, dtype=x.dtype)
 
-    if integrator == "semi_implicit_euler":
+    if integrator != "velocity_verlet":
+        one = step if integrator == "semi_implicit_euler" else implicit_damping_step
         for n in range(steps):
-            x, v = step(x, v, params, dt=dt, goal=goal, control=control_at(n, x, v))
+            x, v = one(x, v, params, dt=dt, goal=goal, control=control_at(n, x, v))
             xs[n + 1], vs[n + 1] = x, v
         return xs, vs
 

@@ -318,6 +318,64 @@ def rate_law(
     return kappa, C_o * exp(rho * (-1.0 / l_o))
 
 
+def stiffness_law(
+    rho: Array,
+    inv_rho: Array,
+    C_a: float,
+    C_r: float,
+    l_a: float,
+    l_r: float,
+    exp: Any,
+    maximum: Any,
+) -> tuple[Array, Array]:
+    """The pair's stiffness for the block bound of the step-size rule: ``(k_ij, p_ij)``.
+
+    The Hessian block of the pair potential ``U(|r_ij|)`` is
+    ``B_ij = U''(ρ) u uᵀ + (U'(ρ)/ρ)(I − u uᵀ)``; with the negative parts dropped
+    (they only lower the largest eigenvalue of the Hessian, ``docs/models.md`` §7) it is
+    ``B⁺_ij = t I + p u uᵀ`` with ``t = max(U'/ρ, 0)``, ``a = max(U'', 0)``,
+    ``p = a − t``, and its norm is ``b = max(a, t)``. Returned: ``k = b + t`` (the
+    scalar part: the block's norm in the off-diagonal sum plus its isotropic part) and
+    ``p`` (the coefficient of ``u uᵀ``, of either sign), with
+    ``U'' = (C_r/l_r²) e^{−ρ/l_r} − (C_a/l_a²) e^{−ρ/l_a}`` and
+    ``U'/ρ = [(C_a/l_a) e^{−ρ/l_a} − (C_r/l_r) e^{−ρ/l_r}] / ρ`` (eq. 9;
+    ``inv_rho = 1/max(ρ, RHO_FLOOR)``). ``maximum`` is the elementwise maximum of the
+    array type (``np.maximum``, ``torch.maximum``, a scalar ``max``).
+
+    >>> k, p = stiffness_law(1.0, 1.0, 1.0, 1.0, 1.0, 0.2, math.exp, max)
+    >>> round(k, 6), round(p, 6)  # attraction at ρ = 1: only the transverse part is positive
+    (0.667179, -0.333589)
+    """
+    e_a = exp(rho * (-1.0 / l_a))
+    e_r = exp(rho * (-1.0 / l_r))
+    curvature = (C_r / (l_r * l_r)) * e_r - (C_a / (l_a * l_a)) * e_a
+    transverse = ((C_a / l_a) * e_a - (C_r / l_r) * e_r) * inv_rho
+    a = maximum(curvature, 0.0 * curvature)
+    t = maximum(transverse, 0.0 * transverse)
+    return maximum(a, t) + t, a - t
+
+
+def block_bound(k_sum: Array, q: list[list[Array]], dim: int, xp: Any) -> Array:
+    """The bound ``Σ_j k_ij + λ̄(Q_i)`` per agent of :func:`stiffness_law`'s sums.
+
+    ``k_sum = Σ_j k_ij`` and ``q[a][b] = Σ_j p_ij u_a u_b`` (``a ≤ b``; the symmetric
+    ``d × d`` matrix ``Q_i``, ``u = r_ij/ρ_ij``, 0 for coincident agents).
+    ``λ̄(Q) = tr Q/d + √((d − 1)/d) ‖Q − (tr Q/d) I‖_F`` bounds the largest eigenvalue of
+    a symmetric matrix from its first two moments (Wolkowicz & Styan 1980; exact for
+    ``d = 2``). ``xp``: the array namespace (``sqrt``) or :mod:`math`.
+    """
+    if dim == 2:
+        trace = q[0][0] + q[1][1]
+        half = 0.5 * (q[0][0] - q[1][1])
+        return k_sum + 0.5 * trace + xp.sqrt(half * half + q[0][1] * q[0][1])
+    trace = q[0][0] + q[1][1] + q[2][2]
+    mean = trace * (1.0 / 3.0)
+    d0, d1, d2 = q[0][0] - mean, q[1][1] - mean, q[2][2] - mean
+    off = q[0][1] * q[0][1] + q[0][2] * q[0][2] + q[1][2] * q[1][2]
+    dev2 = d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * off
+    return k_sum + mean + math.sqrt(2.0 / 3.0) * xp.sqrt(dev2)
+
+
 def _pair_law(
     rho: Array,
     inv_rho: Array,
@@ -530,6 +588,71 @@ def pair_rates(
         rows = xp.clip(xp.amax(xp.sum(w, axis=-1), axis=-1) - p.C_o, 0.0, None)
         gamma = (rate + 2.0 * rows) / p.m
     return omega2, gamma
+
+
+def stiffness_rate(
+    geometry: PairGeometry, params: SocialPotentialParams, *, sink: bool = False
+) -> Array:
+    """``ω²`` per swarm ``(...)``: the block bound of the step-size rule of
+    ``"implicit_damping_euler"`` (``docs/models.md`` §7).
+
+    The Hessian of the potential is ``Σ_{pairs} (e_i − e_j)(e_i − e_j)ᵀ ⊗ B_ij``; with the
+    negative parts of the blocks dropped (:func:`stiffness_law`) and block Gershgorin
+    (Feingold & Varga 1962), its largest eigenvalue is at most
+    ``max_i [λ_max(Σ_j B⁺_ij) + Σ_j ‖B⁺_ij‖]``, which :func:`block_bound` bounds per
+    agent; ``ω²`` is that over the mass. In 2-D never more than
+    ``(2/m) max_i Σ_j b_ij``, the Gershgorin bound of the same blocks (``λ̄`` is then
+    exact). ``sink=True`` adds the goal sink's curvature
+    ``C_g/l_g²`` (over the mass), as :func:`pair_rates`.
+    """
+    p = params
+    dx, rho = geometry.dx, geometry.rho
+    xp = namespace(rho)
+    n = rho.shape[-1]
+    inv_rho = xp.reciprocal_temp(xp.clip(rho, RHO_FLOOR, None))
+    k, pp = stiffness_law(rho, inv_rho, p.C_a, p.C_r, p.l_a, p.l_r, xp.exp_temp, xp.maximum)
+    eye = xp.eye(n, like=rho) > 0
+    k = xp.where(eye, 0.0, k)  # the diagonal ρ_ii = 0 is no pair
+    units = [c * inv_rho for c in dx]  # u_ij, 0 on the diagonal
+    d = len(dx)
+    q = [[None] * d for _ in range(d)]
+    for a in range(d):
+        for b in range(a, d):
+            q[a][b] = xp.sum(pp * units[a] * units[b], axis=-1)
+    bound = block_bound(xp.sum(k, axis=-1), q, d, xp)
+    omega2 = xp.amax(bound, axis=-1) / p.m
+    if sink:
+        omega2 = omega2 + p.C_g / (p.l_g * p.l_g * p.m)
+    return omega2
+
+
+def damping_rates(
+    geometry: PairGeometry, v: Array, params: SocialPotentialParams
+) -> tuple[Array, Array]:
+    """The damping treated implicitly by ``"implicit_damping_euler"``, per agent (times
+    the mass): ``(b_i, w_i)``, each ``(..., N)``.
+
+    ``b_i = D_i⁺``, the positive part of agent i's dissipation rate ``D_i``: ``β``, or
+    with self-propulsion the largest eigenvalue ``3β|v_i|² − α`` of its Jacobian
+    (:func:`dissipation_rate`; a negative rate, energy injected, stays explicit);
+    ``w_i = Σ_{j≠i} w(ρ_ij)``, the alignment's row sum (:func:`rate_law`), which bounds
+    its damping of agent i. ``v``: velocities ``(..., N, d)`` or components.
+    """
+    p = params
+    rho = geometry.rho
+    xp = namespace(rho)
+    vs = components(v)
+    if p.alpha > 0:
+        speed2 = vs[0] * vs[0]
+        for vc in vs[1:]:
+            speed2 = speed2 + vc * vc
+        own = xp.clip(3.0 * p.beta * speed2 - p.alpha, 0.0, None)
+    else:
+        own = p.beta + 0.0 * vs[0]
+    if p.C_o == 0:
+        return own, 0.0 * own
+    w = p.C_o * xp.exp(rho * (-1.0 / p.l_o))
+    return own, xp.clip(xp.sum(w, axis=-1) - p.C_o, 0.0, None)
 
 
 def goal_terms(

@@ -3,7 +3,7 @@
 :class:`CutoffSwarmNavCore` has exactly the public interface and semantics of
 :class:`~swarm_envs.envs.cores.numpy.SwarmNavCore` (``reset``, ``step``, ``observe``,
 ``stats``; attributes ``x, v, goal, t, batch, obs_dim, cfg``) for
-``cfg.dynamics == "social_potential"`` (either integrator), without any ``(B, N, N)``
+``cfg.dynamics == "social_potential"`` (with either explicit integrator), without any ``(B, N, N)``
 array. One step:
 
 1. the action becomes the control force ``u = u_max · a``, added to the passive force
@@ -245,9 +245,15 @@ class CutoffSwarmNavCore(SwarmNavCore):
     @staticmethod
     def unsupported(cfg: SwarmConfig) -> str | None:
         """Why this core cannot run ``cfg`` (``None`` if it can): the social potential
-        model only, either integrator."""
+        model only, with the two explicit integrators (the pair passes do not sum the
+        block bound and the implicit damping of ``"implicit_damping_euler"``)."""
         if cfg.dynamics != "social_potential":
             return f"supports dynamics='social_potential' only, got {cfg.dynamics!r}"
+        if cfg.integrator not in ("semi_implicit_euler", "velocity_verlet"):
+            return (
+                "supports integrator='semi_implicit_euler' or 'velocity_verlet' only, "
+                f"got {cfg.integrator!r}"
+            )
         return None
 
     # ------------------------------------------------------------------ cut-off

@@ -114,7 +114,7 @@ _KEYS = {f.name for f in dataclasses.fields(SwarmConfig)}
 HOST_CONFIG_FIELDS = {
     "physics": "expanded into the physics_* fields",
     "dynamics": "the models whose ModelSpec.backends has 'native' only (checked)",
-    "integrator": "semi_implicit_euler only (checked)",
+    "integrator": "as the derived `implicit_damping`; velocity_verlet refused (checked)",
     **{
         model_spec(name).section: "another model's section"
         for name in SHIPPED
@@ -259,6 +259,12 @@ DERIVED: tuple[tuple[str, str, Callable[[SwarmConfig, np.dtype], float], str], .
     ("obs_bound", "double", lambda c, dt: OBS_BOUND, "observation clip"),
     ("rho_floor", "double", lambda c, dt: RHO_FLOOR, "distance floor"),
     (
+        "implicit_damping",
+        "int64_t",
+        lambda c, dt: int(c.integrator == "implicit_damping_euler"),
+        "integrator='implicit_damping_euler' (else semi-implicit Euler)",
+    ),
+    (
         "centre_tol",
         "double",
         lambda c, dt: CENTRE_RTOL * _eps(dt) * math.sqrt(c.n_agents),
@@ -401,8 +407,11 @@ def unsupported(cfg: SwarmConfig, kernel: KernelInfo) -> str | None:
     if "native" not in model_spec(cfg.dynamics).backends:
         names = " or ".join(f"{name!r}" for name in models_on("native"))
         return f"supports dynamics={names} only, got {cfg.dynamics!r}"
-    if cfg.integrator != "semi_implicit_euler":
-        return f"supports integrator='semi_implicit_euler' only, got {cfg.integrator!r}"
+    if cfg.integrator not in ("semi_implicit_euler", "implicit_damping_euler"):
+        return (
+            "supports integrator='semi_implicit_euler' or 'implicit_damping_euler' only, "
+            f"got {cfg.integrator!r}"
+        )
     if cfg.device != "cpu":
         return f"runs on the CPU only, got device={cfg.device!r}"
     if cfg.informs_agents:

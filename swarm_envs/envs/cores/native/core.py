@@ -131,7 +131,7 @@ class NativeSwarmNavCore(TaskCore):
         self._columns = StatisticColumns(self.dtype)
         self._x = np.zeros((d, B, N), self.dtype)
         self._v = np.zeros((d, B, N), self.dtype)
-        self._f = np.zeros((d, B, N), self.dtype)
+        self._f = self._buffers()[2]
         self._spare = self._buffers()  # a step's output; then the state before it
         self._h = np.full(B, np.inf)  # the stable substep of the current state
         self._goal = np.zeros((B, d), self.dtype)
@@ -174,8 +174,14 @@ class NativeSwarmNavCore(TaskCore):
 
     # ------------------------------------------------------------------ the C step
     def _buffers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        shape = (self.cfg.dim, self.batch, self.cfg.n_agents)
-        return tuple(np.zeros(shape, self.dtype) for _ in range(3))  # type: ignore[return-value]
+        """Zeroed ``(x, v, f)`` state buffers, ``(d, B, N)`` each; with
+        ``"implicit_damping_euler"`` ``f`` has two rows more: the agents' implicit
+        damping ``(b_i, w_i)`` (``damping_rates``), carried like the passive force."""
+        cfg = self.cfg
+        shape = (cfg.dim, self.batch, cfg.n_agents)
+        rows = cfg.dim + 2 * int(cfg.integrator == "implicit_damping_euler")
+        f = np.zeros((rows, self.batch, cfg.n_agents), self.dtype)
+        return np.zeros(shape, self.dtype), np.zeros(shape, self.dtype), f
 
     def _call(
         self,

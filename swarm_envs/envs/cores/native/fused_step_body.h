@@ -176,6 +176,14 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
     const REAL alpha = (REAL)P->physics_alpha;
     const REAL three_beta = (REAL)(3.0 * P->physics_beta);
     const int friction = !rayleigh && beta > 0;
+    /* integrator='implicit_damping_euler' (integrators.implicit_damping_update): each
+     * agent's implicit dissipation b_i and alignment row sum w_i (damping_rates) are
+     * carried as the rows d and d + 1 of f (ks and ws in the scratch after a pass);
+     * Δv_i = h (a_i + w_i s)/(m + h (b_i + w_i)) with the swarm's collective increment
+     * s. Its rule is the block bound (stiffness_law, block_bound, stiffness_rate):
+     * ω² = max_i [Σ_j k_ij + λ̄(Q_i)] / m, Q_i = Σ_j p_ij u uᵀ, and h* = 0.9 · 2/ω. */
+    const int block = P->implicit_damping != 0;
+    const int64_t nq = d == 2 ? 3 : 6; /* Q_i: 00, 01, 11 (, 02, 12, 22) */
     const double cap = (double)P->max_substeps;
     const int same_decay = l_a == l_r, alignment = C_o > 0;
     const int64_t S = NP; /* component stride of the scratch state (padded to LANES) */
@@ -189,6 +197,7 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
     REAL *gd = ws + S, *rho = gd + N, *near_d = rho + NP * NP;
     int32_t *near_i = (int32_t *)(near_d + k_sort * N);
     INDEX *alive = (INDEX *)(near_d + 2 * k_sort * N + 8 * NP + 2 * d * NP);
+    REAL *qs = (REAL *)(alive + NP); /* the agents' Q_i of the block bound, nq × NP */
 
     /* The agents' statuses (swarm_envs.envs.task.agent_status; status NULL: every agent
      * active) as flags (STATUS_FLAGS, generated): AG_PRESENT (in the physics: its pairs
@@ -236,18 +245,53 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
                 h = tau / n;
             }
             const REAL hr = (REAL)h;
+            /* implicit_damping_euler: b_i, w_i of the current state, and s (per
+             * component) over the agents that move (an agent held at rest: w_i = 0) */
+            const REAL *own_in = first ? f + (d * B + b) * N : ks;
+            const REAL *al_in = first ? f + ((d + 1) * B + b) * N : ws;
+            REAL sv[3] = {0, 0, 0};
+            if (block) {
+                REAL num[3] = {0, 0, 0}, z = 0;
+                for (int64_t i = 0; i < N; i++) {
+                    const int held = masked && !(alive[i] & AG_MOBILE);
+                    const REAL al = held ? 0 : al_in[i];
+                    const REAL den = m + hr * (own_in[i] + al);
+                    z += al * (m + hr * own_in[i]) / den;
+                    for (int64_t c = 0; c < d; c++) {
+                        const REAL *fc = first ? f + (c * B + b) * N : fs + c * S;
+                        REAL accel = fc[i] + u_max * UNIT_CLIP(ab[i * d + c]);
+                        if (held) accel = 0;
+                        num[c] += al * hr * accel / den;
+                    }
+                }
+                for (int64_t c = 0; c < d; c++) sv[c] = z > 0 ? num[c] / z : 0;
+            }
             for (int64_t c = 0; c < d; c++) {
                 const int64_t at = (c * B + b) * N;
                 const REAL *xc = first ? x + at : xs + c * S, *vc = first ? v + at : vs + c * S;
                 const REAL *fc = first ? f + at : fs + c * S;
                 REAL *xn = xs + c * S, *vn = vs + c * S;
+                if (block) {
+                    const REAL sc = sv[c];
 #pragma omp simd
-                for (int64_t i = 0; i < N; i++) {
-                    REAL accel = fc[i] + u_max * UNIT_CLIP(ab[i * d + c]);
-                    if (masked) accel = alive[i] & AG_MOBILE ? accel : 0; /* held at rest */
-                    if (m != (REAL)1) accel = accel / m;
-                    vn[i] = vc[i] + hr * accel;
-                    xn[i] = xc[i] + hr * vn[i];
+                    for (int64_t i = 0; i < N; i++) {
+                        REAL accel = fc[i] + u_max * UNIT_CLIP(ab[i * d + c]);
+                        const int held = masked && !(alive[i] & AG_MOBILE);
+                        if (held) accel = 0;
+                        const REAL al = held ? 0 : al_in[i];
+                        const REAL den = m + hr * (own_in[i] + al);
+                        vn[i] = vc[i] + hr * (accel + al * sc) / den;
+                        xn[i] = xc[i] + hr * vn[i];
+                    }
+                } else {
+#pragma omp simd
+                    for (int64_t i = 0; i < N; i++) {
+                        REAL accel = fc[i] + u_max * UNIT_CLIP(ab[i * d + c]);
+                        if (masked) accel = alive[i] & AG_MOBILE ? accel : 0; /* held at rest */
+                        if (m != (REAL)1) accel = accel / m;
+                        vn[i] = vc[i] + hr * accel;
+                        xn[i] = xc[i] + hr * vn[i];
+                    }
                 }
                 for (int64_t i = N; i < NP; i++) xn[i] = vn[i] = 0; /* padding lanes */
             }
@@ -280,11 +324,14 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
         for (int64_t c = 0; c < d; c++)
             for (int64_t i = 0; i < NP; i++) fs[c * S + i] = 0;
         for (int64_t i = 0; i < NP; i++) ks[i] = ws[i] = 0;
+        if (block)
+            for (int64_t i = 0; i < nq * NP; i++) qs[i] = 0;
         for (int64_t I = 0; I < nb; I++) {
             const int64_t I0 = I * LANES;
             /* Sums per agent i of block I, lane by lane: force, pair energy (× 2 for
              * ordered pairs), κ, w and ordered pairs closer than the collision radius. */
             VREAL FI[3] = {{0}, {0}, {0}}, E_lane = {0}, KI = {0}, WI = {0};
+            VREAL QI[6] = {{0}, {0}, {0}, {0}, {0}, {0}};
             VINDEX close_lane = {0};
             const REAL *xi0 = xs + I0, *xi1 = xs + S + I0, *xi2 = xs + 2 * S + I0;
             const REAL *vi0 = vs + I0, *vi1 = vs + S + I0, *vi2 = vs + 2 * S + I0;
@@ -293,6 +340,7 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
             for (int64_t J = I; J < nb; J++) {
                 const int64_t J0 = J * LANES;
                 VREAL xJ[3], vJ[3], FJ[3], KJ = {0}, WJ = {0};
+                VREAL QJ[6] = {{0}, {0}, {0}, {0}, {0}, {0}};
                 VINDEX aJ;
                 memcpy(&aJ, alive + J0, sizeof aJ);
                 for (int64_t c = 0; c < d; c++) {
@@ -321,7 +369,22 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
         REAL ea = EXP(r * dec_a);                                                          \
         REAL er = SAME ? ea : EXP(r * dec_r);                                              \
         REAL sp = ea * ca_la - cr_lr * er;                                                 \
-        kx[l] = valid ? kappa_r * er + kappa_a * ea : 0; /* κ(ρ) */                        \
+        if (block) { /* stiffness_law: k = max(a, t) + t, p = a − t; Q: p u uᵀ */       \
+            const REAL cur = kappa_r * er - kappa_a * ea, tra = sp * inv;                  \
+            const REAL a_ = cur > 0 ? cur : 0, t_ = tra > 0 ? tra : 0;                     \
+            kx[l] = valid ? (a_ > t_ ? a_ : t_) + t_ : 0;                                  \
+            const REAL pu = valid ? (a_ - t_) * inv * inv : 0;                             \
+            qx[0][l] = pu * dx0 * dx0;                                                     \
+            qx[1][l] = pu * dx0 * dx1;                                                     \
+            qx[2][l] = pu * dx1 * dx1;                                                     \
+            if (d == 3) {                                                                  \
+                qx[3][l] = pu * dx0 * dx2;                                                 \
+                qx[4][l] = pu * dx1 * dx2;                                                 \
+                qx[5][l] = pu * dx2 * dx2;                                                 \
+            }                                                                              \
+        } else {                                                                           \
+            kx[l] = valid ? kappa_r * er + kappa_a * ea : 0; /* κ(ρ) */                    \
+        }                                                                                  \
         if (ALIGN) {                                                                       \
             REAL proj = (vi0[l] - vj[0][l]) * dx0 + (vi1[l] - vj[1][l]) * dx1;             \
             if (d == 3) proj = proj + (vi2[l] - vj[2][l]) * dx2;                           \
@@ -345,6 +408,7 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
         const REAL w = both ? 2 : 1;                                                       \
         const INDEX wc = both ? 2 : 1;                                                     \
         REAL xj[3][LANES], vj[3][LANES], cx[3][LANES], kx[LANES], wx[LANES], ex[LANES];    \
+        REAL qx[6][LANES];                                                                 \
         INDEX cl[LANES], pv[LANES], mv[LANES];                                             \
         if (!FULL) { /* pairs of present agents; and one of them moves */                 \
             const VINDEX aj = __builtin_shuffle(aJ, rot[s]);                               \
@@ -369,6 +433,11 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
             }                                                                              \
             memcpy(&t, kx, sizeof t);                                                      \
             KI += t;                                                                       \
+            if (block)                                                                     \
+                for (int64_t q = 0; q < nq; q++) {                                         \
+                    memcpy(&t, qx[q], sizeof t);                                           \
+                    QI[q] += t;                                                            \
+                }                                                                          \
             if (ALIGN) {                                                                   \
                 memcpy(&t, wx, sizeof t);                                                  \
                 WI += t;                                                                   \
@@ -391,6 +460,11 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
             VREAL t;                                                                       \
             memcpy(&t, kx, sizeof t);                                                      \
             KJ += __builtin_shuffle(t, back);                                              \
+            if (block)                                                                     \
+                for (int64_t q = 0; q < nq; q++) {                                         \
+                    memcpy(&t, qx[q], sizeof t);                                           \
+                    QJ[q] += __builtin_shuffle(t, back);                                   \
+                }                                                                          \
             if (ALIGN) {                                                                   \
                 memcpy(&t, wx, sizeof t);                                                  \
                 WJ += __builtin_shuffle(t, back);                                          \
@@ -427,6 +501,9 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
                     ks[J0 + l] += KJ[l];
                     ws[J0 + l] += WJ[l];
                 }
+                if (block)
+                    for (int64_t q = 0; q < nq; q++)
+                        for (int l = 0; l < LANES; l++) qs[q * NP + J0 + l] += QJ[q][l];
             }
             for (int64_t c = 0; c < d; c++)
                 for (int l = 0; l < LANES; l++) fs[c * S + I0 + l] += FI[c][l];
@@ -436,6 +513,9 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
                 energy_pairs += E_lane[l];
                 close_pairs += close_lane[l];
             }
+            if (block)
+                for (int64_t q = 0; q < nq; q++)
+                    for (int l = 0; l < LANES; l++) qs[q * NP + I0 + l] += QI[q][l];
         }
 
         /* Dissipation, then the goal sink (eqs. 19-20), in the numpy core's order. The
@@ -481,6 +561,46 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
          * (+ the sink's C_g/(l_g² m) where it acts passively), γ = (β + 2 max_i Σ_j
          * w_ij)/m, with β replaced by 3β max_i |v_i|² − α under self-propulsion; a NaN
          * sum or speed makes ω² NaN (h* is then inf, as numpy's is for a NaN rate). */
+        if (block) {
+            /* ω² = max_i [Σ_j k_ij + λ̄(Q_i)] / m (block_bound), h* = 0.9 · 2/ω; the
+             * agents' implicit dissipation b_i = D_i⁺ into ks once read (damping_rates;
+             * ws keeps their alignment row sums w_i). */
+            REAL bmax = 0;
+            int bnan = 0;
+            for (int64_t i = 0; i < N; i++) {
+                const REAL *q = qs + i;
+                REAL bound;
+                if (d == 2) {
+                    const REAL half = (REAL)0.5 * (q[0] - q[2 * NP]);
+                    bound = ks[i] + (REAL)0.5 * (q[0] + q[2 * NP]) +
+                            SQRT(half * half + q[NP] * q[NP]);
+                } else {
+                    const REAL q00 = q[0], q01 = q[NP], q11 = q[2 * NP];
+                    const REAL q02 = q[3 * NP], q12 = q[4 * NP], q22 = q[5 * NP];
+                    const REAL mean = (q00 + q11 + q22) * (REAL)(1.0 / 3.0);
+                    const REAL d0 = q00 - mean, d1 = q11 - mean, d2 = q22 - mean;
+                    const REAL off2 = q01 * q01 + q02 * q02 + q12 * q12;
+                    const REAL dev2 = d0 * d0 + d1 * d1 + d2 * d2 + (REAL)2 * off2;
+                    bound = ks[i] + mean + (REAL)0.816496580927726 * SQRT(dev2);
+                }
+                bmax = bound > bmax ? bound : bmax;
+                bnan |= bound != bound;
+                REAL own = beta;
+                if (rayleigh) {
+                    REAL s2 = vs[i] * vs[i];
+                    for (int64_t c = 1; c < d; c++) s2 = s2 + vs[c * S + i] * vs[c * S + i];
+                    own = three_beta * s2 - alpha;
+                    own = own > 0 ? own : 0;
+                }
+                ks[i] = own;
+            }
+            REAL omega2 = bnan | speed_nan ? (REAL)NAN : bmax / m;
+            if (physics_goal) omega2 = omega2 + omega2_sink;
+            const REAL den = (REAL)2 * SQRT(omega2);
+            hs = den > 0 ? (double)((REAL)STEP_EDGE_NUMERATOR / den) : INFINITY;
+            if (last) break;
+            continue;
+        }
         REAL kmax = 0, wmax = 0;
         int nan = 0;
 #pragma omp simd reduction(max : kmax, wmax) reduction(| : nan)
@@ -679,6 +799,11 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
             v_out[(c * B + b) * N + i] = vs[c * S + i];
             f_out[(c * B + b) * N + i] = fs[c * S + i];
         }
+    if (block)
+        for (int64_t i = 0; i < N; i++) {
+            f_out[(d * B + b) * N + i] = ks[i];
+            f_out[((d + 1) * B + b) * N + i] = ws[i];
+        }
     h_out[b] = hs;
     return unsound;
 }
@@ -717,7 +842,8 @@ int FUSED_STEP(const StepParams *P, int64_t b0, int64_t b1, const int64_t *rows,
     }
     if (nonfinite) return STEP_NON_FINITE_ACTIONS;
     const size_t n_real =
-        (size_t)(4 * d * NP + 2 * NP + N + NP * NP + 2 * k_sort * N + 8 * NP + 2 * d * NP + NP);
+        (size_t)(4 * d * NP + 2 * NP + N + NP * NP + 2 * k_sort * N + 8 * NP + 2 * d * NP + NP +
+                 6 * NP);
     int code = STEP_OK;
 #pragma omp parallel if (b1 - b0 > 1) reduction(| : code)
     {

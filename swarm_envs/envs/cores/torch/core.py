@@ -1,7 +1,7 @@
 """The batched SwarmNav core in PyTorch: one fused (compiled) function per step, CPU or CUDA.
 
 :class:`TorchSwarmNavCore` implements :class:`~swarm_envs.envs.protocol.Core` for the
-social potential model with the semi-implicit Euler integrator. Its step is the torch
+social potential model with the two semi-implicit Euler integrators. Its step is the torch
 function of :func:`swarm_envs.envs.cores.torch.step.build_advance`: the shared definitions of
 the physics and the task evaluated on tensors, compiled by ``torch.compile`` into a
 handful of fused loops where a compiler is available (TorchInductor: C++ on the CPU,
@@ -165,8 +165,9 @@ class TorchSwarmNavCore(TaskCore):
     """State and dynamics of ``batch`` independent SwarmNav swarms, in torch.
 
     A :class:`~swarm_envs.envs.protocol.Core` (numpy in, numpy out) for
-    ``cfg.dynamics == "social_potential"`` with ``cfg.integrator ==
-    "semi_implicit_euler"``; :meth:`unsupported` says why any other config is refused.
+    ``cfg.dynamics == "social_potential"`` with ``cfg.integrator`` one of
+    ``"semi_implicit_euler"`` and ``"implicit_damping_euler"``; :meth:`unsupported` says
+    why any other config is refused.
 
     Args:
         cfg: the scenario (:class:`~swarm_envs.config.SwarmConfig`).
@@ -223,7 +224,10 @@ class TorchSwarmNavCore(TaskCore):
         self._columns = StatisticColumns(self.dtype)
         zeros = self._zeros
         # State component first, (d, B, N): the layout the fused step vectorises.
-        self._x, self._v, self._f = zeros(d, B, N), zeros(d, B, N), zeros(d, B, N)
+        # With "implicit_damping_euler" the force carries two rows more: each agent's
+        # implicit damping (b_i, w_i) (build_advance).
+        rows = d + 2 * int(cfg.integrator == "implicit_damping_euler")
+        self._x, self._v, self._f = zeros(d, B, N), zeros(d, B, N), zeros(rows, B, N)
         self._goal = zeros(B, d)
         P = len(PACKED_KEYS)
         #: The task above this core; its previous and start rows stay on the device.
@@ -283,8 +287,11 @@ class TorchSwarmNavCore(TaskCore):
         """Why this core cannot run ``cfg`` (``None`` if it can)."""
         if cfg.dynamics != "social_potential":
             return f"supports dynamics='social_potential' only, got {cfg.dynamics!r}"
-        if cfg.integrator != "semi_implicit_euler":
-            return f"supports integrator='semi_implicit_euler' only, got {cfg.integrator!r}"
+        if cfg.integrator not in ("semi_implicit_euler", "implicit_damping_euler"):
+            return (
+                "supports integrator='semi_implicit_euler' or 'implicit_damping_euler' "
+                f"only, got {cfg.integrator!r}"
+            )
         if cfg.informs_agents:
             return "does not write the informed agents' observation (task='informed')"
         if cfg.task_spec.statistics:

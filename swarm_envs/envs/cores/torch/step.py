@@ -50,15 +50,22 @@ from swarm_envs.envs.task import (
 )
 from swarm_envs.envs.task.agent_status import masks
 from swarm_envs.physics import kinetic_energy
-from swarm_envs.physics.integrators import euler_update, stable_substep, substep_plan
+from swarm_envs.physics.integrators import (
+    euler_update,
+    implicit_damping_update,
+    stable_substep,
+    substep_plan,
+)
 from swarm_envs.physics.social_potential import (
     PairGeometry,
+    damping_rates,
     goal_terms,
     pair_geometry,
     pair_rates,
     pair_terms,
     passive_components,
     present_geometry,
+    stiffness_rate,
 )
 
 if TYPE_CHECKING:
@@ -154,12 +161,52 @@ def _passive(
     return fs, pairs, potential, goal_distance
 
 
-def _stable(geo: PairGeometry, vs: list[torch.Tensor], cfg: SwarmConfig) -> torch.Tensor:
+def _stable(
+    geo: PairGeometry, vs: list[torch.Tensor], cfg: SwarmConfig
+) -> tuple[torch.Tensor, list[torch.Tensor]]:
     """The stable substep ``h*`` ``(B,)`` of the state of ``geo`` with the velocities
-    ``vs`` (the shared rule)."""
+    ``vs`` (the shared rule) and what the state carries beside its force: for
+    ``"implicit_damping_euler"`` the agents' implicit damping ``b_i, w_i`` ``(B, N)``
+    each (:func:`~swarm_envs.physics.social_potential.damping_rates`), nothing
+    otherwise."""
     p = cfg.physics
+    if cfg.integrator == "implicit_damping_euler":
+        omega2 = stiffness_rate(geo, p, sink=cfg.passive_sink)
+        h = stable_substep(omega2, 0.0 * omega2, torch, integrator=cfg.integrator)
+        return h, list(damping_rates(geo, vs, p))
     omega2, gamma = pair_rates(geo, p, sink=cfg.passive_sink, v=vs)
-    return stable_substep(omega2, gamma, torch)
+    return stable_substep(omega2, gamma, torch), []
+
+
+def _update(
+    x: torch.Tensor,
+    v: torch.Tensor,
+    f: torch.Tensor,
+    a: torch.Tensor,
+    step: torch.Tensor,
+    keep: torch.Tensor,
+    mobile: torch.Tensor | None,
+    cfg: SwarmConfig,
+) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
+    """The integrator's update of every component with the carried passive force ``f``
+    (``(d, B, N)``; with ``"implicit_damping_euler"`` its rows ``d, d + 1`` are the
+    implicit damping ``b_i, w_i``) and the control ``u_max a``, the swarms where ``keep``
+    is false left as they are: the new ``(x, v)`` as lists of components. The implicit
+    damping updates the components together (one sum over the agents for all of them;
+    TorchInductor's vectorised CPU code summed them wrongly per component)."""
+    d, m = cfg.dim, cfg.physics.m
+    if cfg.integrator == "implicit_damping_euler":
+        total = _held(f[:d] + cfg.u_max * a.permute(2, 0, 1), mobile)
+        align = _held(f[d + 1], mobile)
+        xn, vn = implicit_damping_update(x, v, total, step, m, f[d], align, -1)
+        xn, vn = torch.where(keep, xn, x), torch.where(keep, vn, v)
+        return list(xn.unbind(0)), list(vn.unbind(0))
+    xs, vs = [], []
+    for c in range(d):
+        xc, vc = euler_update(x[c], v[c], _held(f[c] + cfg.u_max * a[..., c], mobile), step, m)
+        xs.append(torch.where(keep, xc, x[c]))
+        vs.append(torch.where(keep, vc, v[c]))
+    return xs, vs
 
 
 def _masks(
@@ -207,7 +254,7 @@ def build_advance(cfg: SwarmConfig) -> Callable[..., tuple[torch.Tensor, ...]]:
     """
     xp = torch_namespace()
     p = cfg.physics
-    N, d = cfg.n_agents, cfg.dim
+    N = cfg.n_agents
     k_rank = ranked_neighbors(cfg)
     physics_masks = cfg.perturbations.needs_masks
 
@@ -229,13 +276,7 @@ def build_advance(cfg: SwarmConfig) -> Callable[..., tuple[torch.Tensor, ...]]:
         B = x.shape[1]
         members, present, mobile = _masks(status, physics_masks)
         keep, step = (h > 0)[:, None], h[:, None]
-        xs, vs = [], []
-        for c in range(d):
-            xc, vc = euler_update(
-                x[c], v[c], _held(f[c] + cfg.u_max * a[..., c], mobile), step, p.m
-            )
-            xs.append(torch.where(keep, xc, x[c]))
-            vs.append(torch.where(keep, vc, v[c]))
+        xs, vs = _update(x, v, f, a, step, keep, mobile, cfg)
 
         # The new state stored first, component first (d, B, N), as returned: the pair
         # pass reads it (left to itself, the compiler recomputes the update for every
@@ -244,7 +285,7 @@ def build_advance(cfg: SwarmConfig) -> Callable[..., tuple[torch.Tensor, ...]]:
         xs, vs = list(x_new.unbind(0)), list(v_new.unbind(0))
         geo = present_geometry(pair_geometry(xs), present)
         fs, pairs, potential, goal_distance = _passive(geo, xs, vs, goal, cfg, energy=True)
-        h_stable = _stable(geo, vs, cfg)
+        h_stable, carried = _stable(geo, vs, cfg)
         xn, vn = x_new.permute(1, 2, 0), v_new.permute(1, 2, 0)
         energy = kinetic_energy(vn, p) + pairs
         if p.C_g > 0:  # the energy statistic includes the sink whenever it exists
@@ -281,7 +322,7 @@ def build_advance(cfg: SwarmConfig) -> Callable[..., tuple[torch.Tensor, ...]]:
         r = reward(cfg.reward, inputs) + torch.zeros(B, dtype=x.dtype, device=x.device)
         # rho is returned (and dropped by the caller) so that the compiler stores it once,
         # in the pair loop, instead of recomputing it in every pass of the ranking.
-        return x_new, v_new, torch.stack(fs), obs, packed, r, rho
+        return x_new, v_new, torch.stack(fs + carried), obs, packed, r, rho
 
     return advance
 
@@ -336,8 +377,7 @@ def build_substep(cfg: SwarmConfig) -> Callable[..., tuple[Any, ...]]:
     statistics, no observations: the numpy core's
     :meth:`~swarm_envs.envs.dynamics.SocialPotentialDynamics.step`, one substep per call.
     """
-    p = cfg.physics
-    d, cap = cfg.dim, float(cfg.max_substeps)
+    cap = float(cfg.max_substeps)
     physics_masks = cfg.perturbations.needs_masks
 
     def substep(
@@ -359,20 +399,14 @@ def build_substep(cfg: SwarmConfig) -> Callable[..., tuple[Any, ...]]:
         over, needed = over | late, torch.maximum(needed, wanted)
         active = remaining > 0
         keep, step = active[:, None], h.to(x.dtype)[:, None]
-        xs, vs = [], []
-        for c in range(d):
-            xc, vc = euler_update(
-                x[c], v[c], _held(f[c] + cfg.u_max * a[..., c], mobile), step, p.m
-            )
-            xs.append(torch.where(keep, xc, x[c]))
-            vs.append(torch.where(keep, vc, v[c]))
+        xs, vs = _update(x, v, f, a, step, keep, mobile, cfg)
         used = used + active.to(wide)
         remaining = torch.where(active & ~last, remaining - h, 0.0)
         x_new, v_new = torch.stack(xs), torch.stack(vs)
         xs, vs = list(x_new.unbind(0)), list(v_new.unbind(0))
         geo = present_geometry(pair_geometry(xs), present)
         fs, _, _, _ = _passive(geo, xs, vs, goal, cfg, energy=False)
-        h_new = _stable(geo, vs, cfg)
+        h_new, carried = _stable(geo, vs, cfg)
         # The next substep, planned as the next call would plan it: for the fused step
         # when it is every swarm's last.
         h, last, late, wanted = plan_substep(remaining, h_new.to(wide), used, cap, torch)
@@ -380,7 +414,7 @@ def build_substep(cfg: SwarmConfig) -> Callable[..., tuple[Any, ...]]:
         more = (left & ~last).any()
         counts = torch.stack([(over | late).to(wide), torch.maximum(needed, wanted)])
         final = (torch.where(left, h, 0.0).to(x.dtype), (used + left.to(wide)).to(x.dtype), counts)
-        f_new = torch.stack(fs)
+        f_new = torch.stack(fs + carried)
         return x_new, v_new, f_new, h_new, remaining, used, over, needed, more, final
 
     return substep

@@ -37,6 +37,7 @@ typedef struct {
     double success_threshold; /* derived: success: arrived members / members at least this (success_count's rule) */
     double obs_bound; /* derived: observation clip */
     double rho_floor; /* derived: distance floor */
+    int64_t implicit_damping; /* derived: integrator='implicit_damping_euler' (else semi-implicit Euler) */
     double centre_tol; /* derived: centring tolerance / max |x| */
 } StepParams;
 enum { PK_polarization, PK_angular_momentum, PK_expanse, PK_nearest_neighbor_distance, PK_energy, PK_fraction_arrived, PK_collisions, PK_centroid_distance, PK_mean_goal_distance, PK_goal_angular_momentum, PK_mill_speed, PK_mill_order, PK_success, PK_substeps, PK_unstable, PK_effort, PK_over_cap, PK_needed, PK_SIZE };
@@ -45,5 +46,5 @@ enum { STATUS_ACTIVE = 0, STATUS_FAILED = 1, STATUS_FROZEN = 2, STATUS_ABSENT = 
 enum { AG_PRESENT = 1, AG_MOBILE = 2, AG_ACTIVE = 4 };
 #define STATUS_FLAGS { [STATUS_ACTIVE] = AG_PRESENT | AG_MOBILE | AG_ACTIVE, [STATUS_FAILED] = AG_PRESENT | AG_MOBILE, [STATUS_FROZEN] = AG_PRESENT, [STATUS_ABSENT] = 0 }
 #define STEP_EDGE_NUMERATOR 0x1.ccccccccccccdp+1
-#define STEP_LAYOUT_HASH 273085668556145930LL
+#define STEP_LAYOUT_HASH 1061174465787558010LL
 #endif
