@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -73,6 +74,24 @@ def test_every_shipped_train_config_validates(path: Path):
     tc = load_train_config(path)
     assert tc.swarm_config().n_agents >= 1
     assert set(yaml.safe_load(path.read_text())) <= set(tc.to_dict())
+
+
+def _ppo_recipes() -> list[Any]:
+    """Every shipped PPO recipe, and each benchmark entry's training config (seed 0)."""
+    from train.benchmark.matrix import load_matrix
+
+    recipes = [(p.stem, load_train_config(p)) for p in TRAIN_CONFIGS]
+    recipes += [(e.name, e.train_config(0)) for e in load_matrix().entries]
+    return [pytest.param(name, tc, id=name) for name, tc in recipes if tc.algo == "PPO"]
+
+
+@pytest.mark.parametrize(("name", "tc"), _ppo_recipes())
+def test_every_ppo_recipe_splits_its_rollout_into_whole_minibatches(name, tc: TrainConfig):
+    """A rollout of ``n_steps`` × slots samples is cut into minibatches of ``batch_size``:
+    a remainder would be a small, noisy last minibatch of every epoch (SB3 warns)."""
+    n_steps = tc.hyperparams.get("n_steps", 2048)
+    batch = tc.hyperparams.get("batch_size", 64)
+    assert (n_steps * tc.n_slots) % batch == 0, (name, n_steps, tc.n_slots, batch)
 
 
 def test_paper_navigation_train_config_uses_the_paper_scenario():
