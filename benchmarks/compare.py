@@ -3,7 +3,8 @@
 Usage::
 
     python benchmarks/compare.py [--sizes 32x1,32x64,32x1024] [--seconds 0.5] [--repeats 5]
-                                 [--threads T] [--json out.json] [--no-physics] [--update-docs]
+                                 [--threads T] [--json out.json] [--no-physics] [--rows R1,R2]
+                                 [--update-docs]
 
 Installs nothing. VMAS rows appear where ``vmas`` imports, MPE2 rows where ``mpe2``
 imports (try a separate venv: ``python3.11 -m venv /tmp/peers && /tmp/peers/bin/pip
@@ -28,6 +29,9 @@ Rows, ours (all with random actions in [−1, 1], drawn once per row):
   builds it);
 - ``native vec_env`` / ``torch vec_env (compiled)``: the SB3 VecEnv on the C step (the
   default) or on the compiled torch core;
+- ``native vec_env, implicit damping``: the same VecEnv on the C step with
+  ``integrator="implicit_damping_euler"`` (``docs/models.md`` §7: about one substep per
+  step where the damping limits the explicit rule);
 - ``physics only``: one semi-implicit Euler step of the social potential model, numpy
   and torch plain/compiled (no observations, reward or statistics).
 
@@ -149,14 +153,18 @@ def parallel_env(n: int, b: int) -> Step | None:
     return step
 
 
-def vec_env(backend: str) -> Callable[[int, int], Step | None]:
+def vec_env(
+    backend: str, integrator: str = "semi_implicit_euler"
+) -> Callable[[int, int], Step | None]:
     """The SB3 VecEnv on ``backend``: ``"native"`` (the C step, the default where it
-    builds) or ``"torch"`` (the torch core, compiled)."""
+    builds) or ``"torch"`` (the torch core, compiled), with ``integrator``."""
 
     def make(n: int, b: int) -> Step | None:
         if backend == "native" and not native_support()[0]:
             return None
-        venv = swarm_nav_v0.vec_env(b, n_agents=n, max_steps=200, backend=backend)
+        venv = swarm_nav_v0.vec_env(
+            b, n_agents=n, max_steps=200, backend=backend, integrator=integrator
+        )
         assert venv.backend == backend, venv.backend
         if backend == "torch":
             print(f"    (torch vec_env {b} x {n}: ready in {venv.core.compile_seconds:.1f} s)")
@@ -317,6 +325,7 @@ ROWS: list[tuple[str, Callable[[int, int], Step | None], bool]] = [
     ("native core", native_core, False),
     ("torch vec_env (compiled)", vec_env("torch"), False),
     ("native vec_env", vec_env("native"), False),
+    ("native vec_env, implicit damping", vec_env("native", "implicit_damping_euler"), False),
     ("pettingzoo parallel_env", parallel_env, False),
     ("vmas navigation", vmas_navigation, False),
     ("vmas pairwise", vmas_pairwise, False),
@@ -338,11 +347,14 @@ def time_window(fn: Step, seconds: float) -> float:
             return calls / elapsed
 
 
-def compare(n: int, b: int, seconds: float, repeats: int, physics: bool) -> list[dict]:
-    """Time every available row at N = n, B = b, alternating; one dict per row."""
+def compare(
+    n: int, b: int, seconds: float, repeats: int, physics: bool, only: set[str] | None = None
+) -> list[dict]:
+    """Time every available row at N = n, B = b, alternating; one dict per row (the rows
+    named in ``only``, where given)."""
     steps: dict[str, Step] = {}
     for label, factory, is_physics in ROWS:
-        if is_physics and not physics:
+        if (is_physics and not physics) or (only is not None and label not in only):
             continue
         fn = factory(n, b)
         if fn is None:
@@ -432,6 +444,34 @@ def full_vs_physics(results: list[dict]) -> str:
     return "\n".join(head + lines)
 
 
+#: The rows set against VMAS's simulator core in the "against VMAS" table.
+VS_VMAS = ("native vec_env", "native vec_env, implicit damping", "native core")
+
+
+def against_vmas(results: list[dict]) -> str:
+    """Each of :data:`VS_VMAS` over ``vmas pairwise``, per size (markdown; empty without
+    VMAS): ratios of medians and of bests, both rows from the same run."""
+    lines = []
+    for size in sorted({(r["n_agents"], r["batch"]) for r in results}):
+        rows = {r["row"]: r for r in results if (r["n_agents"], r["batch"]) == size}
+        peer = rows.get("vmas pairwise")
+        if peer is None:
+            continue
+        for label in VS_VMAS:
+            if label in rows:
+                ours = rows[label]
+                median = ours["agent_steps_per_s_median"] / peer["agent_steps_per_s_median"]
+                best = ours["agent_steps_per_s_best"] / peer["agent_steps_per_s_best"]
+                lines.append(f"| {label} | {size[0]} | {size[1]} | {median:.1f}x | {best:.1f}x |")
+    if not lines:
+        return ""
+    head = [
+        "| ours | N | B | over vmas pairwise (medians) | (bests) |",
+        "|---|---:|---:|---:|---:|",
+    ]
+    return "\n".join(head + lines)
+
+
 #: The block of docs/performance.md that ``--update-docs`` rewrites.
 DOCS_BEGIN, DOCS_END = "<!-- begin compare.py -->", "<!-- end compare.py -->"
 
@@ -477,6 +517,9 @@ def main() -> None:
     parser.add_argument("--json", default=None, help="also write the results here")
     parser.add_argument("--no-physics", action="store_true", help="skip physics-only rows")
     parser.add_argument(
+        "--rows", default=None, help="comma-separated row labels to time (default: all)"
+    )
+    parser.add_argument(
         "--update-docs", action="store_true", help="rewrite the tables of docs/performance.md"
     )
     args = parser.parse_args()
@@ -490,16 +533,23 @@ def main() -> None:
             print(f"{mod} {version}: importable")
         except ImportError:
             print(f"{mod}: not importable (its rows are skipped)")
+    labels = {label for label, _, _ in ROWS}
+    only = None if args.rows is None else {r.strip() for r in args.rows.split(",")}
+    if only is not None and not only <= labels:
+        raise SystemExit(f"--rows: unknown {sorted(only - labels)}; rows: {sorted(labels)}")
     results: list[dict] = []
     for n, b in parse_sizes(args.sizes):
         print(f"\n== N = {n}, B = {b} ==", flush=True)
-        results += compare(n, b, args.seconds, args.repeats, not args.no_physics)
+        results += compare(n, b, args.seconds, args.repeats, not args.no_physics, only)
     command = " ".join(["python benchmarks/compare.py", *sys.argv[1:]])
     text = (
         f"Measured by `{command.replace(' --update-docs', '')}` on {machine()}.\n\n"
         f"{table(results)}\n\nCost of the full step (observations, reward, statistics; "
         f"the dict API for PettingZoo) over the physics alone:\n\n{full_vs_physics(results)}"
     )
+    vs_vmas = against_vmas(results)
+    if vs_vmas:
+        text += f"\n\nAgainst VMAS's simulator core (`vmas pairwise`), same run:\n\n{vs_vmas}"
     print()
     print(text)
     if args.update_docs:

@@ -279,8 +279,8 @@ class TorchSwarmNavCore(TaskCore):
             self._advance_part = self._build(
                 self.reset_batch, self._advance.compiled, "TorchSwarmNavCore.reset"
             )
-            rows = torch.zeros(self.reset_batch, dtype=torch.int64, device=self.device)
-            self._advance_part.warmup(*self._row_args(rows))
+            some = torch.zeros(self.reset_batch, dtype=torch.int64, device=self.device)
+            self._advance_part.warmup(*self._row_args(some))
 
     @staticmethod
     def unsupported(cfg: SwarmConfig) -> str | None:
