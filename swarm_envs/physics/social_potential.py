@@ -344,7 +344,7 @@ def stiffness_law(
 
     >>> k, p = stiffness_law(1.0, 1.0, 1.0, 1.0, 1.0, 0.2, math.exp, max)
     >>> round(k, 6), round(p, 6)  # attraction at ρ = 1: only the transverse part is positive
-    (0.667179, -0.333589)
+    (0.668379, -0.33419)
     """
     e_a = exp(rho * (-1.0 / l_a))
     e_r = exp(rho * (-1.0 / l_r))
