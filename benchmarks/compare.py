@@ -29,7 +29,7 @@ Rows, ours (all with random actions in [−1, 1], drawn once per row):
   builds it);
 - ``native vec_env`` / ``torch vec_env (compiled)``: the SB3 VecEnv on the C step (the
   default) or on the compiled torch core;
-- ``native vec_env, implicit damping``: the same VecEnv on the C step with
+- ``native vec_env (implicit damping)``: the same VecEnv on the C step with
   ``integrator="implicit_damping_euler"`` (``docs/models.md`` §7: about one substep per
   step where the damping limits the explicit rule);
 - ``physics only``: one semi-implicit Euler step of the social potential model, numpy
@@ -325,7 +325,7 @@ ROWS: list[tuple[str, Callable[[int, int], Step | None], bool]] = [
     ("native core", native_core, False),
     ("torch vec_env (compiled)", vec_env("torch"), False),
     ("native vec_env", vec_env("native"), False),
-    ("native vec_env, implicit damping", vec_env("native", "implicit_damping_euler"), False),
+    ("native vec_env (implicit damping)", vec_env("native", "implicit_damping_euler"), False),
     ("pettingzoo parallel_env", parallel_env, False),
     ("vmas navigation", vmas_navigation, False),
     ("vmas pairwise", vmas_pairwise, False),
@@ -445,7 +445,7 @@ def full_vs_physics(results: list[dict]) -> str:
 
 
 #: The rows set against VMAS's simulator core in the "against VMAS" table.
-VS_VMAS = ("native vec_env", "native vec_env, implicit damping", "native core")
+VS_VMAS = ("native vec_env", "native vec_env (implicit damping)", "native core")
 
 
 def against_vmas(results: list[dict]) -> str:

@@ -351,7 +351,7 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
                 const int s_first = J == I ? 1 : 0, s_last = J == I ? LANES / 2 : LANES - 1;
                 /* no padding lanes, no statuses */
                 const int full = !masked && I0 + LANES <= N && J0 + LANES <= N;
-#define PAIR_BODY(ALIGN, SAME, FULL, LAST)                                                 \
+#define PAIR_BODY(ALIGN, SAME, FULL, LAST, BLOCK)                                          \
     _Pragma("omp simd") for (int l = 0; l < LANES; l++) {                                  \
         const int valid = FULL || pv[l];                                                    \
         REAL dx0 = xj[0][l] - xi0[l], dx1 = xj[1][l] - xi1[l];                             \
@@ -369,7 +369,7 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
         REAL ea = EXP(r * dec_a);                                                          \
         REAL er = SAME ? ea : EXP(r * dec_r);                                              \
         REAL sp = ea * ca_la - cr_lr * er;                                                 \
-        if (block) { /* stiffness_law: k = max(a, t) + t, p = a − t; Q: p u uᵀ */       \
+        if (BLOCK) { /* stiffness_law: k = max(a, t) + t, p = a − t; Q: p u uᵀ */       \
             const REAL cur = kappa_r * er - kappa_a * ea, tra = sp * inv;                  \
             const REAL a_ = cur > 0 ? cur : 0, t_ = tra > 0 ? tra : 0;                     \
             kx[l] = valid ? (a_ > t_ ? a_ : t_) + t_ : 0;                                  \
@@ -402,7 +402,7 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
             drow[l] = valid ? r : inf;                                                     \
         }                                                                                  \
     }
-#define S_LOOP(ALIGN, SAME, FULL, LAST)                                                    \
+#define S_LOOP(ALIGN, SAME, FULL, LAST, BLOCK)                                             \
     for (int s = s_first; s <= s_last; s++) {                                              \
         const int both = !(J == I && s == LANES / 2); /* else each pair twice */           \
         const REAL w = both ? 2 : 1;                                                       \
@@ -424,7 +424,7 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
             memcpy(vj[c], &t, sizeof t);                                                   \
         }                                                                                  \
         REAL *drow = rho + ((I * nb + J) * LANES + s) * LANES;                             \
-        PAIR_BODY(ALIGN, SAME, FULL, LAST)                                                 \
+        PAIR_BODY(ALIGN, SAME, FULL, LAST, BLOCK)                                          \
         { /* to i, in its lane */                                                          \
             VREAL t;                                                                       \
             for (int64_t c = 0; c < d; c++) {                                              \
@@ -433,7 +433,7 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
             }                                                                              \
             memcpy(&t, kx, sizeof t);                                                      \
             KI += t;                                                                       \
-            if (block)                                                                     \
+            if (BLOCK)                                                                     \
                 for (int64_t q = 0; q < nq; q++) {                                         \
                     memcpy(&t, qx[q], sizeof t);                                           \
                     QI[q] += t;                                                            \
@@ -460,7 +460,7 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
             VREAL t;                                                                       \
             memcpy(&t, kx, sizeof t);                                                      \
             KJ += __builtin_shuffle(t, back);                                              \
-            if (block)                                                                     \
+            if (BLOCK)                                                                     \
                 for (int64_t q = 0; q < nq; q++) {                                         \
                     memcpy(&t, qx[q], sizeof t);                                           \
                     QJ[q] += __builtin_shuffle(t, back);                                   \
@@ -476,22 +476,28 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
                  * its own offset loop, so that its sums stay in registers. The other
                  * passes do not share the exponential of equal decay lengths (four
                  * copies fewer to compile). */
-                if (last) {
-                    if (full) {
-                        if (alignment) {
-                            if (same_decay) { S_LOOP(1, 1, 1, 1) } else { S_LOOP(1, 0, 1, 1) }
-                        } else {
-                            if (same_decay) { S_LOOP(0, 1, 1, 1) } else { S_LOOP(0, 0, 1, 1) }
-                        }
-                    } else if (alignment) {
-                        if (same_decay) { S_LOOP(1, 1, 0, 1) } else { S_LOOP(1, 0, 0, 1) }
-                    } else {
-                        if (same_decay) { S_LOOP(0, 1, 0, 1) } else { S_LOOP(0, 0, 0, 1) }
-                    }
-                } else if (full) {
-                    if (alignment) { S_LOOP(1, 0, 1, 0) } else { S_LOOP(0, 0, 1, 0) }
+                if (block) { /* the block bound: one copy, its other flags at run time */
+                    S_LOOP(alignment, 0, 0, last, 1)
                 } else {
-                    if (alignment) { S_LOOP(1, 0, 0, 0) } else { S_LOOP(0, 0, 0, 0) }
+                    if (last) {
+                        if (full) {
+                            if (alignment) {
+                                if (same_decay) { S_LOOP(1, 1, 1, 1, 0) }
+                                else { S_LOOP(1, 0, 1, 1, 0) }
+                            } else {
+                                if (same_decay) { S_LOOP(0, 1, 1, 1, 0) }
+                                else { S_LOOP(0, 0, 1, 1, 0) }
+                            }
+                        } else if (alignment) {
+                            if (same_decay) { S_LOOP(1, 1, 0, 1, 0) } else { S_LOOP(1, 0, 0, 1, 0) }
+                        } else {
+                            if (same_decay) { S_LOOP(0, 1, 0, 1, 0) } else { S_LOOP(0, 0, 0, 1, 0) }
+                        }
+                    } else if (full) {
+                        if (alignment) { S_LOOP(1, 0, 1, 0, 0) } else { S_LOOP(0, 0, 1, 0, 0) }
+                    } else {
+                        if (alignment) { S_LOOP(1, 0, 0, 0, 0) } else { S_LOOP(0, 0, 0, 0, 0) }
+                    }
                 }
 #undef S_LOOP
 #undef PAIR_BODY
