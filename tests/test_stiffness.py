@@ -68,3 +68,12 @@ def test_the_warning_comes_once_per_config_across_cores():
     first, _ = _run(STIFF, "numpy", STIFF_WINDOW)
     again, _ = _run(STIFF, "numpy", STIFF_WINDOW)
     assert len(first) == 1 and again == []
+
+
+def test_a_stiff_lagrangian_swarm_is_told_of_its_own_tolerance():
+    cfg = SwarmConfig(dynamics="lagrangian")
+    stats = {"nearest_neighbor_distance": np.array([0.3]), "expanse": np.array([1.0])}
+    message = stiffness.stiff_message(cfg, stats, 0, 9.0, STIFF_WINDOW)
+    for part in ("step_tol=", "lagrangian.step_tol", "lagrangian.r", "lower dt"):
+        assert part in message, (part, message)
+    assert "H-stable" not in message  # the social potential's cause is not this model's

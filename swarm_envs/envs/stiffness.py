@@ -117,4 +117,19 @@ def stiff_message(
             + remedy
             + ", or, for large N, backend='cutoff' or 'torch' (each substep cheaper)"
         )
+    elif cfg.dynamics == "lagrangian":
+        lag = cfg.lagrangian
+        cause += (
+            f"; the Lagrangian step's substeps keep each pair's clearance from the safety "
+            f"radii (r={lag.r}) and its local error within step_tol={lag.step_tol:g} of "
+            "that clearance, so close pairs take short substeps"
+        )
+        loosest = (
+            "" if lag.step_tol >= 1.0 else "a looser tolerance (lagrangian.step_tol, at most 1), "
+        )
+        remedy = (
+            loosest
+            + "smaller safety radii (lagrangian.r), a less dense start (init_density), "
+            + remedy
+        )
     return f"stiff swarm: {cause}. To speed it up: {remedy}. (Said once per config.)"
