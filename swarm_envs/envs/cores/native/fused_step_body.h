@@ -59,8 +59,7 @@ static inline __attribute__((always_inline)) void KNN_BLOCK(
                 }
 #ifdef KNN_KEYS
                 const VINDEX bits = (VINDEX)cd;
-                vkey c_lo = (KEY_HALF(bits, 0) << 32) | KEY_HALF(ci, 0);
-                vkey c_hi = (KEY_HALF(bits, 1) << 32) | KEY_HALF(ci, 1);
+                vkey c_lo = KEY_HALF(bits, ci, 0), c_hi = KEY_HALF(bits, ci, 1);
                 for (int64_t q = 0; q < K; q++) {
                     vkey t = key_min(lo[q], c_lo);
                     c_lo = key_max(lo[q], c_lo);
@@ -516,9 +515,12 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
             for (int l = 0; l < LANES; l++) {
                 ks[I0 + l] += KI[l];
                 ws[I0 + l] += WI[l];
-                energy_pairs += E_lane[l];
-                close_pairs += close_lane[l];
             }
+            if (last) /* the other passes sum no energy and no close pairs */
+                for (int l = 0; l < LANES; l++) {
+                    energy_pairs += E_lane[l];
+                    close_pairs += close_lane[l];
+                }
             if (block)
                 for (int64_t q = 0; q < nq; q++)
                     for (int l = 0; l < LANES; l++) qs[q * NP + I0 + l] += QI[q][l];
