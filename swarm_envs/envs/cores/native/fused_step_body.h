@@ -475,9 +475,11 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
                  * its own offset loop, so that its sums stay in registers. The other
                  * passes do not share the exponential of equal decay lengths (four
                  * copies fewer to compile). */
-                if (block) { /* the block bound: in 2-D a tile without padding lanes as
-                              * one copy, the other tiles (and every 3-D tile) as another;
-                              * their other flags at run time */
+                if (block) { /* the block bound: in 2-D a tile without padding lanes
+                              * (and without statuses) as two copies, the last pass's and
+                              * the others'; every other tile as one more copy, its flags
+                              * at run time (in 3-D a copy per tile kind would let the
+                              * compiler fuse other multiply-adds: other last bits) */
                     if (d == 2 && full && last) { S_LOOP(alignment, 0, 1, 1, 1) }
                     else if (d == 2 && full) { S_LOOP(alignment, 0, 1, 0, 1) }
                     else { S_LOOP(alignment, 0, 0, last, 1) }
