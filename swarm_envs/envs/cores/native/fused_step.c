@@ -136,12 +136,23 @@ typedef int32_t vindex_f32 __attribute__((vector_size(64)));
 #define STABLE_SUBSTEP stable_substep_f32
 #define SWARM_STATS swarm_stats_f32
 typedef uint64_t vkey __attribute__((vector_size(64)));
-/* Lanes [8h, 8h + 8) of a 16-lane int32 vector, zero-extended to 64 bits. */
-#define KEY_HALF(v, h)                                                                 \
+/* The keys of lanes [8h, 8h + 8) of the 16-lane int32 vectors bits and ci: lane l's
+ * bits above its ci, (bits << 32) | ci as 64-bit integers. On a little-endian machine the
+ * two words of a key are its lane of ci then its lane of bits: one interleaving shuffle. */
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+#define KEY_HALF(bits, ci, h)                                                          \
+    ((h) ? (vkey)__builtin_shufflevector((ci), (bits), 8, 24, 9, 25, 10, 26, 11, 27, 12, \
+                                         28, 13, 29, 14, 30, 15, 31)                    \
+         : (vkey)__builtin_shufflevector((ci), (bits), 0, 16, 1, 17, 2, 18, 3, 19, 4,   \
+                                         20, 5, 21, 6, 22, 7, 23))
+#else
+#define KEY_WORDS(v, h)                                                                \
     __builtin_convertvector(                                                           \
         (h) ? __builtin_shufflevector((v), (v), 8, 9, 10, 11, 12, 13, 14, 15)          \
             : __builtin_shufflevector((v), (v), 0, 1, 2, 3, 4, 5, 6, 7),               \
         vkey)
+#define KEY_HALF(bits, ci, h) ((KEY_WORDS(bits, h) << 32) | KEY_WORDS(ci, h))
+#endif
 #ifdef __AVX512F__
 static inline vkey key_min(vkey a, vkey b) { return (vkey)_mm512_min_epu64((__m512i)a, (__m512i)b); }
 static inline vkey key_max(vkey a, vkey b) { return (vkey)_mm512_max_epu64((__m512i)a, (__m512i)b); }

@@ -59,8 +59,7 @@ static inline __attribute__((always_inline)) void KNN_BLOCK(
                 }
 #ifdef KNN_KEYS
                 const VINDEX bits = (VINDEX)cd;
-                vkey c_lo = (KEY_HALF(bits, 0) << 32) | KEY_HALF(ci, 0);
-                vkey c_hi = (KEY_HALF(bits, 1) << 32) | KEY_HALF(ci, 1);
+                vkey c_lo = KEY_HALF(bits, ci, 0), c_hi = KEY_HALF(bits, ci, 1);
                 for (int64_t q = 0; q < K; q++) {
                     vkey t = key_min(lo[q], c_lo);
                     c_lo = key_max(lo[q], c_lo);
@@ -476,8 +475,14 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
                  * its own offset loop, so that its sums stay in registers. The other
                  * passes do not share the exponential of equal decay lengths (four
                  * copies fewer to compile). */
-                if (block) { /* the block bound: one copy, its other flags at run time */
-                    S_LOOP(alignment, 0, 0, last, 1)
+                if (block) { /* the block bound: in 2-D a tile without padding lanes
+                              * (and without statuses) as two copies, the last pass's and
+                              * the others'; every other tile as one more copy, its flags
+                              * at run time (in 3-D a copy per tile kind would let the
+                              * compiler fuse other multiply-adds: other last bits) */
+                    if (d == 2 && full && last) { S_LOOP(alignment, 0, 1, 1, 1) }
+                    else if (d == 2 && full) { S_LOOP(alignment, 0, 1, 0, 1) }
+                    else { S_LOOP(alignment, 0, 0, last, 1) }
                 } else {
                     if (last) {
                         if (full) {
@@ -516,9 +521,12 @@ static inline __attribute__((always_inline)) int FUSED_SWARM(
             for (int l = 0; l < LANES; l++) {
                 ks[I0 + l] += KI[l];
                 ws[I0 + l] += WI[l];
-                energy_pairs += E_lane[l];
-                close_pairs += close_lane[l];
             }
+            if (last) /* the other passes sum no energy and no close pairs */
+                for (int l = 0; l < LANES; l++) {
+                    energy_pairs += E_lane[l];
+                    close_pairs += close_lane[l];
+                }
             if (block)
                 for (int64_t q = 0; q < nq; q++)
                     for (int l = 0; l < LANES; l++) qs[q * NP + I0 + l] += QI[q][l];

@@ -46,7 +46,7 @@ static inline __attribute__((always_inline)) void SWARM_STATS(
         const REAL den = moves ? speed : 1;
         hs0 += member ? (moves ? v0[i] : 0) / den : 0;
         hs1 += member ? (moves ? v1[i] : 0) / den : 0;
-        hs2 += member ? (moves ? vz : 0) / den : 0;
+        if (d == 3) hs2 += member ? (moves ? vz : 0) / den : 0; /* else +0 */
         cs0 += member ? x0[i] : 0;
         cs1 += member ? x1[i] : 0;
         cs2 += member ? xz : 0;
