@@ -104,7 +104,7 @@ def test_paper_navigation_train_config_uses_the_paper_scenario():
     ("data", "fragment"),
     [
         ({"algoo": "PPO"}, "unknown config key 'algoo'"),
-        ({"algo": "DQN"}, "algo must be one of ('PPO', 'SAC')"),
+        ({"algo": "DQN"}, "algo must be one of ('PPO', 'SAC', 'ES')"),
         ({"mode": "solo"}, "mode must be one of ('shared', 'central')"),
         ({"n_swarms": 0}, "n_swarms must be an integer >= 1"),
         ({"total_timesteps": 1.5}, "total_timesteps must be an integer"),

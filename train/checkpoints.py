@@ -145,7 +145,7 @@ def save_checkpoint(model: Any, out: Path, extra: dict[str, Any], keep: int) -> 
     if final.exists():  # an incomplete folder of that name (no state.json)
         shutil.rmtree(final)
     os.replace(tmp, final)
-    _prune(out, keep)
+    prune_checkpoints(out, keep)
     return final
 
 
@@ -193,7 +193,8 @@ def _load_env(path: Path) -> Any:
     return env
 
 
-def _prune(out: Path, keep: int) -> None:
+def prune_checkpoints(out: Path, keep: int) -> None:
+    """Remove all but the ``keep`` newest checkpoints of ``out``, and unfinished ones."""
     for old in list_checkpoints(out)[:-keep]:
         shutil.rmtree(old, ignore_errors=True)
     for partial in (Path(out) / CHECKPOINTS).glob(PARTIAL + "*"):

@@ -36,7 +36,9 @@ from train.integers import ACCEPTED, check_integer, coerce_integer_fields, integ
 if TYPE_CHECKING:
     from stable_baselines3.common.base_class import BaseAlgorithm
 
-ALGOS = ("PPO", "SAC")
+#: ``PPO`` and ``SAC`` are SB3's; ``ES`` is evolution strategies on the deterministic
+#: shared policy (:mod:`train.es`).
+ALGOS = ("PPO", "SAC", "ES")
 #: The SB3 policy every run builds (its class per algorithm: ``policy_aliases``).
 POLICY = "MlpPolicy"
 #: Keys a resumed run may change (``swarm-train --resume DIR key=value``): the total
@@ -52,12 +54,13 @@ RESERVED = {"policy", "env", "seed", "device", "policy_kwargs", "tensorboard_log
 
 
 def algorithm_class(name: str) -> type[BaseAlgorithm]:
-    """The SB3 class for ``name`` (one of :data:`ALGOS`)."""
+    """The SB3 class for ``name`` (one of :data:`ALGOS`; ``ES`` saves its policy as a
+    PPO model, so its class is PPO's)."""
     import stable_baselines3
 
     if name not in ALGOS:
         raise ValueError(f"algo must be one of {ALGOS}, got {name!r}")
-    return getattr(stable_baselines3, name)
+    return getattr(stable_baselines3, "PPO" if name == "ES" else name)
 
 
 def actor_critic(cls: type[BaseAlgorithm]) -> bool:
@@ -115,7 +118,8 @@ class TrainConfig(RunConfig):
     ``central`` mode."""
 
     algo: str = "PPO"
-    """SB3 algorithm: ``PPO`` or ``SAC``."""
+    """``PPO`` or ``SAC`` (SB3's), or ``ES``: evolution strategies on the deterministic
+    shared policy (:mod:`train.es`; ``n_swarms`` is the episodes each candidate runs)."""
     mode: str = "shared"
     """``shared``: one policy for every agent through ``swarm_nav_v0.vec_env``;
     ``central``: one policy over the whole swarm through the Gymnasium env."""
@@ -221,6 +225,9 @@ class TrainConfig(RunConfig):
         object.__setattr__(self, "plugins", load_run_plugins(self.plugins))
         if not isinstance(self.hyperparams, Mapping):
             raise ValueError(f"hyperparams must be a mapping, got {self.hyperparams!r}")
+        if self.algo == "ES":
+            self._check_es()
+            return
         allowed = set(inspect.signature(cls.__init__).parameters) - RESERVED - {"self"}
         allowed = {a for a in allowed if not a.startswith("_")}
         for key in self.hyperparams:
@@ -249,6 +256,27 @@ class TrainConfig(RunConfig):
         n_envs = self.n_swarms * (self.swarm_config().n_agents if self.mode == "shared" else 1)
         hyper = check_hyperparams(self.algo, self.hyperparams, n_envs)
         object.__setattr__(self, "hyperparams", hyper)
+
+    def _check_es(self) -> None:
+        """The checks of an ``algo: ES`` run (:mod:`train.es`)."""
+        from train.es import check_es_hyperparams
+
+        if self.mode != "shared":
+            raise ValueError(
+                f"algo ES trains a shared policy: mode must be 'shared', got {self.mode!r}"
+            )
+        for name in ("residual_warmup", "eval_freq"):
+            if getattr(self, name):
+                raise ValueError(
+                    f"{name} must be 0 with algo ES (it has no value function and reports its "
+                    f"centre's return every generation), got {getattr(self, name)!r}"
+                )
+        if self.residual is not None:
+            from train.residual import check_baseline_name
+
+            check_baseline_name(self.residual)
+        self._check_env()
+        object.__setattr__(self, "hyperparams", check_es_hyperparams(self.hyperparams))
 
     @property
     def n_slots(self) -> int:

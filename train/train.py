@@ -79,6 +79,7 @@ from train.checkpoints import (
     write_atomic,
 )
 from train.config import POLICY, TrainConfig, algorithm_class
+from train.es import ES
 from train.evaluate.policies import TRAINED_ENV, trained_env_record
 from train.interrupt import StopRequest, TrainingInterrupted, stop_on_signals
 from train.outdir import RUN_FILES, check_out_dir, prepare_out_dir
@@ -239,15 +240,17 @@ def train(
         check_out_dir(out, overwrite=overwrite)
     if tc.torch_threads is not None:
         torch.set_num_threads(tc.torch_threads)
+    if tc.algo == ES:
+        return _train_es(
+            tc, out, progress_bar, verbose, overwrite, resume, stop, handle_signals, prog
+        )
     tb = str(out / "tensorboard") if tensorboard and _has_tensorboard() else None
     if resume:
         model, state = _resume_model(tc, out, tb)
     else:
         model, state = _new_model(tc, tb), {"train_seconds": 0.0, "evaluator": None}
         prepare_out_dir(out, overwrite=overwrite, patterns=RUN_FILES, prog=prog)
-    cfg = tc.swarm_config()
-    (out / "train_config.yaml").write_text(yaml.safe_dump(tc.to_dict(), sort_keys=False))
-    (out / "env_config.yaml").write_text(yaml.safe_dump(as_dict(cfg), sort_keys=False))
+    cfg = _write_run_configs(tc, out)
     run = _Run(tc, out, model, float(state["train_seconds"]))
     callbacks: list[Any] = [SwarmStatsCallback(cfg)]
     if tc.residual is not None and tc.residual_warmup > 0:
@@ -304,6 +307,49 @@ def train(
     return out / "model.zip"
 
 
+def _train_es(
+    tc: TrainConfig,
+    out: Path,
+    progress_bar: bool,
+    verbose: int,
+    overwrite: bool,
+    resume: bool,
+    stop: StopRequest,
+    handle_signals: bool,
+    prog: str,
+) -> Path:
+    """:func:`train` for ``algo: ES`` (:mod:`train.es`): the same output folder."""
+    from train.es import train_es
+
+    if resume and latest_checkpoint(out) is None:
+        raise _nothing_to_resume(out)
+    if not resume:
+        prepare_out_dir(out, overwrite=overwrite, patterns=RUN_FILES, prog=prog)
+    _write_run_configs(tc, out)
+    return train_es(
+        tc,
+        out,
+        progress_bar=progress_bar,
+        verbose=verbose,
+        resume=resume,
+        stop=stop,
+        handle_signals=handle_signals,
+    )
+
+
+def _write_run_configs(tc: TrainConfig, out: Path) -> Any:
+    """Write ``train_config.yaml`` and ``env_config.yaml`` into ``out``; return the
+    resolved :class:`~swarm_envs.config.SwarmConfig`."""
+    cfg = tc.swarm_config()
+    (out / "train_config.yaml").write_text(yaml.safe_dump(tc.to_dict(), sort_keys=False))
+    (out / "env_config.yaml").write_text(yaml.safe_dump(as_dict(cfg), sort_keys=False))
+    return cfg
+
+
+def _nothing_to_resume(out: Path) -> TrainSetupError:
+    return TrainSetupError(f"--resume {out}: no checkpoint in {out / CHECKPOINTS} to continue from")
+
+
 def _new_model(tc: TrainConfig, tensorboard_log: str | None) -> Any:
     """A fresh model of ``tc`` on its training env; SB3's own refusals as ValueError."""
     venv = make_training_env(tc)
@@ -318,9 +364,7 @@ def _resume_model(tc: TrainConfig, out: Path, tensorboard_log: str | None) -> tu
     """The model of the latest checkpoint in ``out`` and its saved state."""
     ckpt = latest_checkpoint(out)
     if ckpt is None:
-        raise TrainSetupError(
-            f"--resume {out}: no checkpoint in {out / CHECKPOINTS} to continue from"
-        )
+        raise _nothing_to_resume(out)
     done = checkpoint_timesteps(ckpt)
     if done >= tc.total_timesteps:
         raise TrainSetupError(
@@ -379,42 +423,53 @@ class _Run:
         self.write_meta(status)
 
     def write_meta(self, status: str) -> None:
-        """``meta.json``: versions, run description, progress and ``status``.
-
-        ``status`` is ``running`` (also what a killed run leaves), ``interrupted`` or
-        ``completed``; ``timesteps`` and ``checkpoint`` describe what ``model.zip`` holds.
-        """
-        import stable_baselines3
-        import torch
-
-        tc = self.tc
-        timesteps = checkpoint_timesteps(self.checkpoint_path) if self.checkpoint_path else 0
-        meta = {
-            "swarm_envs": swarm_envs.__version__,
-            "stable_baselines3": stable_baselines3.__version__,
-            "torch": torch.__version__,
-            "numpy": np.__version__,
-            "python": platform.python_version(),
-            "machine": platform.machine(),
-            "algo": tc.algo,
-            "mode": tc.mode,
-            "seed": tc.seed,
-            "total_timesteps": tc.total_timesteps,
-            "status": status,
-            "timesteps": timesteps,
-            "checkpoint": (
-                str(self.checkpoint_path.relative_to(self.out)) if self.checkpoint_path else None
-            ),
-            "train_seconds": round(self.train_seconds(), 2),
-            "torch_threads": torch.get_num_threads(),
-            "env": {
-                k: v
-                for k, v in trained_env_record(tc.swarm_config(), tc.env_id).items()
-                if k != "env_config"  # env_config.yaml holds it
-            },
-            "evaluations": self.evaluator.history if self.evaluator is not None else [],
-        }
+        """``meta.json`` (:func:`run_meta`) with ``status`` and the periodic evaluations."""
+        path = self.checkpoint_path
+        meta = run_meta(
+            self.tc,
+            status,
+            checkpoint_timesteps(path) if path else 0,
+            str(path.relative_to(self.out)) if path else None,
+            self.train_seconds(),
+        )
+        meta["evaluations"] = self.evaluator.history if self.evaluator is not None else []
         write_atomic(self.out / "meta.json", json.dumps(meta, indent=2) + "\n")
+
+
+def run_meta(
+    tc: TrainConfig, status: str, timesteps: int, checkpoint: str | None, train_seconds: float
+) -> dict[str, Any]:
+    """What ``meta.json`` says of a run: versions, the run's description, its progress.
+
+    ``status`` is ``running`` (also what a killed run leaves), ``interrupted`` or
+    ``completed``; ``timesteps`` and ``checkpoint`` (relative to the output folder)
+    describe what ``model.zip`` holds.
+    """
+    import stable_baselines3
+    import torch
+
+    return {
+        "swarm_envs": swarm_envs.__version__,
+        "stable_baselines3": stable_baselines3.__version__,
+        "torch": torch.__version__,
+        "numpy": np.__version__,
+        "python": platform.python_version(),
+        "machine": platform.machine(),
+        "algo": tc.algo,
+        "mode": tc.mode,
+        "seed": tc.seed,
+        "total_timesteps": tc.total_timesteps,
+        "status": status,
+        "timesteps": timesteps,
+        "checkpoint": checkpoint,
+        "train_seconds": round(train_seconds, 2),
+        "torch_threads": torch.get_num_threads(),
+        "env": {
+            k: v
+            for k, v in trained_env_record(tc.swarm_config(), tc.env_id).items()
+            if k != "env_config"  # env_config.yaml holds it
+        },
+    }
 
 
 def _has_tensorboard() -> bool:

@@ -109,11 +109,14 @@ def quick_overrides(tc: TrainConfig) -> dict[str, Any]:
     """TrainConfig overrides of a smoke run of ``tc``: two swarms, about one update.
 
     PPO: one rollout of 32 steps on every slot and one epoch over it; SAC: 16 vector
-    steps, learning from the first, one gradient step each. The networks and the env
+    steps, learning from the first, one gradient step each; ES: one generation of two
+    candidates. The networks and the env
     stay as configured.
     """
     slots = 2 * (tc.swarm_config().n_agents if tc.mode == "shared" else 1)
     base: dict[str, Any] = {"n_swarms": 2, "eval_freq": 0, "checkpoint_freq": 0}
+    if tc.algo == "ES":  # one generation of one antithetic pair
+        return {**base, "total_timesteps": 1, "hyperparams": {"population": 2}}
     if tc.algo == "PPO":
         hyper = {"n_steps": 32, "batch_size": 64, "n_epochs": 1}
         return {**base, "total_timesteps": 32 * slots, "hyperparams": hyper}
