@@ -91,9 +91,9 @@ def test_the_update_climbs_a_smooth_objective():
 
 
 def _policy(tc):
-    from train.es import _policy_model
+    from train.es import policy_model
 
-    return _policy_model(tc)
+    return policy_model(tc)
 
 
 def test_actor_vector_round_trips_and_acts_as_sb3_predicts():

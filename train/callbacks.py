@@ -145,6 +145,21 @@ class AnalyticBaselineEvalCallback(BaseCallback):
         self._next_eval = int(state["next_eval"])
 
 
+def progress_line(done: int, total: int, done_at_start: int, elapsed: float) -> str:
+    """``progress: <done> / <total> timesteps (<percent> %), <seconds> s, <rate>
+    timesteps/s``, the rate over this process's ``elapsed`` seconds.
+
+    >>> progress_line(500, 1000, 100, 4.0)
+    'progress: 500 / 1,000 timesteps (50 %), 4 s, 100 timesteps/s'
+    """
+    rate = (done - done_at_start) / elapsed if elapsed > 0 else 0.0
+    percent = 100.0 * done / total if total > 0 else 100.0
+    return (
+        f"progress: {done:,} / {total:,} timesteps ({percent:.0f} %), "
+        f"{elapsed:.0f} s, {rate:,.0f} timesteps/s"
+    )
+
+
 class ProgressLines(BaseCallback):
     """One progress line at least every ``every_seconds`` of wall time, for a log file.
 
@@ -169,14 +184,7 @@ class ProgressLines(BaseCallback):
 
     def _line(self, now: float) -> str:
         clock, steps = self._start
-        elapsed = now - clock
-        done = self.model.num_timesteps
-        rate = (done - steps) / elapsed if elapsed > 0 else 0.0
-        percent = 100.0 * done / self.total if self.total > 0 else 100.0
-        return (
-            f"progress: {done:,} / {self.total:,} timesteps ({percent:.0f} %), "
-            f"{elapsed:.0f} s, {rate:,.0f} timesteps/s"
-        )
+        return progress_line(self.model.num_timesteps, self.total, steps, now - clock)
 
     def _emit(self, now: float) -> None:
         self._last = now

@@ -34,7 +34,6 @@ import json
 import math
 import os
 import shutil
-import sys
 import time
 from collections.abc import Mapping
 from dataclasses import replace
@@ -59,6 +58,9 @@ _ADAM = (0.9, 0.999, 1e-8)
 
 #: The first word of every generation's episode seed (``(_STREAM, seed, generation)``).
 _STREAM = 0x45_53
+
+#: Generations whose centre's return ``meta.json`` (and a checkpoint) keeps.
+_HISTORY = 20
 
 #: A checkpoint's ES state, beside its ``model.zip`` and ``state.json``.
 STATE_FILE = "es_state.npz"
@@ -280,7 +282,7 @@ class EvolutionStrategy:
         self.rng.bit_generator.state = state["rng"]
 
 
-def _policy_model(tc: Any) -> Any:
+def policy_model(tc: Any) -> Any:
     """The PPO model whose actor ES trains (seeded: its initial actor is ``θ₀``), on a
     one-swarm training env (only its spaces are used)."""
     from train.train import build_model, make_training_env
@@ -305,7 +307,9 @@ def train_es(
     checked (and, without ``resume``, emptied). Returns ``out/model.zip``."""
     import contextlib
 
+    from train.callbacks import progress_line
     from train.checkpoints import (
+        PARTIAL,
         checkpoint_dir,
         checkpoint_timesteps,
         copy_atomic,
@@ -315,20 +319,22 @@ def train_es(
     )
     from train.interrupt import TrainingInterrupted, stop_on_signals
     from train.residual import RESIDUAL, make_baseline
-    from train.train import run_meta
+    from train.train import PROGRESS_LINE_SECONDS, run_meta
 
     cfg = tc.swarm_config()
-    model = _policy_model(tc)
+    model = policy_model(tc)
     actor = ActorParameters(model.policy)
     hyper = check_es_hyperparams(tc.hyperparams)
     es = EvolutionStrategy(actor.flat(), hyper, tc.seed)
     timesteps, seconds_before = 0, 0.0
+    history: list[dict[str, float]] = []
     if resume:
         ckpt = latest_checkpoint(out)
         assert ckpt is not None  # train.train checked
         state = json.loads((ckpt / "state.json").read_text())
         es.restore(ckpt / STATE_FILE, state["es"])
         timesteps, seconds_before = int(state["timesteps"]), float(state["train_seconds"])
+        history.extend(state.get("history", []))
     baseline = (
         make_baseline(tc.residual, cfg, getattr(model, RESIDUAL)["gains"]) if tc.residual else None
     )
@@ -336,7 +342,6 @@ def train_es(
     rollouts = Rollouts(cfg, actor, baseline, P + 1, tc.n_swarms)
     clock = time.perf_counter()
     saved_at = (time.monotonic(), timesteps)
-    history: list[dict[str, float]] = []
 
     def seconds() -> float:
         return seconds_before + time.perf_counter() - clock
@@ -346,12 +351,12 @@ def train_es(
         meta = run_meta(
             tc, status, checkpoint_timesteps(ckpt), str(ckpt.relative_to(out)), seconds()
         )
-        meta["es"] = {"generations": es.generation, "centre_returns": history[-20:]}
+        meta["es"] = {"generations": es.generation, "centre_returns": history[-_HISTORY:]}
         write_atomic(out / "meta.json", json.dumps(meta, indent=2) + "\n")
 
     def checkpoint() -> Path:
         final = checkpoint_dir(out, timesteps)
-        tmp = final.with_name(".partial-" + final.name)
+        tmp = final.with_name(PARTIAL + final.name)
         if tmp.exists():
             shutil.rmtree(tmp)
         tmp.mkdir(parents=True)
@@ -359,7 +364,12 @@ def train_es(
         model.num_timesteps = timesteps
         model.save(tmp / "model.zip")
         extra = es.save(tmp / STATE_FILE)
-        state = {"timesteps": timesteps, "train_seconds": round(seconds(), 3), "es": extra}
+        state = {
+            "timesteps": timesteps,
+            "train_seconds": round(seconds(), 3),
+            "es": extra,
+            "history": history[-_HISTORY:],
+        }
         (tmp / "state.json").write_text(json.dumps(state, indent=2) + "\n")
         if final.exists():
             shutil.rmtree(final)
@@ -374,7 +384,11 @@ def train_es(
             f"{what} ES ({P} candidates × {tc.n_swarms} episodes, {actor.size} parameters) for "
             f"{tc.total_timesteps:,} timesteps; N = {cfg.n_agents}; out = {out}"
         )
-    last_line = time.monotonic()
+    last_line, start_steps = time.monotonic(), timesteps
+
+    def seconds_now() -> float:
+        return time.perf_counter() - clock
+
     guards = stop_on_signals(stop) if handle_signals else contextlib.nullcontext(stop)
     with guards:
         ckpt = checkpoint() if not resume else latest_checkpoint(out)
@@ -400,12 +414,11 @@ def train_es(
             if by_time or by_steps:
                 ckpt = checkpoint()
                 saved_at = (time.monotonic(), timesteps)
-            if progress_bar and time.monotonic() - last_line >= 10.0:
+            if progress_bar and time.monotonic() - last_line >= PROGRESS_LINE_SECONDS:
                 last_line = time.monotonic()
+                line = progress_line(timesteps, tc.total_timesteps, start_steps, seconds_now())
                 print(
-                    f"ES generation {es.generation}: {timesteps:,}/{tc.total_timesteps:,} "
-                    f"timesteps, centre's return {returns[P]:.3f}",
-                    file=sys.stderr,
+                    f"{line}; generation {es.generation}, centre's return {returns[P]:.3f}",
                     flush=True,
                 )
         ckpt = checkpoint()

@@ -351,7 +351,12 @@ def _nothing_to_resume(out: Path) -> TrainSetupError:
 
 
 def _new_model(tc: TrainConfig, tensorboard_log: str | None) -> Any:
-    """A fresh model of ``tc`` on its training env; SB3's own refusals as ValueError."""
+    """A fresh model of ``tc`` on its training env; SB3's own refusals as ValueError
+    (``algo: ES``: the PPO model whose actor it trains, :func:`train.es.policy_model`)."""
+    if tc.algo == ES:
+        from train.es import policy_model
+
+        return policy_model(tc)
     venv = make_training_env(tc)
     try:
         return build_model(tc, venv, tensorboard_log=tensorboard_log)
