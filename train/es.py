@@ -8,7 +8,7 @@ evolution strategies: each generation draws ``population / 2`` Gaussian directio
 same starts, informed agents and perturbations), shapes the candidates' mean returns
 into centred ranks and steps ``θ`` along ``Σ_k (rank⁺_k − rank⁻_k) ε_k / (population σ)``
 with Adam, less ``weight_decay · θ``. All candidates' episodes step together on one
-batched core (``population × n_swarms`` swarms), each until its episode ends; a
+batched core (``(population + 1) × n_swarms`` swarms), each until its episode ends; a
 candidate that makes its swarm unstable ends that episode there (the config's
 ``on_unstable`` is taken as ``"truncate"``), which its return pays for.
 
@@ -19,13 +19,15 @@ mean: a residual policy (``residual: <baseline>``) starts at its baseline's retu
 rises. ``total_timesteps`` counts the agent-steps every candidate's episodes took.
 
 A run writes what an SB3 run writes (:mod:`train.train`): ``model.zip`` is a PPO model
-whose actor holds ``θ`` (its value function is untrained, its log standard deviation
-``residual_log_std``), so every evaluation tool loads it as any shared policy;
+whose actor holds ``θ`` (its value function is untrained; its log standard deviation
+is ``residual_log_std`` with a ``residual``, else SB3's 0), so every evaluation tool
+loads it as any shared policy;
 checkpoints (``checkpoints/step_<timesteps>/``: ``model.zip``, ``es_state.npz`` with
-``θ`` and Adam's moments, ``state.json`` with the generation, the generator's state and
-the training seconds) are taken between generations every ``checkpoint_seconds`` and
-``checkpoint_freq`` timesteps, on a stop request and at the end; ``resume`` continues
-from the newest, and gives the same ``θ`` as an uninterrupted run.
+``θ`` and Adam's moments, ``state.json`` with the generation, the generator's state,
+the training seconds and the last generations' centre returns) are taken between
+generations every ``checkpoint_seconds`` and ``checkpoint_freq`` timesteps, on a stop
+request and at the end; ``resume`` continues from the newest, and gives the same ``θ``
+as an uninterrupted run.
 """
 
 from __future__ import annotations
