@@ -30,6 +30,7 @@ from swarm_envs.config import (
     load_swarm_config,
     resolve_config_path,
 )
+from train.es import ES
 from train.hyperparams import check_hyperparams
 from train.integers import ACCEPTED, check_integer, coerce_integer_fields, integral
 
@@ -38,7 +39,7 @@ if TYPE_CHECKING:
 
 #: ``PPO`` and ``SAC`` are SB3's; ``ES`` is evolution strategies on the deterministic
 #: shared policy (:mod:`train.es`).
-ALGOS = ("PPO", "SAC", "ES")
+ALGOS = ("PPO", "SAC", ES)
 #: The SB3 policy every run builds (its class per algorithm: ``policy_aliases``).
 POLICY = "MlpPolicy"
 #: Keys a resumed run may change (``swarm-train --resume DIR key=value``): the total
@@ -60,7 +61,7 @@ def algorithm_class(name: str) -> type[BaseAlgorithm]:
 
     if name not in ALGOS:
         raise ValueError(f"algo must be one of {ALGOS}, got {name!r}")
-    return getattr(stable_baselines3, "PPO" if name == "ES" else name)
+    return getattr(stable_baselines3, "PPO" if name == ES else name)
 
 
 def actor_critic(cls: type[BaseAlgorithm]) -> bool:
@@ -225,17 +226,10 @@ class TrainConfig(RunConfig):
         object.__setattr__(self, "plugins", load_run_plugins(self.plugins))
         if not isinstance(self.hyperparams, Mapping):
             raise ValueError(f"hyperparams must be a mapping, got {self.hyperparams!r}")
-        if self.algo == "ES":
-            self._check_es()
-            return
-        allowed = set(inspect.signature(cls.__init__).parameters) - RESERVED - {"self"}
-        allowed = {a for a in allowed if not a.startswith("_")}
-        for key in self.hyperparams:
-            if key not in allowed:
-                raise ValueError(
-                    f"hyperparams.{key} is not a {self.algo} argument; "
-                    f"allowed: {', '.join(sorted(allowed))}"
-                )
+        if self.algo == ES:
+            self._check_es_only()
+        else:
+            self._check_sb3_keywords(cls)
         if self.residual is not None:
             from train.residual import check_baseline_name
 
@@ -253,14 +247,29 @@ class TrainConfig(RunConfig):
         ):
             raise ValueError(f"residual_log_std must be a number, got {self.residual_log_std!r}")
         self._check_env()  # a typo in the env part fails before any training starts
-        n_envs = self.n_swarms * (self.swarm_config().n_agents if self.mode == "shared" else 1)
-        hyper = check_hyperparams(self.algo, self.hyperparams, n_envs)
+        if self.algo == ES:
+            from train.es import check_es_hyperparams
+
+            hyper = check_es_hyperparams(self.hyperparams)
+        else:
+            n_envs = self.n_slots
+            hyper = check_hyperparams(self.algo, self.hyperparams, n_envs)
         object.__setattr__(self, "hyperparams", hyper)
 
-    def _check_es(self) -> None:
-        """The checks of an ``algo: ES`` run (:mod:`train.es`)."""
-        from train.es import check_es_hyperparams
+    def _check_sb3_keywords(self, cls: type[BaseAlgorithm]) -> None:
+        """Every key of ``hyperparams`` is an argument of the SB3 class ``cls``."""
+        allowed = set(inspect.signature(cls.__init__).parameters) - RESERVED - {"self"}
+        allowed = {a for a in allowed if not a.startswith("_")}
+        for key in self.hyperparams:
+            if key not in allowed:
+                raise ValueError(
+                    f"hyperparams.{key} is not a {self.algo} argument; "
+                    f"allowed: {', '.join(sorted(allowed))}"
+                )
 
+    def _check_es_only(self) -> None:
+        """What an ``algo: ES`` run (:mod:`train.es`) refuses: central mode, a periodic
+        evaluation, a value-function warm-up."""
         if self.mode != "shared":
             raise ValueError(
                 f"algo ES trains a shared policy: mode must be 'shared', got {self.mode!r}"
@@ -271,12 +280,6 @@ class TrainConfig(RunConfig):
                     f"{name} must be 0 with algo ES (it has no value function and reports its "
                     f"centre's return every generation), got {getattr(self, name)!r}"
                 )
-        if self.residual is not None:
-            from train.residual import check_baseline_name
-
-            check_baseline_name(self.residual)
-        self._check_env()
-        object.__setattr__(self, "hyperparams", check_es_hyperparams(self.hyperparams))
 
     @property
     def n_slots(self) -> int:
