@@ -613,6 +613,21 @@ def test_observations_are_stable_between_steps():
     np.testing.assert_array_equal(core.observe(np.array([False, True])), obs[1:])
 
 
+def test_swarms_reset_a_few_at_a_time_from_the_start_get_their_own_observations():
+    # Resetting the batch in parts from the first reset (as ES does, one block per
+    # candidate) gives each part the observations a whole reset from the same
+    # generator gives it.
+    core = make_core(EVERYTHING, batch=4)
+    for half in (np.arange(4) < 2, np.arange(4) >= 2):
+        core.reset(np.random.default_rng(5), which=half)
+    whole = make_core(EVERYTHING, batch=2)
+    whole.reset(np.random.default_rng(5))
+    obs = core.observe()
+    assert obs.shape[0] == 4
+    np.testing.assert_array_equal(obs[:2], whole.observe())
+    np.testing.assert_array_equal(obs[2:], whole.observe())
+
+
 # --------------------------------------------------------------------------- noise
 
 

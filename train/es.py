@@ -5,9 +5,11 @@
 evolution strategies: each generation draws ``population / 2`` Gaussian directions
 ``ε_k``, runs the candidates ``θ ± σ ε_k`` (and ``θ`` itself, for the log) on the same
 ``n_swarms`` seeded episodes each (common random numbers: every candidate meets the
-same starts, informed agents and perturbations), shapes the candidates' mean returns
-into centred ranks and steps ``θ`` along ``Σ_k (rank⁺_k − rank⁻_k) ε_k / (population σ)``
-with Adam, less ``weight_decay · θ``. All candidates' episodes step together on one
+same starts, informed agents and failure schedules; the observation and action noise of
+perturbed configs is drawn step by step for all swarms at once, so it differs between
+candidates), shapes the candidates' mean returns into centred ranks and steps ``θ``
+along ``Σ_k (rank⁺_k − rank⁻_k) ε_k / (population σ)`` with Adam, less
+``weight_decay · θ``. All candidates' episodes step together on one
 batched core (``(population + 1) × n_swarms`` swarms), each until its episode ends; a
 candidate that makes its swarm unstable ends that episode there (the config's
 ``on_unstable`` is taken as ``"truncate"``), which its return pays for.

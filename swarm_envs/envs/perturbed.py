@@ -102,9 +102,11 @@ class PerturbedCore:
         self.status = status
         if self._noisy_obs:
             fresh = self._perturb(self.inner.observe(rows), idx)
-            if self._obs is None or idx.size == self.batch:
+            if idx.size == self.batch:
                 self._obs = fresh
             else:
+                if self._obs is None:  # a first reset of some swarms: the others have none yet
+                    self._obs = np.zeros((self.batch, *fresh.shape[1:]), fresh.dtype)
                 self._obs[idx] = fresh
 
     def step(self, actions: Any) -> StepResult:
