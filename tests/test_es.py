@@ -172,3 +172,28 @@ def test_a_stop_request_saves_and_says_how_to_continue(tmp_path):
     meta = json.loads((tmp_path / "run" / "meta.json").read_text())
     assert meta["status"] == "interrupted"
     assert (tmp_path / "run" / "model.zip").is_file()
+
+
+def test_candidates_meet_the_same_failures_on_a_perturbed_config():
+    from train.residual import make_baseline
+
+    perturbed = {
+        **SMALL_ENV,
+        "n_agents": 6,
+        "perturbations": {"failed_fraction": [0.0, 0.5], "obs_noise": [0.0, 0.05]},
+    }
+    tc = es_config(residual="pd", env=perturbed)
+    cfg = tc.swarm_config()
+    actor = ActorParameters(_policy(tc).policy)
+    rollouts = Rollouts(cfg, actor, make_baseline("pd", cfg), candidates=3, episodes=4)
+    returns, _ = rollouts.returns(np.zeros((3, actor.size)), (5, 0, 0))
+    assert np.isfinite(returns).all()
+    rollouts.core.reset(np.random.default_rng(0))  # statuses of a new start, then blocks
+    for k in range(3):
+        block = np.zeros(12, bool)
+        block[4 * k : 4 * (k + 1)] = True
+        rollouts.core.reset(np.random.default_rng(np.random.SeedSequence((5, 0, 0))), which=block)
+    status = rollouts.core.status.reshape(3, 4, -1)
+    assert (status != status[0, 0, 0]).any()  # some agents failed
+    np.testing.assert_array_equal(status[1], status[0])
+    np.testing.assert_array_equal(status[2], status[0])
