@@ -151,6 +151,10 @@ def test_training_writes_a_loadable_model_and_resumes_to_the_same_parameters(tmp
     b = load_sb3_model(tmp_path / "b" / "model.zip").model.policy
     np.testing.assert_array_equal(ActorParameters(a).flat(), ActorParameters(b).flat())
     assert json.loads((tmp_path / "a" / "meta.json").read_text())["es"]["generations"] == 3
+    from train.train import TrainSetupError
+
+    with pytest.raises(TrainSetupError, match="give a larger total_timesteps"):
+        run(tmp_path / "a", 2 * per_generation + 1, resume=True)  # nothing left to do
 
 
 def test_a_stop_request_saves_and_says_how_to_continue(tmp_path):

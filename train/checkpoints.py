@@ -129,23 +129,35 @@ def save_checkpoint(model: Any, out: Path, extra: dict[str, Any], keep: int) -> 
     final = checkpoint_dir(out, timesteps)
     if (final / "state.json").is_file():  # already saved at this step
         return final
+
+    def fill(tmp: Path) -> None:
+        model.save(tmp / "model.zip")
+        if hasattr(model, "save_replay_buffer") and model.replay_buffer is not None:
+            model.save_replay_buffer(tmp / "replay_buffer.pkl")
+        env_saved = _save_env(model.get_env(), tmp / "env.pkl")
+        with (tmp / "rng.pkl").open("wb") as fh:
+            pickle.dump(capture_rng(model), fh, protocol=pickle.HIGHEST_PROTOCOL)
+        state = {"timesteps": timesteps, "env_state": env_saved, **extra}
+        (tmp / "state.json").write_text(json.dumps(state, indent=2) + "\n")
+
+    return write_checkpoint(out, timesteps, fill, keep)
+
+
+def write_checkpoint(out: Path, timesteps: int, fill: Callable[[Path], None], keep: int) -> Path:
+    """The checkpoint folder of ``timesteps`` in ``out``, written whole or not at all:
+    ``fill`` writes its files into a hidden folder, which is then renamed into place
+    (replacing a folder of that name); the ``keep`` newest checkpoints are kept."""
+    final = checkpoint_dir(out, timesteps)
     final.parent.mkdir(parents=True, exist_ok=True)
     tmp = final.with_name(PARTIAL + final.name)
     if tmp.exists():
         shutil.rmtree(tmp)
     tmp.mkdir()
-    model.save(tmp / "model.zip")
-    if hasattr(model, "save_replay_buffer") and model.replay_buffer is not None:
-        model.save_replay_buffer(tmp / "replay_buffer.pkl")
-    env_saved = _save_env(model.get_env(), tmp / "env.pkl")
-    with (tmp / "rng.pkl").open("wb") as fh:
-        pickle.dump(capture_rng(model), fh, protocol=pickle.HIGHEST_PROTOCOL)
-    state = {"timesteps": timesteps, "env_state": env_saved, **extra}
-    (tmp / "state.json").write_text(json.dumps(state, indent=2) + "\n")
-    if final.exists():  # an incomplete folder of that name (no state.json)
+    fill(tmp)
+    if final.exists():  # an incomplete folder of that name, or one being replaced
         shutil.rmtree(final)
     os.replace(tmp, final)
-    prune_checkpoints(out, keep)
+    _prune(out, keep)
     return final
 
 
@@ -193,8 +205,7 @@ def _load_env(path: Path) -> Any:
     return env
 
 
-def prune_checkpoints(out: Path, keep: int) -> None:
-    """Remove all but the ``keep`` newest checkpoints of ``out``, and unfinished ones."""
+def _prune(out: Path, keep: int) -> None:
     for old in list_checkpoints(out)[:-keep]:
         shutil.rmtree(old, ignore_errors=True)
     for partial in (Path(out) / CHECKPOINTS).glob(PARTIAL + "*"):

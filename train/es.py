@@ -36,8 +36,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import shutil
 import time
 from collections.abc import Mapping
 from dataclasses import replace
@@ -313,13 +311,11 @@ def train_es(
 
     from train.callbacks import progress_line
     from train.checkpoints import (
-        PARTIAL,
-        checkpoint_dir,
         checkpoint_timesteps,
         copy_atomic,
         latest_checkpoint,
-        prune_checkpoints,
         write_atomic,
+        write_checkpoint,
     )
     from train.interrupt import TrainingInterrupted, stop_on_signals
     from train.residual import RESIDUAL, make_baseline
@@ -358,12 +354,7 @@ def train_es(
         meta["es"] = {"generations": es.generation, "centre_returns": history[-_HISTORY:]}
         write_atomic(out / "meta.json", json.dumps(meta, indent=2) + "\n")
 
-    def checkpoint() -> Path:
-        final = checkpoint_dir(out, timesteps)
-        tmp = final.with_name(PARTIAL + final.name)
-        if tmp.exists():
-            shutil.rmtree(tmp)
-        tmp.mkdir(parents=True)
+    def fill(tmp: Path) -> None:
         actor.load(es.theta)
         model.num_timesteps = timesteps
         model.save(tmp / "model.zip")
@@ -375,10 +366,9 @@ def train_es(
             "history": history[-_HISTORY:],
         }
         (tmp / "state.json").write_text(json.dumps(state, indent=2) + "\n")
-        if final.exists():
-            shutil.rmtree(final)
-        os.replace(tmp, final)
-        prune_checkpoints(out, tc.checkpoint_keep)
+
+    def checkpoint() -> Path:
+        final = write_checkpoint(out, timesteps, fill, tc.checkpoint_keep)
         publish("running", final)
         return final
 

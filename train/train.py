@@ -321,9 +321,9 @@ def _train_es(
     """:func:`train` for ``algo: ES`` (:mod:`train.es`): the same output folder."""
     from train.es import train_es
 
-    if resume and latest_checkpoint(out) is None:
-        raise _nothing_to_resume(out)
-    if not resume:
+    if resume:
+        _resume_checkpoint(tc, out)  # there is one, short of total_timesteps
+    else:
         prepare_out_dir(out, overwrite=overwrite, patterns=RUN_FILES, prog=prog)
     _write_run_configs(tc, out)
     return train_es(
@@ -346,8 +346,24 @@ def _write_run_configs(tc: TrainConfig, out: Path) -> Any:
     return cfg
 
 
-def _nothing_to_resume(out: Path) -> TrainSetupError:
-    return TrainSetupError(f"--resume {out}: no checkpoint in {out / CHECKPOINTS} to continue from")
+def _resume_checkpoint(tc: TrainConfig, out: Path) -> Path:
+    """The latest checkpoint in ``out``, to continue up to ``tc.total_timesteps``.
+
+    Raises:
+        TrainSetupError: there is none, or it holds ``total_timesteps`` already.
+    """
+    ckpt = latest_checkpoint(out)
+    if ckpt is None:
+        raise TrainSetupError(
+            f"--resume {out}: no checkpoint in {out / CHECKPOINTS} to continue from"
+        )
+    done = checkpoint_timesteps(ckpt)
+    if done >= tc.total_timesteps:
+        raise TrainSetupError(
+            f"--resume {out}: the run has {done:,} timesteps, total_timesteps is "
+            f"{tc.total_timesteps:,}; give a larger total_timesteps=... to extend it"
+        )
+    return ckpt
 
 
 def _new_model(tc: TrainConfig, tensorboard_log: str | None) -> Any:
@@ -367,15 +383,7 @@ def _new_model(tc: TrainConfig, tensorboard_log: str | None) -> Any:
 
 def _resume_model(tc: TrainConfig, out: Path, tensorboard_log: str | None) -> tuple[Any, dict]:
     """The model of the latest checkpoint in ``out`` and its saved state."""
-    ckpt = latest_checkpoint(out)
-    if ckpt is None:
-        raise _nothing_to_resume(out)
-    done = checkpoint_timesteps(ckpt)
-    if done >= tc.total_timesteps:
-        raise TrainSetupError(
-            f"--resume {out}: the run has {done:,} timesteps, total_timesteps is "
-            f"{tc.total_timesteps:,}; give a larger total_timesteps=... to extend it"
-        )
+    ckpt = _resume_checkpoint(tc, out)
     cls = done_slots_only(algorithm_class(tc.algo))
     try:
         return load_checkpoint(
