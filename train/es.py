@@ -309,6 +309,8 @@ def train_es(
     checked (and, without ``resume``, emptied). Returns ``out/model.zip``."""
     import contextlib
 
+    from stable_baselines3 import PPO
+
     from train.callbacks import progress_line
     from train.checkpoints import (
         checkpoint_timesteps,
@@ -322,14 +324,15 @@ def train_es(
     from train.train import PROGRESS_LINE_SECONDS, run_meta
 
     cfg = tc.swarm_config()
-    model = policy_model(tc)
+    ckpt = latest_checkpoint(out) if resume else None
+    # A resumed run keeps the baseline gains its model recorded, as SB3's runs do.
+    model = policy_model(tc) if ckpt is None else PPO.load(ckpt / "model.zip", device=tc.device)
     actor = ActorParameters(model.policy)
     hyper = check_es_hyperparams(tc.hyperparams)
     es = EvolutionStrategy(actor.flat(), hyper, tc.seed)
     timesteps, seconds_before = 0, 0.0
     history: list[dict[str, float]] = []
     if resume:
-        ckpt = latest_checkpoint(out)
         assert ckpt is not None  # train.train checked
         state = json.loads((ckpt / "state.json").read_text())
         es.restore(ckpt / STATE_FILE, state["es"])
