@@ -24,6 +24,7 @@ from agents.tuned import load_tuned, scenario_key, tuned_gains
 from swarm_envs import swarm_nav_v0
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs import observation_size
+from swarm_envs.envs.backends import make_core
 from swarm_envs.physics import SocialPotentialParams
 from swarm_envs.tasks import task_config
 from train.benchmark.stats import paired_difference
@@ -177,8 +178,10 @@ def test_swarm_tune_refuses_an_evaluation_seed(tmp_path, capsys):
 @pytest.mark.parametrize("dynamics", ["social_potential", "zone"])
 def test_no_policy_reaches_the_goal_before_the_bound(dynamics):
     cfg = SwarmConfig(dynamics=dynamics)
-    for name in ("pd", "analytic"):
-        policy = make_controller(name, cfg)
+    policies = {name: make_controller(name, cfg) for name in ("pd", "analytic")}
+    if dynamics == "social_potential":  # full thrust on both axes: the box's corners
+        policies["corner"] = SaturatedPDController(cfg, k_p=5.0, k_d=0.0, saturation="clip")
+    for name, policy in policies.items():
         batch = run_episodes(policy, cfg, 16, 5, record_episode=False)
         bound = time_to_goal_bound(cfg, batch.start["x"], batch.start["v"], batch.start["goal"])
         assert bound is not None and np.all(bound > 0)
@@ -194,11 +197,34 @@ def test_bound_is_exact_for_one_free_agent_without_drag():
         SocialPotentialParams.navigation(), C_a=0.0, C_r=0.0, C_o=0.0, beta=0.0
     )
     cfg = SwarmConfig(physics=params)
-    x, v = np.zeros((2, 2, 2)), np.zeros((2, 2, 2))
-    goal = np.array([[7.5, 0.0], [7.5 / np.sqrt(2), 7.5 / np.sqrt(2)]])
+    x, v = np.zeros((3, 2, 2)), np.zeros((3, 2, 2))
+    goal = np.array([[7.5, 0.0], [7.5 / np.sqrt(2), 7.5 / np.sqrt(2)], [7.5, 1.0]])
     bound = time_to_goal_bound(cfg, x, v, goal)
     assert bound[0] == pytest.approx(2.0)  # 6 = ½ · 3 · t²
     assert bound[1] < bound[0]
+    # Off the axes the box's corner gives more progress along the line to the goal
+    # (its support, 1.12 u_max here) but leads past the goal's side: the reachable box
+    # meets the goal's ball only when x has covered 6, as on the axis.
+    assert bound[2] == pytest.approx(2.0)
+
+
+def test_bound_is_reached_by_one_free_agent_off_the_axes():
+    # The bound is tight: a constant action (1, 1/6) brings a free agent from rest to
+    # (6, 1) in 2 s without drag, on the ball of radius 1.5 about (7.5, 1).
+    params = dataclasses.replace(
+        SocialPotentialParams.navigation(), C_a=0.0, C_r=0.0, C_o=0.0, beta=0.0
+    )
+    cfg = SwarmConfig(physics=params, n_agents=1)
+    x, v, goal = np.zeros((1, 1, 2)), np.zeros((1, 1, 2)), np.array([[7.5, 1.0]])
+    bound = float(time_to_goal_bound(cfg, x, v, goal)[0])
+    core = make_core(cfg)
+    core.reset(np.random.default_rng(0))
+    core.x[...], core.v[...], core.goal[...] = x, v, goal
+    steps = 0
+    while np.linalg.norm(core.x[0, 0] - goal[0]) > cfg.arrival_radius:
+        core.step(np.array([[[1.0, 1.0 / 6.0]]]))
+        steps += 1
+    assert steps * cfg.dt == pytest.approx(bound) == pytest.approx(2.0)
 
 
 def test_bound_is_undefined_where_it_would_not_hold():

@@ -17,6 +17,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from train.evaluate.bound import NEAR_OPTIMAL
 from train.evaluate.report import MISSING, write_json
 
 __all__ = ["BENCHMARK_FILES", "MEASURE_DOCS", "format_results_table", "write_results"]
@@ -132,13 +133,14 @@ def _markdown(results: Mapping[str, Any]) -> str:
     ]
     near = [
         f"- {entry['name']} / {ev['label']}: the best baseline, "
-        f"{ev['best_baseline']}, is within 5 % of the lower bound on the time to goal "
-        f"({over:+.1%}): little is left to learn here."
+        f"{ev['best_baseline']}, is within {NEAR_OPTIMAL:.0%} of the lower bound on the "
+        f"time to goal ({over:+.2%}): no policy can arrive more than {NEAR_OPTIMAL:.0%} "
+        "sooner, so learning has little to win here."
         for entry in results["entries"]
         for ev in entry["evaluations"]
         if ev.get("best_baseline")
         and (over := ev["policies"][ev["best_baseline"]].get("time_over_bound")) is not None
-        and over <= 0.05
+        and over <= NEAR_OPTIMAL
     ]
     if near:
         lines += ["", "Near-optimal baselines:", "", *near]

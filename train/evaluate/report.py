@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from swarm_envs.config import SwarmConfig
+from train.evaluate.bound import NEAR_OPTIMAL
 from train.evaluate.episodes import EpisodeBatch
 from train.evaluate.figures import plot_curves, write_episode_gif
 from train.evaluate.measures import METRIC_DOCS, json_safe
@@ -96,8 +97,12 @@ def bound_line(results: Mapping[str, Any]) -> str:
     best = results.get("best_baseline")
     over = results["policies"].get(best, {}).get("time_over_bound") if best else None
     if over is not None:
-        near = "within 5 % of it: little left to gain" if over <= 0.05 else "room to gain"
-        line += f" The best baseline, {best}, takes {over:+.0%} more ({near})."
+        near = (
+            f"within {NEAR_OPTIMAL:.0%} of it: near-optimal"
+            if over <= NEAR_OPTIMAL
+            else "room to gain"
+        )
+        line += f" The best baseline, {best}, takes {over:+.2%} more ({near})."
     alone = results.get("free_agent_time")
     if alone is not None:
         line += (
