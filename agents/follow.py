@@ -7,13 +7,19 @@ steer the uninformed agents, from what they do see: each neighbour's offset, rel
 velocity and informed flag. :class:`InformedFollowerController` does that:
 
 - an informed agent applies the saturated PD law toward the goal
-  (:class:`~agents.SaturatedPDController`, gains ``k_p, k_d``);
+  (:class:`~agents.SaturatedPDController`, gains ``k_p, k_d``), tethered to its
+  neighbours: when their mean offset ``m`` is longer than ``ℓ`` (it has run ahead of
+  them), a pull ``k_l (|m| − ℓ) m̂`` toward them is added before the saturation,
+  ``a_i = sat((k_p (r_g − r_i) − k_d v_i + k_l max(0, |m| − ℓ) m̂) / u_max)``. Where
+  the speed is fixed (the zone model) a leader cannot slow down for its flock, and
+  one that outruns it leaves the flock without a guide;
 - an uninformed agent matches the velocity of its informed neighbours and closes on
   them: ``a_i = sat((k_v ⟨v_j − v_i⟩ + k_c ⟨r_j − r_i⟩) / u_max)``, the means over the
   informed neighbours in its observation; with none in view, over all its neighbours
   (velocity matching and cohesion, a flock that carries the information on).
 
-All four gains are tuned on training seeds (``swarm-tune``), like the PD's.
+All six gains are tuned on training seeds (``swarm-tune``), like the PD's; ``k_l = 0``
+(the default) is the untethered leader.
 """
 
 from __future__ import annotations
@@ -38,6 +44,9 @@ class InformedFollowerController(SaturatedPDController):
         k_p, k_d, saturation: the informed agents' PD law (:class:`SaturatedPDController`).
         k_v: velocity-matching gain ``≥ 0`` of the uninformed agents.
         k_c: cohesion gain ``≥ 0`` of the uninformed agents (toward the mean offset).
+        k_l: tether gain ``≥ 0`` of the informed agents (0: no tether).
+        tether: the length ``ℓ ≥ 0`` of the tether: the mean neighbour offset beyond
+            which it pulls.
         Every ``None`` gain is the tuned one of the env's scenario (``follow`` in
         ``configs/baselines/tuned.yaml``), else the default.
 
@@ -54,6 +63,8 @@ class InformedFollowerController(SaturatedPDController):
     acts_informed_only = False
     DEFAULT_K_V: float = 1.0
     DEFAULT_K_C: float = 0.5
+    DEFAULT_K_L: float = 0.0
+    DEFAULT_TETHER: float = 1.0
     _TUNED_NAME = "follow"
 
     def __init__(
@@ -64,6 +75,8 @@ class InformedFollowerController(SaturatedPDController):
         k_v: float | None = None,
         k_c: float | None = None,
         saturation: str | None = None,
+        k_l: float | None = None,
+        tether: float | None = None,
     ) -> None:
         from agents.tuned import Gain, tuned_gains
 
@@ -76,18 +89,22 @@ class InformedFollowerController(SaturatedPDController):
         k_c_value: Gain = tuned.get("k_c", self.DEFAULT_K_C) if k_c is None else k_c
         self.k_v: float = check_real(owner, "k_v", k_v_value, low=0.0)
         self.k_c: float = check_real(owner, "k_c", k_c_value, low=0.0)
+        k_l_value: Gain = tuned.get("k_l", self.DEFAULT_K_L) if k_l is None else k_l
+        tether_value: Gain = tuned.get("tether", self.DEFAULT_TETHER) if tether is None else tether
+        self.k_l: float = check_real(owner, "k_l", k_l_value, low=0.0)
+        self.tether: float = check_real(owner, "tether", tether_value, low=0.0)
         self.obs_neighbor_scale: float = self.cfg.obs_neighbor_scale
 
     def __repr__(self) -> str:
         return (
             f"{type(self).__name__}(k_p={self.k_p:g}, k_d={self.k_d:g}, k_v={self.k_v:g}, "
-            f"k_c={self.k_c:g}, saturation={self.saturation!r})"
+            f"k_c={self.k_c:g}, k_l={self.k_l:g}, tether={self.tether:g}, "
+            f"saturation={self.saturation!r})"
         )
 
     def _actions(self, obs: np.ndarray, deterministic: bool) -> np.ndarray:
         d, k = self.dim, self.cfg.n_neighbors
         informed = obs[:, 2 * d] > 0.5
-        leaders = super()._actions(obs, deterministic)
         blocks = obs[:, own_size(self.cfg) :].reshape(len(obs), k, block_size(self.cfg))
         offset = blocks[..., :d] * self.obs_neighbor_scale
         rel_velocity = blocks[..., d : 2 * d] * self.obs_velocity_scale
@@ -101,4 +118,16 @@ class InformedFollowerController(SaturatedPDController):
         followers = saturate(
             (self.k_v * mean_velocity + self.k_c * mean_offset) / self.u_max, self.saturation
         )
+        # The leaders' PD law, with the tether to all their real neighbours.
+        goal = np.asarray(obs[:, :d] * self.obs_goal_scale, np.float64)
+        velocity = np.asarray(obs[:, d : 2 * d] * self.obs_velocity_scale, np.float64)
+        pd = self.k_p * goal - self.k_d * velocity
+        if self.k_l > 0:
+            flock = np.einsum("nk,nkd->nd", real, offset) / np.maximum(
+                real.sum(axis=1, keepdims=True), 1.0
+            )
+            length = np.sqrt(np.einsum("nd,nd->n", flock, flock))[:, None]
+            stretch = np.maximum(length - self.tether, 0.0) / np.where(length > 0, length, 1.0)
+            pd = pd + self.k_l * stretch * flock
+        leaders = saturate(pd / self.u_max, self.saturation)
         return np.where(informed[:, None], leaders, followers)

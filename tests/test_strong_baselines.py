@@ -94,7 +94,9 @@ def test_pd_beats_the_papers_controller_on_navigation():
 
 def test_followers_match_their_informed_neighbours():
     cfg = task_config("informed", n_agents=4, n_neighbors=3)
-    ctrl = InformedFollowerController(cfg, k_p=1.0, k_d=0.0, k_v=1.5, k_c=0.0, saturation="norm")
+    ctrl = InformedFollowerController(
+        cfg, k_p=1.0, k_d=0.0, k_v=1.5, k_c=0.0, k_l=0.0, saturation="norm"
+    )
     obs = np.zeros((1, ctrl.obs_dim), np.float32)  # an uninformed agent
     own = 2 * cfg.dim + 1
     block = (ctrl.obs_dim - own) // 3
@@ -108,6 +110,34 @@ def test_followers_match_their_informed_neighbours():
     informed[0, : cfg.dim] = [0.3, 0.0]  # goal 3 ahead
     action, _ = ctrl.predict(informed)
     np.testing.assert_allclose(action[0], [1.0 * 3.0 / cfg.u_max, 0.0], atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("k_l", "behind", "expected"),
+    [
+        (0.0, 2.0, 1.0),  # no tether: full thrust at the goal
+        (1.0, 2.0, 0.5),  # (3 − 1 · (2 − 0.5)) / 3: pulled back toward the flock
+        (1.0, 0.4, 1.0),  # the flock within the tether's length: no pull
+    ],
+)
+def test_leaders_are_tethered_to_their_flock(k_l, behind, expected):
+    cfg = task_config("informed", n_agents=3, n_neighbors=2)
+    ctrl = InformedFollowerController(
+        cfg, k_p=1.0, k_d=0.0, k_v=1.0, k_c=1.0, k_l=k_l, tether=0.5, saturation="norm"
+    )
+    obs = np.zeros((1, ctrl.obs_dim), np.float32)
+    own = 2 * cfg.dim + 1
+    block = (ctrl.obs_dim - own) // 2
+    obs[0, : cfg.dim] = [3.0 / cfg.obs_goal_scale, 0.0]  # informed, the goal 3 ahead
+    obs[0, 2 * cfg.dim] = 1.0
+    for j, side in enumerate((-1.0, 1.0)):  # two neighbours behind it, to either side
+        start = own + j * block
+        obs[0, start : start + 2] = np.array([-behind, side * 0.1]) / cfg.obs_neighbor_scale
+        obs[0, start + 4] = 1.0  # real
+    action, _ = ctrl.predict(obs)
+    np.testing.assert_allclose(action[0], [expected, 0.0], atol=1e-6)
+    with pytest.raises(ValueError, match="k_l"):
+        InformedFollowerController(cfg, k_l=-1.0)
 
 
 def test_followers_need_the_informed_task():
@@ -351,6 +381,21 @@ def test_residual_model_loads_as_the_policy_it_trained_as(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # its own env: no warning
         evaluate_policies({"learned": policy}, tc.swarm_config(), 2, 9, progress=False)
+
+
+def test_residual_record_rebuilds_the_baseline_it_was_trained_on():
+    from train.residual import make_baseline, residual_record
+
+    cfg = task_config("informed")
+    tethered = InformedFollowerController(cfg, k_l=3.0, tether=2.0)
+    record = residual_record("follow", tethered)
+    assert (record["gains"]["k_l"], record["gains"]["tether"]) == (3.0, 2.0)
+    rebuilt = make_baseline("follow", cfg, record["gains"])
+    assert (rebuilt.k_l, rebuilt.tether, rebuilt.k_p) == (3.0, 2.0, tethered.k_p)
+    # A record made before the tether existed rebuilds the untethered leader, whatever
+    # the tuned table holds today.
+    older = {k: v for k, v in record["gains"].items() if k not in ("k_l", "tether")}
+    assert make_baseline("follow", cfg, older).k_l == 0.0
 
 
 def test_residual_needs_shared_mode_and_a_known_baseline():

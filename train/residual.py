@@ -38,7 +38,23 @@ __all__ = [
 RESIDUAL = "swarm_residual"
 
 #: Attributes of a controller recorded with a residual model (its gains).
-_GAIN_ATTRS = ("k_p", "k_d", "k_v", "k_c", "saturation", "approach", "spin", "omega")
+_GAIN_ATTRS = (
+    "k_p",
+    "k_d",
+    "k_v",
+    "k_c",
+    "k_l",
+    "tether",
+    "saturation",
+    "approach",
+    "spin",
+    "omega",
+)
+
+#: Gains a controller gained after residual models recorded it, with the value that
+#: leaves it as it was: a record without them rebuilds the baseline it was trained on,
+#: not today's tuned one (``follow``'s leader tether, off before it existed).
+_GAINS_BEFORE_RECORDED = {"follow": {"k_l": 0.0}}
 
 
 def check_baseline_name(name: Any) -> str:
@@ -54,13 +70,14 @@ def check_baseline_name(name: Any) -> str:
 
 def make_baseline(name: str, cfg: SwarmConfig, gains: Mapping[str, Any] | None = None) -> Any:
     """The controller ``name`` of :data:`agents.CONTROLLERS` for ``cfg``, with ``gains``
-    (``None``: its tuned or default gains)."""
+    (``None``: its tuned or default gains; recorded gains that lack a gain added to the
+    controller since are completed with the value that leaves it as it was)."""
     from agents import CONTROLLERS, make_controller
 
     check_baseline_name(name)
     if gains is None:
         return make_controller(name, cfg)
-    return CONTROLLERS[name](cfg, **dict(gains))
+    return CONTROLLERS[name](cfg, **{**_GAINS_BEFORE_RECORDED.get(name, {}), **dict(gains)})
 
 
 def residual_record(name: str, baseline: Any) -> dict[str, Any]:
