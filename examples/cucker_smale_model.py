@@ -136,15 +136,6 @@ def cucker_smale_substeps(cfg: SwarmConfig) -> int:
     return int(n)
 
 
-def check_config(cfg: SwarmConfig) -> None:
-    """What the model requires of the rest of the config: its one integrator."""
-    if cfg.integrator != "semi_implicit_euler":
-        raise ValueError(
-            f"SwarmConfig.integrator must be 'semi_implicit_euler' with "
-            f"dynamics='cucker_smale', got {cfg.integrator!r}"
-        )
-
-
 class CuckerSmaleDynamics(Dynamics):
     """The environment's step: the rule's substeps of the alignment force, the passive
     sink (with ``goal_in_physics``) and the control ``u``, each a semi-implicit Euler
@@ -189,7 +180,6 @@ CUCKER_SMALE = register_model(
         substeps=cucker_smale_substeps,
         substeps_fixed=True,
         baseline="potential",
-        check=check_config,
     ),
     replace=True,  # re-running this file replaces its own entry
 )

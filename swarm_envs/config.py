@@ -387,6 +387,13 @@ class SwarmConfig:
         if not isinstance(self.perturbations, Perturbations):
             raise ValueError(f"{owner}.perturbations must be Perturbations")
         self._check_task(owner)
+        allowed = model_spec(self.dynamics).integrators
+        if self.integrator not in allowed:
+            raise ValueError(
+                f"{owner}.integrator={self.integrator!r} is not available with "
+                f"dynamics={self.dynamics!r}: it takes {' or '.join(map(repr, allowed))} "
+                "(the models' integrators: docs/models.md)"
+            )
         if self.perturbations.needs_masks and not model_spec(self.dynamics).applies_masks:
             masks = [n for n in model_names() if model_spec(n).applies_masks]
             masked = " or ".join(f"dynamics={n!r}" for n in masks)

@@ -55,7 +55,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from swarm_envs.physics.integrators import simulate
+from swarm_envs.physics.integrators import INTEGRATORS, simulate
 from swarm_envs.physics.lagrangian import LagrangianParams, simulate_lagrangian
 from swarm_envs.physics.piecewise import PiecewiseParams, simulate_piecewise
 from swarm_envs.physics.social_potential import SocialPotentialParams
@@ -139,6 +139,10 @@ class ModelSpec:
         applies_masks: whether its adapter honours the agents' ``present`` and
             ``mobile`` masks, so that agents can be removed, frozen, absent or join
             (``perturbations``); the other models take passive failures and noise only.
+        integrators: the values of ``SwarmConfig.integrator`` its adapter honours;
+            ``SwarmConfig`` refuses the others for it. Always the default,
+            ``"semi_implicit_euler"``, which also stands for the model's own update where
+            it has one (the zone model's turn, the Lagrangian model's safe substep).
         check: what it requires of the rest of the config, ``check(cfg)``, run last by
             ``SwarmConfig``'s validation; ``None``: nothing.
     """
@@ -155,6 +159,7 @@ class ModelSpec:
     backends: tuple[str, ...] = ("numpy",)
     baseline: str | None = None
     applies_masks: bool = False
+    integrators: tuple[str, ...] = (INTEGRATORS[0],)
     check: ConfigCheck | None = None
 
     def __post_init__(self) -> None:
@@ -189,6 +194,13 @@ class ModelSpec:
                 f"reference) among them, got {self.backends!r}"
             )
         object.__setattr__(self, "backends", backends)
+        integrators = tuple(self.integrators)
+        if INTEGRATORS[0] not in integrators or not set(integrators) <= set(INTEGRATORS):
+            raise ValueError(
+                f"{owner}.integrators must name integrators of {INTEGRATORS}, "
+                f"{INTEGRATORS[0]!r} among them, got {self.integrators!r}"
+            )
+        object.__setattr__(self, "integrators", integrators)
         if self.baseline is not None and not isinstance(self.baseline, str):
             raise ValueError(f"{owner}.baseline must be a controller name or None")
         for key in ("source", "action"):
@@ -389,6 +401,7 @@ _SHIPPED_SPECS = (
         backends=("numpy", "cutoff", "native", "torch"),
         baseline="potential",
         applies_masks=True,
+        integrators=INTEGRATORS,
     ),
     ModelSpec(
         name="zone",

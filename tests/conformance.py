@@ -275,6 +275,8 @@ def configs(
         fields["init_radius"] = max(fields["init_radius"], 0.1 * fields["n_agents"])
     if fields["init_density"] is not None:
         fields.pop("init_radius")  # one of the two sets the start radius
+    if fields["integrator"] not in model_spec(fields["dynamics"]).integrators:
+        fields["integrator"] = "semi_implicit_euler"  # the model's own update
     physical = fields["dynamics"] == "social_potential"
     if perturb and not (physical and fields["integrator"] != "velocity_verlet"):
         fields["perturbations"].update(_MASK_DEFAULTS)  # passive failures and noise only

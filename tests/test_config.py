@@ -77,6 +77,14 @@ def test_resolve_config_path_forms_agree():
         ({"n_agents": 0}, "n_agents must be an integer >= 1"),
         ({"n_agents": 2.5}, "n_agents must be an integer"),
         ({"integrator": "rk4"}, "integrator must be one of"),
+        (
+            {"dynamics": "zone", "integrator": "velocity_verlet"},
+            "integrator='velocity_verlet' is not available with dynamics='zone'",
+        ),
+        (
+            {"dynamics": "piecewise", "integrator": "implicit_damping_euler"},
+            "not available with dynamics='piecewise': it takes 'semi_implicit_euler'",
+        ),
         ({"success_fraction": 1.5}, "success_fraction must be in (0, 1]"),
         ({"goal_distance_min": 5.0, "goal_distance_max": 4.0}, "goal_distance_max"),
         ({"reward": {"effort": -1.0}}, "effort must be in [0, inf)"),

@@ -129,6 +129,8 @@ def test_an_adapter_that_is_not_a_dynamics_is_refused_when_built(registry):
         ({"baseline": 1}, "baseline must be a controller name"),
         ({"action": " "}, "action must be a non-empty description"),
         ({"check": "no"}, "check must be None or callable"),
+        ({"integrators": ("velocity_verlet",)}, "'semi_implicit_euler' among them"),
+        ({"integrators": ("semi_implicit_euler", "rk4")}, "integrators must name integrators"),
     ],
 )
 def test_an_incomplete_entry_is_refused_naming_the_field(change, message):

@@ -179,8 +179,8 @@ def test_its_section_is_built_validated_and_round_trips(cs):
         cfg_of(model_params={NAME: {"K": -1.0}})
     with pytest.raises(ValueError, match=r"model_params: unknown section 'zone'.*cucker_smale"):
         cfg_of(model_params={"zone": {}})
-    with pytest.raises(ValueError, match="integrator must be 'semi_implicit_euler'"):
-        cfg_of(integrator="velocity_verlet")  # the model's own check
+    with pytest.raises(ValueError, match="integrator='velocity_verlet' is not available"):
+        cfg_of(integrator="velocity_verlet")  # ModelSpec.integrators: the default only
     with pytest.raises(ValueError, match="need dynamics='social_potential'"):
         cfg_of(perturbations={"failed_fraction": 0.2, "failure_mode": "frozen"})
 
