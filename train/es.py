@@ -80,7 +80,11 @@ def check_es_hyperparams(hyperparams: Mapping[str, Any]) -> dict[str, float | in
     for key, value in hyperparams.items():
         if key not in ES_DEFAULTS:
             allowed = ", ".join(sorted(ES_DEFAULTS))
-            raise ValueError(f"hyperparams.{key} is not an ES argument; allowed: {allowed}")
+            raise ValueError(
+                f"hyperparams.{key} is not an ES argument; allowed: {allowed} (a PPO or SAC "
+                "recipe's hyperparams do not carry over to algo=ES: start from an ES recipe "
+                "such as configs/train/residual_es.yaml)"
+            )
         if isinstance(value, str):
             try:
                 value = float(value)
