@@ -117,6 +117,10 @@ def test_paper_navigation_train_config_uses_the_paper_scenario():
         ({"env": {"dt": -1.0}}, "dt must be in (0, inf)"),
         ({"env_config": "no/such.yaml"}, "config file not found"),
         ({"torch_threads": 0}, "torch_threads must be null or an integer >= 1"),
+        ({"encoder": "transformer"}, "encoder must be null or one of deepsets"),
+        ({"encoder": "deepsets", "mode": "central"}, "it needs mode 'shared'"),
+        ({"encoder": "deepsets", "algo": "ES", "hyperparams": {}}, "algo ES trains the flat"),
+        ({"encoder_width": 0}, "encoder_width must be an integer >= 1"),
     ],
 )
 def test_bad_train_configs_name_the_key(data, fragment):
@@ -228,6 +232,60 @@ def test_smoke_training_writes_a_reloadable_model(tmp_path: Path, algo, mode, hy
     learned = results["policies"]["learned"]
     assert np.isfinite(learned["mean_return"])
     assert learned["mode"] == mode
+
+
+@pytest.mark.parametrize(
+    ("algo", "hyper"),
+    [
+        ("PPO", {"n_steps": 64, "batch_size": 64, "n_epochs": 1}),
+        ("SAC", {"learning_starts": 100, "batch_size": 32, "buffer_size": 2000}),
+    ],
+)
+def test_a_policy_with_the_neighbour_set_encoder_trains_and_reloads(tmp_path: Path, algo, hyper):
+    from train.encoders import NeighborSetEncoder
+
+    tc = smoke_config(
+        algo=algo, hyperparams=hyper, total_timesteps=400, encoder="deepsets", encoder_width=8
+    )
+    train(tc, tmp_path, progress_bar=False, tensorboard=False, verbose=0)
+    assert load_train_config(tmp_path / "train_config.yaml") == tc
+    model = load_sb3_model(tmp_path / "model.zip")
+    extractor = (
+        model.policy.actor.features_extractor
+        if algo == "SAC"
+        else (model.policy.features_extractor)
+    )
+    assert isinstance(extractor, NeighborSetEncoder)
+    cfg = tc.swarm_config()
+    obs = np.random.default_rng(0).normal(size=(5, model.observation_space.shape[0]))
+    obs = obs.astype(np.float32)
+    block = (obs.shape[1] - extractor.own) // cfg.n_neighbors
+    own, slots = obs[:, : extractor.own], obs[:, extractor.own :].reshape(5, -1, block)
+    slots[..., extractor.mask] = 1.0  # every slot a real neighbour
+    order = np.random.default_rng(1).permutation(cfg.n_neighbors)
+    a = model.predict(np.concatenate([own, slots.reshape(5, -1)], axis=1), deterministic=True)
+    shuffled = slots[:, order].reshape(5, -1)
+    b = model.predict(np.concatenate([own, shuffled], axis=1), deterministic=True)
+    np.testing.assert_allclose(a[0], b[0], atol=1e-5)  # the neighbours' order is not an input
+
+
+def test_the_neighbour_set_encoder_ignores_padding_slots():
+    import gymnasium as gym
+    import torch
+
+    from train.encoders import NeighborSetEncoder
+
+    space = gym.spaces.Box(-10.0, 10.0, (2 + 3 * 3,), np.float32)
+    enc = NeighborSetEncoder(space, own=2, k=3, block=3, mask=2, width=4)
+    obs = torch.zeros(2, 11)
+    obs[:, 2:5] = torch.tensor([0.4, -0.2, 1.0])  # one real neighbour
+    obs[1, 5:8] = torch.tensor([5.0, 5.0, 0.0])  # padding with garbage: ignored
+    out = enc(obs)
+    torch.testing.assert_close(out[0], out[1])
+    none = enc(torch.zeros(1, 11))  # no neighbour at all: zero codes
+    assert torch.count_nonzero(none) == 0
+    with pytest.raises(ValueError, match="is not 2 own entries and 3 slots of 4"):
+        NeighborSetEncoder(space, own=2, k=3, block=4, mask=2)
 
 
 def test_training_is_deterministic_for_a_seed(tmp_path: Path):

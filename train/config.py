@@ -142,6 +142,13 @@ class TrainConfig(RunConfig):
     """Seed of the model, the training envs and SB3's global seeding."""
     net_arch: tuple[int, ...] = (64, 64)
     """Hidden layer sizes of the policy and value networks."""
+    encoder: str | None = None
+    """Shared mode, PPO or SAC: ``deepsets`` reads the neighbour slots as a set
+    (:class:`train.encoders.NeighborSetEncoder`: one network over every slot, pooled by
+    mean and maximum over the real neighbours, beside the agent's own features) before
+    ``net_arch``; ``null``: the flat observation."""
+    encoder_width: int = 32
+    """With ``encoder``: the width of its per-slot network and of each pooled code."""
     hyperparams: dict = field(default_factory=dict)
     """Extra SB3 constructor arguments, checked against the algorithm's signature."""
     residual: str | None = None
@@ -192,6 +199,7 @@ class TrainConfig(RunConfig):
             ("checkpoint_freq", 0),
             ("checkpoint_keep", 1),
             ("residual_warmup", 0),
+            ("encoder_width", 1),
         ):
             object.__setattr__(self, name, check_integer(name, getattr(self, name), low=low))
         for name in ("seed", "eval_seed"):
@@ -230,6 +238,7 @@ class TrainConfig(RunConfig):
             self._check_es_only()
         else:
             self._check_sb3_keywords(cls)
+        self._check_encoder()
         if self.residual is not None:
             from train.residual import check_baseline_name
 
@@ -266,6 +275,29 @@ class TrainConfig(RunConfig):
                     f"hyperparams.{key} is not a {self.algo} argument; "
                     f"allowed: {', '.join(sorted(allowed))}"
                 )
+
+    def _check_encoder(self) -> None:
+        """``encoder`` is null or one of :data:`train.encoders.ENCODERS`, with a shared
+        SB3 policy (ES's network is the flat actor; central mode sees every agent at
+        once)."""
+        from train.encoders import ENCODERS
+
+        if self.encoder is None:
+            return
+        if self.encoder not in ENCODERS:
+            raise ValueError(
+                f"encoder must be null or one of {', '.join(ENCODERS)}, got {self.encoder!r}"
+            )
+        if self.mode != "shared":
+            raise ValueError(
+                f"encoder {self.encoder!r} reads one agent's neighbour slots: it needs mode "
+                f"'shared', got mode {self.mode!r}"
+            )
+        if self.algo == ES:
+            raise ValueError(
+                f"encoder {self.encoder!r} is an SB3 features extractor: algo ES trains the "
+                "flat actor only; set encoder to null or algo to PPO or SAC"
+            )
 
     def _check_es_only(self) -> None:
         """What an ``algo: ES`` run (:mod:`train.es`) refuses: central mode, a periodic

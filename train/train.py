@@ -172,6 +172,13 @@ def build_model(tc: TrainConfig, venv: VecEnv, tensorboard_log: str | None = Non
     policy_kwargs: dict[str, Any] = {"net_arch": net if tc.algo == "SAC" else dict(pi=net, vf=net)}
     if tc.residual is not None and tc.algo == "PPO":
         policy_kwargs["log_std_init"] = tc.residual_log_std
+    if tc.encoder is not None:
+        from train.encoders import NeighborSetEncoder, encoder_kwargs
+
+        policy_kwargs["features_extractor_class"] = NeighborSetEncoder
+        policy_kwargs["features_extractor_kwargs"] = encoder_kwargs(
+            tc.swarm_config(), tc.encoder_width
+        )
     model = cls(
         POLICY,
         venv,
