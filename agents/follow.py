@@ -119,9 +119,9 @@ class InformedFollowerController(SaturatedPDController):
             (self.k_v * mean_velocity + self.k_c * mean_offset) / self.u_max, self.saturation
         )
         # The leaders' PD law, with the tether to all their real neighbours.
-        goal = np.asarray(obs[:, :d] * self.obs_goal_scale, np.float64)
-        velocity = np.asarray(obs[:, d : 2 * d] * self.obs_velocity_scale, np.float64)
-        pd = self.k_p * goal - self.k_d * velocity
+        pd = self.command(
+            obs[:, :d] * self.obs_goal_scale, obs[:, d : 2 * d] * self.obs_velocity_scale
+        )
         if self.k_l > 0:
             flock = np.einsum("nk,nkd->nd", real, offset) / np.maximum(
                 real.sum(axis=1, keepdims=True), 1.0

@@ -114,7 +114,13 @@ class SaturatedPDController(Controller):
                 f"offset and velocity must both be shaped (..., {self.dim}), got "
                 f"{offset.shape} and {velocity.shape}"
             )
-        return saturate((self.k_p * offset - self.k_d * velocity) / self.u_max, self.saturation)
+        return saturate(self.command(offset, velocity) / self.u_max, self.saturation)
+
+    def command(self, offset: np.ndarray, velocity: np.ndarray) -> np.ndarray:
+        """The PD law before its saturation, ``k_p (r_g − r_i) − k_d v_i`` (control
+        units, float64), for goal offsets and velocities shaped alike ``(..., d)``."""
+        offset = np.asarray(offset, dtype=np.float64)
+        return self.k_p * offset - self.k_d * np.asarray(velocity, dtype=np.float64)
 
     def _actions(self, obs: np.ndarray, deterministic: bool) -> np.ndarray:
         d = self.dim

@@ -119,7 +119,7 @@ def _steps_to_reach(cfg: SwarmConfig, offset: np.ndarray, speed: np.ndarray) -> 
     The components are independent, so the points reachable at time ``t`` form a box:
     along each axis the interval between full thrust backward and full thrust forward
     from that axis's start speed. The bound is the first step at which that box meets
-    the ball of ``radius`` about ``offset``. Each end of an interval is the farther of
+    the ball of the arrival radius about ``offset``. Each end of an interval is the farther of
     the exact flow's and one-substep semi-implicit Euler's (the integrator's own
     recursion, which runs slightly ahead of the flow).
 
