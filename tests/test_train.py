@@ -259,8 +259,7 @@ def test_a_policy_with_the_neighbour_set_encoder_trains_and_reloads(tmp_path: Pa
     cfg = tc.swarm_config()
     obs = np.random.default_rng(0).normal(size=(5, model.observation_space.shape[0]))
     obs = obs.astype(np.float32)
-    block = (obs.shape[1] - extractor.own) // cfg.n_neighbors
-    own, slots = obs[:, : extractor.own], obs[:, extractor.own :].reshape(5, -1, block)
+    own, slots = obs[:, : extractor.own], obs[:, extractor.own :].reshape(5, -1, extractor.block)
     slots[..., extractor.mask] = 1.0  # every slot a real neighbour
     order = np.random.default_rng(1).permutation(cfg.n_neighbors)
     a = model.predict(np.concatenate([own, slots.reshape(5, -1)], axis=1), deterministic=True)
