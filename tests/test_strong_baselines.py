@@ -213,8 +213,12 @@ def test_no_policy_reaches_the_goal_before_the_bound(dynamics):
         policies["corner"] = SaturatedPDController(cfg, k_p=5.0, k_d=0.0, saturation="clip")
     for name, policy in policies.items():
         batch = run_episodes(policy, cfg, 16, 5, record_episode=False)
-        bound = time_to_goal_bound(cfg, batch.start["x"], batch.start["v"], batch.start["goal"])
+        start = batch.start
+        bound = time_to_goal_bound(
+            cfg, start["x"], start["v"], start["goal"], max_turn=start.get("max_turn")
+        )
         assert bound is not None and np.all(bound > 0)
+        assert ("max_turn" in start) == (dynamics == "zone")
         reached = batch.first_success[batch.success] * cfg.dt
         assert batch.success.any()
         assert np.all(reached >= bound[batch.success] - 1e-9), name
@@ -255,6 +259,45 @@ def test_bound_is_reached_by_one_free_agent_off_the_axes():
         core.step(np.array([[[1.0, 1.0 / 6.0]]]))
         steps += 1
     assert steps * cfg.dt == pytest.approx(bound) == pytest.approx(2.0)
+
+
+def _zone_agent_run(speed: float, heading: float) -> tuple[float, float, float]:
+    """One zone-model agent at the origin, its own ``speed`` and start ``heading``
+    (radians from the goal's direction), steered by the PD law to the goal 10 away:
+    its time to goal, the bound with its turning limit and the bound without."""
+    cfg = SwarmConfig(dynamics="zone", n_agents=1)
+    core = make_core(cfg)
+    core.reset(np.random.default_rng(0))
+    core.dynamics.agent_params.speed[...] = speed  # as the model's spread may draw it
+    goal = np.array([[10.0, 0.0]])
+    core.x[...], core.goal[...] = 0.0, goal
+    core.v[...] = speed * np.array([[[np.cos(heading), np.sin(heading)]]])
+    start = (core.x.copy(), core.v.copy(), goal)
+    turn = core.dynamics.agent_params.max_turn.copy()
+    bound = float(time_to_goal_bound(cfg, *start, max_turn=turn)[0])
+    straight = float(time_to_goal_bound(cfg, *start)[0])
+    pd = make_controller("pd", cfg)
+    steps = 0
+    while np.linalg.norm(core.x[0, 0] - goal[0]) > cfg.arrival_radius:
+        core.step(np.asarray(pd.predict(core.observe().reshape(1, -1))[0]).reshape(1, 1, 2))
+        steps += 1
+    return steps * cfg.dt, bound, straight
+
+
+def test_zone_bound_counts_each_agents_own_speed():
+    # An agent 25 % faster than the nominal speed, heading at the goal: 8.5 at 0.125 per
+    # step is 68 steps. The nominal speed's 85 steps would be no bound at all.
+    reached, bound, straight = _zone_agent_run(1.25, 0.0)
+    assert bound == straight == pytest.approx(6.8)
+    assert reached >= bound - 1e-9
+
+
+def test_zone_bound_counts_the_turning_limit():
+    # Heading 170° away, 30° per step: the agent turns for 5 steps, moving away, before
+    # it can head for the goal. The PD law does exactly that, so it meets the bound.
+    reached, bound, straight = _zone_agent_run(1.0, np.radians(170.0))
+    assert straight == pytest.approx(8.5)
+    assert bound == pytest.approx(reached) == pytest.approx(9.0)
 
 
 def test_bound_is_undefined_where_it_would_not_hold():

@@ -246,7 +246,10 @@ def _episodes(policy: Any, cfg: SwarmConfig, s: Settings, name: str) -> _Episode
         policy, cfg, s.episodes, s.eval_seed, name=name, progress=False, record_episode=False
     )
     reached = batch.lengths if batch.first_success is None else batch.first_success
-    bound = time_to_goal_bound(cfg, batch.start["x"], batch.start["v"], batch.start["goal"])
+    start = batch.start
+    bound = time_to_goal_bound(
+        cfg, start["x"], start["v"], start["goal"], max_turn=start.get("max_turn")
+    )
     return _Episodes(batch.returns, batch.success, batch.lengths, reached, bound)
 
 

@@ -14,22 +14,29 @@ the centroid's motion depends on the model (``D = |g − c(0)|``):
   the ball of radius ``R`` about the goal. Each end of an interval is the farther of
   the exact flow's and the one-substep semi-implicit Euler recursion's (the integrator's
   own progress, which runs slightly ahead; more substeps approach the flow).
-- **zone model**: every agent moves at its constant ``speed``, so the centroid covers at
-  most ``speed · dt`` per step: ``⌈(D − R) / (speed · dt)⌉`` steps.
+- **zone model**: every agent must be within ``R`` of the goal, and agent ``i`` moves
+  exactly ``s_i dt`` per step (its own speed ``s_i = |v_i|``, drawn with the model's
+  spread) along a heading that turns by at most its own ``φ_i`` per step before it moves.
+  After ``n`` steps its heading's angle to the line from its start to the goal is at
+  least ``θ_i − nφ_i`` (``θ_i`` at the start), so its progress along that line is at most
+  ``s_i dt Σ_{k ≤ n} cos(max(0, θ_i − kφ_i))``; it needs ``D_i − R`` (``D_i`` its start
+  distance). The bound is the slowest agent's first such step (without the per-agent
+  ``φ_i``, the straight line: ``⌈(D_i − R) / (s_i dt)⌉``).
 
 Elsewhere — the piecewise model (its neighbour forces are one-way and do not cancel),
 the Lagrangian model, self-propulsion, a passive sink, a task with its own success rule
 or one that holds a state (the mill, a user's task: ``TaskSpec.success``,
 ``terminates_on_success``), ``success_fraction
 < 1`` or perturbations that change who acts — no bound is defined (``None``). The bound
-ignores everything that slows a real swarm (keeping together, braking, turning), so a
-policy at the bound is optimal, and one within a few percent of it has little left to
-gain.
+ignores everything else that slows a real swarm (keeping together, braking, and in the
+informed task that most agents do not know where the goal is), so a policy at the bound
+is optimal, and one within a few percent of it has little left to gain.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -79,7 +86,11 @@ def bound_reason(cfg: SwarmConfig) -> str | None:
 
 
 def time_to_goal_bound(
-    cfg: SwarmConfig, x: np.ndarray, v: np.ndarray, goal: np.ndarray
+    cfg: SwarmConfig,
+    x: np.ndarray,
+    v: np.ndarray,
+    goal: np.ndarray,
+    max_turn: np.ndarray | None = None,
 ) -> np.ndarray | None:
     """The lower bound (simulated seconds, a multiple of ``dt``) on each swarm's time to
     goal from its start state, ``(B,)``; ``None`` where no bound is defined
@@ -89,6 +100,9 @@ def time_to_goal_bound(
         cfg: the scenario.
         x, v: start positions and velocities ``(B, N, d)``.
         goal: goals ``(B, d)``.
+        max_turn: the zone model's per-agent turning limits ``φ_i`` ``(B, N)`` in radians
+            (``EpisodeBatch.start["max_turn"]``); ``None``: no turning limit counted
+            (a looser bound, still one). Other models ignore it.
 
     >>> import dataclasses
     >>> from swarm_envs.physics import SocialPotentialParams
@@ -103,12 +117,43 @@ def time_to_goal_bound(
     x = np.asarray(x, np.float64)
     v = np.asarray(v, np.float64)
     goal = np.asarray(goal, np.float64)
-    centroid, drift = x.mean(axis=1), v.mean(axis=1)
-    offset = goal - centroid
     if cfg.dynamics == "zone":
-        gap = np.maximum(np.sqrt(np.einsum("bk,bk->b", offset, offset)) - cfg.arrival_radius, 0)
-        return np.ceil(gap / (cfg.zone.speed * cfg.dt) - 1e-9) * cfg.dt
-    return _steps_to_reach(cfg, offset, drift) * cfg.dt
+        return _zone_steps(cfg, x, v, goal, max_turn).max(axis=1) * cfg.dt
+    centroid, drift = x.mean(axis=1), v.mean(axis=1)
+    return _steps_to_reach(cfg, goal - centroid, drift) * cfg.dt
+
+
+def _zone_steps(
+    cfg: SwarmConfig, x: np.ndarray, v: np.ndarray, goal: np.ndarray, max_turn: Any
+) -> np.ndarray:
+    """Steps until each agent of the zone model can first be within the arrival radius
+    ``(B, N)`` (``max_steps + 1``: never): the module docstring's per-agent bound.
+
+    Args:
+        cfg: the scenario (``dt``, ``max_steps``, the radius).
+        x, v: start positions and velocities ``(B, N, d)`` (``|v_i|`` is the speed).
+        goal: goals ``(B, d)``.
+        max_turn: per-agent turning limits ``(B, N)`` or ``None`` (π: none).
+    """
+    dt, radius = cfg.dt, cfg.arrival_radius
+    speed = np.sqrt(np.einsum("bnk,bnk->bn", v, v))
+    offset = goal[:, None, :] - x
+    distance = np.sqrt(np.einsum("bnk,bnk->bn", offset, offset))
+    cos = np.einsum("bnk,bnk->bn", v, offset) / np.maximum(speed * distance, 1e-300)
+    angle = np.arccos(np.clip(cos, -1.0, 1.0))
+    phi = np.broadcast_to(math.pi if max_turn is None else np.asarray(max_turn), angle.shape)
+    # The positions are sums of rounded steps: a bound that an exact arrival meets must
+    # not wait for the last ulp.
+    need = distance - radius - 1e-9 * np.maximum(distance, 1.0)
+    steps = np.where(need <= 0, 0, cfg.max_steps + 1)
+    progress = np.zeros_like(distance)
+    for n in range(1, cfg.max_steps + 1):
+        open_ = steps > n - 1
+        if not open_.any():
+            break
+        progress += speed * dt * np.cos(np.maximum(angle - n * phi, 0.0))
+        steps = np.where(open_ & (progress >= need), n, steps)
+    return steps
 
 
 def _steps_to_reach(cfg: SwarmConfig, offset: np.ndarray, speed: np.ndarray) -> np.ndarray:
@@ -200,7 +245,7 @@ def free_agent_time(
     swarm would need to reach the arrival radius alone, its own control the only force
     beside the drag (the reachable box of :func:`time_to_goal_bound`, per agent), from
     its start (``None`` where :func:`bound_reason`
-    gives no bound, or for the zone model, whose bound is already per agent).
+    gives no bound, or for the zone model, whose bound is already the slowest agent's).
 
     It ignores the pair forces, which a coordinated swarm can use (cohesion pulls the
     rear forward), so a policy may beat it; a policy close to it has little left to gain

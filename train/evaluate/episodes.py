@@ -77,7 +77,8 @@ class EpisodeBatch:
     trajectory: dict[str, np.ndarray] = field(default_factory=dict)
     start: dict[str, np.ndarray] = field(default_factory=dict)
     """Every episode's start state: positions and velocities ``(B, N, d)``, goals
-    ``(B, d)`` (the same for every policy run on the same seed)."""
+    ``(B, d)`` and, for the zone model, each agent's turning limit ``max_turn`` ``(B, N)``
+    (the same for every policy run on the same seed)."""
     first_success: np.ndarray | None = None
     """The step at which each episode first succeeded ``(B,)`` (0: never): its end in
     navigation, the first step of the held mill in the mill task (``None``: the
@@ -140,6 +141,9 @@ def run_episodes(
     xs, vs = [core.x[0].copy()], [core.v[0].copy()]
     goal0 = core.goal[0].copy()
     start = {"x": np.array(core.x), "v": np.array(core.v), "goal": np.array(core.goal)}
+    zone = getattr(getattr(core, "dynamics", None), "agent_params", None)
+    if zone is not None:  # the zone model's per-agent turning limits, for the bound
+        start["max_turn"] = np.array(zone.max_turn, np.float64)
     state: Any = None
     episode_start = np.ones(B, bool)
 

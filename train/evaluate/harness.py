@@ -160,7 +160,7 @@ def evaluate_policies(
     }
     first = next(iter(batches.values()))
     start = (first.start["x"], first.start["v"], first.start["goal"])
-    bound = time_to_goal_bound(cfg, *start)
+    bound = time_to_goal_bound(cfg, *start, max_turn=first.start.get("max_turn"))
     alone = free_agent_time(cfg, *start)
     measures = {name: summarize(b, bound) for name, b in batches.items()}
     results: dict[str, Any] = {
