@@ -2,7 +2,7 @@
 
 Navigation succeeds when every agent is within the arrival radius ``R`` of the goal at
 once, so the swarm's centroid ``c`` is then within ``R`` of the goal too. What bounds
-the centroid's motion depends on the model (``D = |g − c(0)|``):
+the time depends on the model:
 
 - **social potential** (navigation and informed tasks, linear friction ``α = 0``, no
   passive sink): the pair forces (Morse and alignment) are equal and opposite, so they
