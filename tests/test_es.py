@@ -201,3 +201,23 @@ def test_candidates_meet_the_same_failures_on_a_perturbed_config():
     assert (status != status[0, 0, 0]).any()  # some agents failed
     np.testing.assert_array_equal(status[1], status[0])
     np.testing.assert_array_equal(status[2], status[0])
+
+
+def test_rollouts_scale_the_correction_as_the_evaluated_policy_does():
+    from train.evaluate.episodes import run_episodes
+    from train.residual import ResidualPolicy, make_baseline
+
+    tc = es_config(residual="pd", residual_scale=0.5, env={**SMALL_ENV, "max_steps": 40})
+    cfg = tc.swarm_config()
+    model = _policy(tc)
+    actor = ActorParameters(model.policy)
+    baseline = make_baseline("pd", cfg)
+    theta = np.random.default_rng(3).normal(0, 0.3, actor.size)
+    rollouts = Rollouts(cfg, actor, baseline, candidates=1, episodes=4, scale=0.5)
+    returns, _ = rollouts.returns(theta[None], (7, 0, 0))
+    actor.load(theta)
+    policy = ResidualPolicy(model, baseline, 0.5)
+    ref = run_episodes(policy, cfg, 4, np.random.SeedSequence((7, 0, 0)), record_episode=False)
+    assert returns[0] == pytest.approx(ref.returns.mean(), abs=1e-4)
+    full = Rollouts(cfg, actor, baseline, candidates=1, episodes=4)
+    assert full.returns(theta[None], (7, 0, 0))[0][0] != pytest.approx(returns[0], abs=1e-4)

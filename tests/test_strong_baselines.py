@@ -398,6 +398,40 @@ def test_residual_vec_env_steps_baseline_plus_correction():
         np.testing.assert_allclose(r_p, r_w)
 
 
+@pytest.mark.parametrize("scale", [1.0, 0.25])
+def test_residual_vec_env_scales_the_correction(scale):
+    from train.residual import ResidualVecEnv
+
+    cfg = SwarmConfig(n_agents=5)
+    pd = make_controller("pd", cfg)
+    plain = swarm_nav_v0.vec_env(2, n_agents=5)
+    wrapped = ResidualVecEnv(swarm_nav_v0.vec_env(2, n_agents=5), pd, scale)
+    plain.seed(4)
+    wrapped.seed(4)
+    obs_p, _ = plain.reset(), wrapped.reset()
+    correction = np.full((10, 2), 0.8, np.float32)
+    for _ in range(5):
+        base, _ = pd.predict(obs_p)
+        obs_p, r_p, _, _ = plain.step(np.clip(base + scale * correction, -1, 1))
+        obs_w, r_w, _, _ = wrapped.step(correction)
+        np.testing.assert_allclose(obs_p, obs_w)
+        np.testing.assert_allclose(r_p, r_w)
+
+
+def test_residual_scale_is_refused_outside_its_range_and_without_a_residual():
+    from train.config import load_train_config
+    from train.residual import ResidualVecEnv
+
+    for bad in (0.0, 1.5, -0.2, True, "half"):
+        with pytest.raises(ValueError, match=r"residual_scale must be a number in \(0, 1\]"):
+            load_train_config("configs/train/demo.yaml", {"residual": "pd", "residual_scale": bad})
+    with pytest.raises(ValueError, match="set residual to a baseline"):
+        load_train_config("configs/train/demo.yaml", {"residual_scale": 0.5})
+    pd = make_controller("pd", SwarmConfig(n_agents=5))
+    with pytest.raises(ValueError, match="residual_scale"):
+        ResidualVecEnv(swarm_nav_v0.vec_env(1, n_agents=5), pd, 2.0)
+
+
 def test_residual_model_loads_as_the_policy_it_trained_as(tmp_path):
     from train.config import load_train_config
     from train.evaluate import load_sb3_model
@@ -412,6 +446,7 @@ def test_residual_model_loads_as_the_policy_it_trained_as(tmp_path):
             "eval_freq": 0,
             "checkpoint_freq": 0,
             "residual": "pd",
+            "residual_scale": 0.5,
             "env": {"n_agents": 5},
             "hyperparams": {"n_steps": 256, "batch_size": 640, "n_epochs": 1},
         },
@@ -421,6 +456,12 @@ def test_residual_model_loads_as_the_policy_it_trained_as(tmp_path):
     assert isinstance(policy, ResidualPolicy)
     pd = make_controller("pd", tc.swarm_config())
     assert (policy.baseline.k_p, policy.baseline.k_d) == (pd.k_p, pd.k_d)
+    assert policy.scale == 0.5  # recorded in the model, applied at evaluation
+    obs = swarm_nav_v0.vec_env(1, n_agents=5).reset()
+    correction, _ = policy.model.predict(obs, deterministic=True)
+    base, _ = pd.predict(obs)
+    expected = np.clip(base + 0.5 * np.clip(correction, -1, 1), -1, 1)
+    np.testing.assert_allclose(policy.predict(obs)[0], expected, rtol=1e-6)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # its own env: no warning
         evaluate_policies({"learned": policy}, tc.swarm_config(), 2, 9, progress=False)
@@ -433,6 +474,7 @@ def test_residual_record_rebuilds_the_baseline_it_was_trained_on():
     tethered = InformedFollowerController(cfg, k_l=3.0, tether=2.0)
     record = residual_record("follow", tethered)
     assert (record["gains"]["k_l"], record["gains"]["tether"]) == (3.0, 2.0)
+    assert record["scale"] == 1.0
     rebuilt = make_baseline("follow", cfg, record["gains"])
     assert (rebuilt.k_l, rebuilt.tether, rebuilt.k_p) == (3.0, 2.0, tethered.k_p)
     # A record made before the tether existed rebuilds the untethered leader, whatever

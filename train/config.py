@@ -158,7 +158,12 @@ class TrainConfig(RunConfig):
     the start of training, and are recorded in the model. ``null``: the policy acts alone."""
     residual_log_std: float = -1.0
     """With ``residual``: the initial log standard deviation of the policy's Gaussian
-    (the exploration noise around the baseline's action; SB3's default is 0)."""
+    (the exploration noise around the baseline's action, before ``residual_scale``;
+    SB3's default is 0)."""
+    residual_scale: float = 1.0
+    """With ``residual``: the scale ``c`` in (0, 1] of the correction, ``a = clip(b(o) +
+    c · r_θ(o), −1, 1)``: the policy stays within ``c`` of the baseline's action on every
+    axis, in training and at evaluation (recorded in the model)."""
     residual_warmup: int = 0
     """With ``residual``: timesteps at the start during which only the value function
     learns (:class:`train.residual.CriticWarmup`); the policy stays the baseline's. An
@@ -255,6 +260,14 @@ class TrainConfig(RunConfig):
             self.residual_log_std, int | float
         ):
             raise ValueError(f"residual_log_std must be a number, got {self.residual_log_std!r}")
+        from train.residual import check_residual_scale
+
+        object.__setattr__(self, "residual_scale", check_residual_scale(self.residual_scale))
+        if self.residual is None and self.residual_scale != 1.0:
+            raise ValueError(
+                f"residual_scale = {self.residual_scale} scales a residual policy's "
+                "correction; set residual to a baseline or leave residual_scale at 1"
+            )
         self._check_env()  # a typo in the env part fails before any training starts
         if self.algo == ES:
             from train.es import check_es_hyperparams

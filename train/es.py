@@ -181,13 +181,20 @@ class Rollouts:
     """
 
     def __init__(
-        self, cfg: Any, actor: ActorParameters, baseline: Any, candidates: int, episodes: int
+        self,
+        cfg: Any,
+        actor: ActorParameters,
+        baseline: Any,
+        candidates: int,
+        episodes: int,
+        scale: float = 1.0,
     ) -> None:
         from swarm_envs.envs.backends import make_core
 
         self.cfg = replace(cfg, on_unstable="truncate")
         self.actor = actor
         self.baseline = baseline
+        self.scale = scale
         self.candidates = candidates
         self.episodes = episodes
         self.core = make_core(self.cfg, batch=candidates * episodes)
@@ -197,6 +204,8 @@ class Rollouts:
         taken (every candidate's swarms until their episodes ended). Every block's starts
         come from ``numpy.random.default_rng(SeedSequence(entropy))``: a tuple, so that
         no generation meets the episodes of an integer seed (an evaluation's)."""
+        from train.residual import apply_correction
+
         core, P, M = self.core, self.candidates, self.episodes
         if thetas.shape[0] != P:
             raise ValueError(f"expected {P} parameter vectors, got {thetas.shape[0]}")
@@ -214,7 +223,7 @@ class Rollouts:
             action = self.actor.actions(thetas, obs.reshape(P, M * N, od)).reshape(B * N, -1)
             if self.baseline is not None:
                 base, _ = self.baseline.predict(obs.reshape(B * N, od))
-                action = np.clip(np.asarray(base, np.float32) + action, -1.0, 1.0)
+                action = apply_correction(base, action, self.scale)
             reward, terminated, truncated, _ = core.step(action.reshape(B, N, -1))
             live = ~done
             total[live] += reward[live]
@@ -342,11 +351,10 @@ def train_es(
         es.restore(ckpt / STATE_FILE, state["es"])
         timesteps, seconds_before = int(state["timesteps"]), float(state["train_seconds"])
         history.extend(state.get("history", []))
-    baseline = (
-        make_baseline(tc.residual, cfg, getattr(model, RESIDUAL)["gains"]) if tc.residual else None
-    )
+    record = getattr(model, RESIDUAL, None) or {}
+    baseline = make_baseline(tc.residual, cfg, record["gains"]) if tc.residual else None
     P = int(hyper["population"])
-    rollouts = Rollouts(cfg, actor, baseline, P + 1, tc.n_swarms)
+    rollouts = Rollouts(cfg, actor, baseline, P + 1, tc.n_swarms, record.get("scale", 1.0))
     clock = time.perf_counter()
     saved_at = (time.monotonic(), timesteps)
 

@@ -1,12 +1,15 @@
 """Residual policies: a learned correction on top of a simple baseline's action.
 
-A residual policy acts ``a_i = clip(b(o_i) + r_θ(o_i), −1, 1)``: the baseline ``b`` (a
-controller of :mod:`agents`, e.g. the tuned saturated PD law) plus a learned correction
-``r_θ``. SB3's PPO starts its Gaussian policy's mean near zero (the action layer is
-initialised small), so training starts at the baseline's return and only has to learn
-what the baseline misses. ``TrainConfig.residual`` names the baseline; training steps
-the env through :class:`ResidualVecEnv`, and the model records the baseline and its
-gains (:data:`RESIDUAL`, saved in the model zip), so that :func:`as_policy` rebuilds the
+A residual policy acts ``a_i = clip(b(o_i) + c · r_θ(o_i), −1, 1)``: the baseline ``b``
+(a controller of :mod:`agents`, e.g. the tuned saturated PD law) plus a learned
+correction ``r_θ``, scaled by ``c = TrainConfig.residual_scale`` (1 by default; a
+smaller ``c`` keeps the policy within ``c`` of the baseline's action on every axis, a
+trust region that training cannot leave). SB3's PPO starts its Gaussian policy's mean
+near zero (the action layer is initialised small), so training starts at the
+baseline's return and only has to learn what the baseline misses.
+``TrainConfig.residual`` names the baseline; training steps the env through
+:class:`ResidualVecEnv`, and the model records the baseline, its gains and the scale
+(:data:`RESIDUAL`, saved in the model zip), so that :func:`as_policy` rebuilds the
 same policy at evaluation, whatever the tuned table says by then.
 """
 
@@ -28,8 +31,10 @@ __all__ = [
     "CriticWarmup",
     "ResidualPolicy",
     "ResidualVecEnv",
+    "apply_correction",
     "as_policy",
     "check_baseline_name",
+    "check_residual_scale",
     "make_baseline",
     "residual_record",
 ]
@@ -80,19 +85,36 @@ def make_baseline(name: str, cfg: SwarmConfig, gains: Mapping[str, Any] | None =
     return CONTROLLERS[name](cfg, **{**_GAINS_BEFORE_RECORDED.get(name, {}), **dict(gains)})
 
 
-def residual_record(name: str, baseline: Any) -> dict[str, Any]:
-    """What a residual model records: the baseline's name and gains."""
+def check_residual_scale(scale: Any) -> float:
+    """``scale`` as a float if it is a number in (0, 1], else ``ValueError``."""
+    if isinstance(scale, bool) or not isinstance(scale, int | float) or not 0 < scale <= 1:
+        raise ValueError(f"residual_scale must be a number in (0, 1], got {scale!r}")
+    return float(scale)
+
+
+def residual_record(name: str, baseline: Any, scale: float = 1.0) -> dict[str, Any]:
+    """What a residual model records: the baseline's name and gains, and the scale of
+    the correction (:class:`ResidualVecEnv`)."""
     gains = {k: getattr(baseline, k) for k in _GAIN_ATTRS if hasattr(baseline, k)}
-    return {"baseline": name, "gains": gains}
+    return {"baseline": name, "gains": gains, "scale": check_residual_scale(scale)}
+
+
+def apply_correction(base: Any, correction: Any, scale: float) -> np.ndarray:
+    """The action of a residual policy: ``clip(base + scale · clip(correction, −1, 1),
+    −1, 1)`` in float32 (one definition for training, evaluation and ES)."""
+    total = np.asarray(base, np.float32) + scale * np.clip(correction, -1.0, 1.0)
+    return np.clip(total, -1.0, 1.0).astype(np.float32, copy=False)
 
 
 class ResidualVecEnv(VecEnvWrapper):
     """A VecEnv whose actions are corrections: it steps the wrapped env with
-    ``clip(baseline(obs) + action, −1, 1)``, ``obs`` the observations the actions answer."""
+    ``clip(baseline(obs) + scale · action, −1, 1)`` (:func:`apply_correction`), ``obs``
+    the observations the actions answer."""
 
-    def __init__(self, venv: VecEnv, baseline: Any) -> None:
+    def __init__(self, venv: VecEnv, baseline: Any, scale: float = 1.0) -> None:
         super().__init__(venv)
         self.baseline = baseline
+        self.scale = check_residual_scale(scale)
         self._obs: VecEnvObs | None = None
 
     def reset(self) -> VecEnvObs:
@@ -103,8 +125,7 @@ class ResidualVecEnv(VecEnvWrapper):
         if self._obs is None:
             raise RuntimeError("ResidualVecEnv: step before reset")
         base, _ = self.baseline.predict(self._obs)
-        total = np.clip(np.asarray(base, np.float32) + actions, -1.0, 1.0)
-        self.venv.step_async(total.astype(np.float32, copy=False))
+        self.venv.step_async(apply_correction(base, actions, self.scale))
 
     def step_wait(self) -> Any:
         obs, rewards, dones, infos = self.venv.step_wait()
@@ -113,11 +134,13 @@ class ResidualVecEnv(VecEnvWrapper):
 
 
 class ResidualPolicy:
-    """A residual model as one policy (SB3's ``predict``): baseline plus correction."""
+    """A residual model as one policy (SB3's ``predict``): baseline plus the correction
+    times ``scale`` (:func:`apply_correction`)."""
 
-    def __init__(self, model: Any, baseline: Any) -> None:
+    def __init__(self, model: Any, baseline: Any, scale: float = 1.0) -> None:
         self.model = model
         self.baseline = baseline
+        self.scale = check_residual_scale(scale)
         self.observation_space = model.observation_space
         self.action_space = model.action_space
         from train.evaluate.policies import TRAINED_ENV
@@ -136,8 +159,7 @@ class ResidualPolicy:
             observation, state=state, episode_start=episode_start, deterministic=deterministic
         )
         base, _ = self.baseline.predict(observation)
-        total = np.clip(np.asarray(base) + np.clip(correction, -1.0, 1.0), -1.0, 1.0)
-        return total.astype(np.float32, copy=False), state
+        return apply_correction(base, correction, self.scale), state
 
 
 class CriticWarmup(BaseCallback):
@@ -191,7 +213,8 @@ class CriticWarmup(BaseCallback):
 
 def as_policy(model: Any) -> Any:
     """``model`` as the policy it acts as: a :class:`ResidualPolicy` for a model that
-    records a baseline (:data:`RESIDUAL`), the model itself otherwise."""
+    records a baseline (:data:`RESIDUAL`; a record without a scale is a correction at
+    scale 1), the model itself otherwise."""
     record = getattr(model, RESIDUAL, None)
     if not isinstance(record, Mapping):
         return model
@@ -200,4 +223,5 @@ def as_policy(model: Any) -> Any:
 
     trained = getattr(model, TRAINED_ENV, None) or {}
     cfg = load_swarm_config(None, dict(trained.get("env_config") or {}))
-    return ResidualPolicy(model, make_baseline(record["baseline"], cfg, record.get("gains")))
+    baseline = make_baseline(record["baseline"], cfg, record.get("gains"))
+    return ResidualPolicy(model, baseline, record.get("scale", 1.0))

@@ -115,7 +115,8 @@ def make_training_env(tc: TrainConfig) -> VecEnv:
         if tc.residual is not None:
             from train.residual import ResidualVecEnv, make_baseline
 
-            return ResidualVecEnv(venv, make_baseline(tc.residual, tc.swarm_config()))
+            baseline = make_baseline(tc.residual, tc.swarm_config())
+            return ResidualVecEnv(venv, baseline, tc.residual_scale)
         return venv
     import gymnasium as gym
 
@@ -199,7 +200,7 @@ def build_model(tc: TrainConfig, venv: VecEnv, tensorboard_log: str | None = Non
                 "a residual policy trains on a ResidualVecEnv (make_training_env), "
                 f"got {type(venv).__name__}"
             )
-        setattr(model, RESIDUAL, residual_record(tc.residual, venv.baseline))
+        setattr(model, RESIDUAL, residual_record(tc.residual, venv.baseline, venv.scale))
     return model
 
 
