@@ -5,7 +5,7 @@ Usage::
     python benchmarks/ab.py --base HEAD~1 [--sizes 32x1,32x1024,64x128]
                             [--rows vec_env,torch_vec_env,parallel_env,physics]
                             [--seconds 0.5] [--repeats 7] [--tune-allocator] [--json out.json]
-                            [--large-swarm]
+                            [--large-swarm] [--zero-actions] [--integrator NAME]
 
 ``--base`` is a git revision (checked out into a temporary worktree) or a folder holding
 another checkout. Each version runs in its own worker process (``PYTHONPATH`` pointing
@@ -19,6 +19,11 @@ base: above 1 is faster) and the physical state of the swarms at the end of the 
 take it too) at its start density 0.3; with ``--zero-actions`` (every row) the swarms stay
 at that density and a step takes one substep at every N: rows that time the same work in
 versions with and without step-size control (compare the printed states).
+
+``--integrator NAME`` sets ``SwarmConfig.integrator`` of the env rows (``vec_env``,
+``torch_vec_env``, ``parallel_env``; e.g. ``implicit_damping_euler``, which the torch
+core refuses); the ``physics`` row stays the bare semi-implicit Euler step. A version
+that does not know the integrator fails on that row, naming it.
 
 Rows (the same API calls in both versions):
 
@@ -205,6 +210,7 @@ def main() -> None:
     parser.add_argument(
         "--zero-actions", action="store_true", help="VecEnv rows with zero actions (passive)"
     )
+    parser.add_argument("--integrator", default=None, help="SwarmConfig.integrator of the env rows")
     args = parser.parse_args()
     root = Path(__file__).resolve().parent.parent
     sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
@@ -222,6 +228,8 @@ def main() -> None:
                     env = large_swarm_env(n) if args.large_swarm else {}
                     if args.zero_actions:
                         env["_zero_actions"] = True
+                    if args.integrator is not None and row != "physics":
+                        env["integrator"] = args.integrator
                     for w in workers.values():
                         w.ask(op="make", tune=args.tune_allocator, env=env, **spec)
                     rates: dict[str, list[float]] = {name: [] for name in workers}
