@@ -36,7 +36,7 @@ from train.benchmark.stats import (
     summarize_runs,
 )
 from train.config import TrainConfig, load_train_config
-from train.evaluate.bound import bound_reason, time_over_bound, time_to_goal_bound
+from train.evaluate.bound import bound_of_episodes, bound_reason, time_over_bound
 from train.evaluate.harness import best_baseline
 from train.evaluate.measures import finite
 
@@ -246,10 +246,7 @@ def _episodes(policy: Any, cfg: SwarmConfig, s: Settings, name: str) -> _Episode
         policy, cfg, s.episodes, s.eval_seed, name=name, progress=False, record_episode=False
     )
     reached = batch.lengths if batch.first_success is None else batch.first_success
-    start = batch.start
-    bound = time_to_goal_bound(
-        cfg, start["x"], start["v"], start["goal"], max_turn=start.get("max_turn")
-    )
+    bound = bound_of_episodes(cfg, batch.start)
     return _Episodes(batch.returns, batch.success, batch.lengths, reached, bound)
 
 

@@ -36,6 +36,7 @@ is optimal, and one within a few percent of it has little left to gain.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -44,6 +45,7 @@ from swarm_envs.config import SwarmConfig
 
 __all__ = [
     "NEAR_OPTIMAL",
+    "bound_of_episodes",
     "bound_reason",
     "free_agent_time",
     "time_over_bound",
@@ -121,6 +123,15 @@ def time_to_goal_bound(
         return _zone_steps(cfg, x, v, goal, max_turn).max(axis=1) * cfg.dt
     centroid, drift = x.mean(axis=1), v.mean(axis=1)
     return _steps_to_reach(cfg, goal - centroid, drift) * cfg.dt
+
+
+def bound_of_episodes(cfg: SwarmConfig, start: Mapping[str, np.ndarray]) -> np.ndarray | None:
+    """:func:`time_to_goal_bound` of the episodes whose start state is ``start``
+    (``EpisodeBatch.start``: ``x``, ``v``, ``goal`` and, for the zone model,
+    ``max_turn``)."""
+    return time_to_goal_bound(
+        cfg, start["x"], start["v"], start["goal"], max_turn=start.get("max_turn")
+    )
 
 
 def _zone_steps(

@@ -10,7 +10,7 @@ from typing import Any
 from agents.base import Controller, swarm_config_of
 from swarm_envs import ENV_ID
 from swarm_envs.config import SwarmConfig, as_dict
-from train.evaluate.bound import bound_reason, free_agent_time, time_to_goal_bound
+from train.evaluate.bound import bound_of_episodes, bound_reason, free_agent_time
 from train.evaluate.episodes import run_episodes
 from train.evaluate.measures import METRIC_DOCS, finite, summarize
 from train.evaluate.policies import (
@@ -160,7 +160,7 @@ def evaluate_policies(
     }
     first = next(iter(batches.values()))
     start = (first.start["x"], first.start["v"], first.start["goal"])
-    bound = time_to_goal_bound(cfg, *start, max_turn=first.start.get("max_turn"))
+    bound = bound_of_episodes(cfg, first.start)
     alone = free_agent_time(cfg, *start)
     measures = {name: summarize(b, bound) for name, b in batches.items()}
     results: dict[str, Any] = {
