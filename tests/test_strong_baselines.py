@@ -429,7 +429,7 @@ def test_residual_scale_is_refused_outside_its_range_and_without_a_residual():
 def test_residual_model_loads_as_the_policy_it_trained_as(tmp_path):
     from train.config import load_train_config
     from train.evaluate import load_sb3_model
-    from train.residual import ResidualPolicy
+    from train.residual import ResidualPolicy, as_policy
     from train.train import train
 
     tc = load_train_config(
@@ -456,6 +456,10 @@ def test_residual_model_loads_as_the_policy_it_trained_as(tmp_path):
     base, _ = pd.predict(obs)
     expected = np.clip(base + 0.5 * np.clip(correction, -1, 1), -1, 1)
     np.testing.assert_allclose(policy.predict(obs)[0], expected, rtol=1e-6)
+    # Asking a loaded policy for the policy it acts as gives it back, not the baseline
+    # added a second time.
+    assert as_policy(policy) is policy
+    np.testing.assert_allclose(as_policy(policy).predict(obs)[0], expected, rtol=1e-6)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # its own env: no warning
         evaluate_policies({"learned": policy}, tc.swarm_config(), 2, 9, progress=False)

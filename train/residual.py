@@ -214,7 +214,11 @@ class CriticWarmup(BaseCallback):
 def as_policy(model: Any) -> Any:
     """``model`` as the policy it acts as: a :class:`ResidualPolicy` for a model that
     records a baseline (:data:`RESIDUAL`; a record without a scale is a correction at
-    scale 1), the model itself otherwise."""
+    scale 1), the model itself otherwise. A :class:`ResidualPolicy` is returned as it
+    is: it already acts as its baseline plus its correction (wrapping it again would
+    add the baseline twice)."""
+    if isinstance(model, ResidualPolicy):
+        return model
     record = getattr(model, RESIDUAL, None)
     if not isinstance(record, Mapping):
         return model
