@@ -192,6 +192,74 @@ def test_swarm_tune_writes_the_best_point_of_its_grid(tmp_path):
     assert record["seed"] == 3 and record["episodes"] == 4 and record["points"] == 2
 
 
+def test_swarm_tune_refines_past_a_coarse_grid(tmp_path):
+    from train.tune_baselines import main
+
+    grids = tmp_path / "grids.yaml"
+    grids.write_text(
+        yaml.safe_dump(
+            {
+                "seed": 3,
+                "episodes": 4,
+                "grids": {"pd": {"k_p": [0.05], "k_d": [0.25], "saturation": ["box", "norm"]}},
+                "refine": {"rounds": 2, "factor": 4.0},
+            }
+        )
+    )
+    out = tmp_path / "tuned.yaml"
+    assert (
+        main(["--grids", str(grids), "--only", "navigation/social_potential", "--out", str(out)])
+        == 0
+    )
+    record = yaml.safe_load(out.read_text())["baselines"]["pd"]["navigation/social_potential"]
+    # The grid holds only a crawling proportional gain; the search steps it up.
+    assert record["grid_gains"]["k_p"] == 0.05
+    assert record["gains"]["k_p"] > 0.05
+    assert record["refine_rounds"] >= 1
+    assert record["mean_return"] > record["grid_return"]
+    # Two grid points, then in each of the two rounds (the first moved, so the second
+    # ran) k_p and k_d up and down and the other saturation.
+    assert record["points"] == 2 + 2 * 5
+
+
+def test_swarm_tune_refinement_skips_gains_out_of_range(tmp_path):
+    from train.tune_baselines import main
+
+    grids = tmp_path / "grids.yaml"
+    grids.write_text(
+        yaml.safe_dump(
+            {
+                "seed": 3,
+                "episodes": 2,
+                "grids": {"mill": {"approach": [1.0], "spin": [0.2]}},
+                "refine": {"rounds": 1, "factor": 1.25},
+            }
+        )
+    )
+    out = tmp_path / "tuned.yaml"
+    # approach 1.25 is out of the mill controller's range [0, 1]: skipped, not fatal.
+    assert main(["--grids", str(grids), "--only", "mill/social_potential", "--out", str(out)]) == 0
+    record = yaml.safe_load(out.read_text())["baselines"]["mill"]["mill/social_potential"]
+    assert record["points"] == 1 + 3  # approach 0.8, spin 0.25 and 0.16
+    assert 0 <= record["gains"]["approach"] <= 1
+
+
+@pytest.mark.parametrize(
+    "refine",
+    [{"rounds": -1}, {"factor": 1.0}, {"rounds": 2, "step": 2}, [2, 1.25], {"rounds": True}],
+)
+def test_swarm_tune_refuses_a_bad_refinement(tmp_path, capsys, refine):
+    from train.tune_baselines import main
+
+    grids = tmp_path / "grids.yaml"
+    grids.write_text(yaml.safe_dump({"grids": {"pd": {"k_p": [1.0]}}, "refine": refine}))
+    assert main(["--grids", str(grids), "--out", str(tmp_path / "t.yaml")]) == 2
+    assert "refine must be a mapping {rounds: integer >= 0, factor: number > 1}" in (
+        capsys.readouterr().err
+    )
+    assert not (tmp_path / "t.yaml").exists()
+
+
 def test_swarm_tune_refuses_an_evaluation_seed(tmp_path, capsys):
     from train.tune_baselines import main
 

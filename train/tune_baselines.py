@@ -11,6 +11,14 @@ ties go to the earlier point. The winners are written to
 (``"<task>/<dynamics>"``, :func:`agents.tuned.scenario_key`), with the return they
 scored, so that ``make_controller("pd", env)`` and every evaluation use them.
 
+A grid is coarse: where the grid file asks for it (``refine: {rounds, factor}``), the
+grid's winner is then refined on the same episodes by a local search: each round tries
+every numeric gain of the current best multiplied and divided by ``factor`` (a zero
+gain stays zero; a value the baseline refuses, out of its gain's range, is skipped) and
+every other value the grid lists for each named gain (such as ``saturation``), and
+moves to the best of them if it scores higher; the search stops after ``rounds`` rounds
+or at a round that finds nothing better.
+
 Exit status 0, or 2 with one line on stderr on a bad flag or file.
 """
 
@@ -20,6 +28,7 @@ import argparse
 import itertools
 import sys
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +39,16 @@ from swarm_envs.config import CONFIG_ROOT, SwarmConfig, load_swarm_config
 from train.cli_common import CliError, OneLineParser, check_seed, fail
 from train.config import read_yaml_mapping
 
-__all__ = ["DEFAULT_GRIDS", "Grid", "grid_points", "load_grids", "main", "tune_scenario"]
+__all__ = [
+    "DEFAULT_GRIDS",
+    "Grid",
+    "Refinement",
+    "grid_points",
+    "load_grids",
+    "main",
+    "refinement_points",
+    "tune_scenario",
+]
 
 PROG = "swarm-tune"
 
@@ -39,6 +57,15 @@ DEFAULT_GRIDS = CONFIG_ROOT / "baselines" / "grids.yaml"
 
 #: A grid: each gain's values (numbers, or names such as ``saturation``'s).
 Grid = dict[str, list[Gain]]
+
+
+@dataclass(frozen=True)
+class Refinement:
+    """The local search after the grid (module docstring): at most ``rounds`` rounds
+    (0: none), numeric gains stepped by ``factor > 1``."""
+
+    rounds: int = 0
+    factor: float = 1.25
 
 
 def evaluation_seeds() -> tuple[int, ...]:
@@ -50,21 +77,24 @@ def evaluation_seeds() -> tuple[int, ...]:
     return (DEFAULT_EVAL_SEED, TrainConfig.eval_seed)
 
 
-def load_grids(path: str | Path = DEFAULT_GRIDS) -> tuple[int, int, dict[str, Grid]]:
-    """``(seed, episodes, {baseline: {gain: values}})`` from a grid file.
+def load_grids(
+    path: str | Path = DEFAULT_GRIDS,
+) -> tuple[int, int, dict[str, Grid], Refinement]:
+    """``(seed, episodes, {baseline: {gain: values}}, refinement)`` from a grid file.
 
     Raises:
         ValueError: an unknown key, a baseline that is not a simple one, an empty grid
-            or one of values that are neither numbers nor names, or an evaluation seed as
-            the tuning seed.
+            or one of values that are neither numbers nor names, an evaluation seed as
+            the tuning seed, or a ``refine`` section that is not ``{rounds: integer
+            >= 0, factor: number > 1}``.
     """
     from agents import CONTROLLERS, SIMPLE
 
     data = read_yaml_mapping(path, "grid file")
-    unknown = sorted(set(data) - {"seed", "episodes", "grids"})
+    unknown = sorted(set(data) - {"seed", "episodes", "grids", "refine"})
     if unknown:
         raise ValueError(
-            f"{path}: unknown key(s) {', '.join(unknown)}; allowed: seed, episodes, grids"
+            f"{path}: unknown key(s) {', '.join(unknown)}; allowed: seed, episodes, grids, refine"
         )
     seed = check_seed("seed", data.get("seed", 0))
     if seed in evaluation_seeds():
@@ -94,7 +124,49 @@ def load_grids(path: str | Path = DEFAULT_GRIDS) -> tuple[int, int, dict[str, Gr
                     f"{path}: grids.{name}.{gain} must be a non-empty list of numbers or names"
                 )
             grids[name][str(gain)] = [v if isinstance(v, str) else float(v) for v in values]
-    return seed, episodes, grids
+    return seed, episodes, grids, _refinement(path, data.get("refine"))
+
+
+def _refinement(path: str | Path, section: Any) -> Refinement:
+    if section is None:
+        return Refinement()
+    problem = ValueError(
+        f"{path}: refine must be a mapping {{rounds: integer >= 0, factor: number > 1}}, "
+        f"got {section!r}"
+    )
+    if not isinstance(section, Mapping) or set(section) - {"rounds", "factor"}:
+        raise problem
+    rounds = section.get("rounds", Refinement.rounds)
+    factor = section.get("factor", Refinement.factor)
+    if not isinstance(rounds, int) or isinstance(rounds, bool) or rounds < 0:
+        raise problem
+    if not isinstance(factor, int | float) or isinstance(factor, bool) or not factor > 1:
+        raise problem
+    return Refinement(rounds, float(factor))
+
+
+def refinement_points(
+    point: Mapping[str, Gain], grid: Grid, factor: float
+) -> list[dict[str, Gain]]:
+    """The neighbours of ``point`` one round of the refinement tries: each numeric gain
+    multiplied, then divided, by ``factor`` (a zero gain has none), and each named gain
+    set to every other value its grid lists.
+
+    >>> grid = {"k_p": [1.0], "k_d": [0.0], "saturation": ["box", "clip"]}
+    >>> for p in refinement_points({"k_p": 2.0, "k_d": 0.0, "saturation": "box"}, grid, 2.0):
+    ...     print(p)
+    {'k_p': 4.0, 'k_d': 0.0, 'saturation': 'box'}
+    {'k_p': 1.0, 'k_d': 0.0, 'saturation': 'box'}
+    {'k_p': 2.0, 'k_d': 0.0, 'saturation': 'clip'}
+    """
+    out: list[dict[str, Gain]] = []
+    for gain, value in point.items():
+        if isinstance(value, str):
+            out.extend({**point, gain: other} for other in grid[gain] if other != value)
+        elif value != 0:
+            out.append({**point, gain: round(float(value) * factor, 6)})
+            out.append({**point, gain: round(float(value) / factor, 6)})
+    return out
 
 
 def grid_points(grid: Grid) -> list[dict[str, Gain]]:
@@ -114,27 +186,77 @@ def make_tuned(name: str, cfg: SwarmConfig, point: Mapping[str, Any]) -> Any:
     return CONTROLLERS[name](cfg, **point)
 
 
-def tune_scenario(
-    name: str, cfg: SwarmConfig, grid: Grid, seed: int, episodes: int
-) -> dict[str, Any]:
-    """Evaluate every point of ``grid`` on ``cfg``; return the winner's record
-    ``{"gains", "mean_return", "success_rate", "seed", "episodes", "points"}``."""
+def _best_of(
+    name: str, cfg: SwarmConfig, points: Sequence[Mapping[str, Gain]], seed: int, episodes: int
+) -> tuple[int, dict[str, Any]]:
+    """The index of the point with the highest mean return (ties: the earlier) and its
+    scores, every point evaluated on the same ``episodes`` episodes of ``seed``."""
     from train.evaluate import evaluate_policies
 
-    points = grid_points(grid)
     policies = {f"p{i}": make_tuned(name, cfg, p) for i, p in enumerate(points)}
     results = evaluate_policies(
         policies, cfg, episodes, seed, progress=False, gif=False, plots=False
     )
     scores = [results["policies"][f"p{i}"] for i in range(len(points))]
     best = max(range(len(points)), key=lambda i: (scores[i]["mean_return"], -i))
+    return best, scores[best]
+
+
+def _accepted(name: str, cfg: SwarmConfig, point: Mapping[str, Gain]) -> bool:
+    """Whether the baseline takes the gains of ``point`` (a step may leave a gain's
+    range, such as the mill's ``approach`` beyond 1)."""
+    try:
+        make_tuned(name, cfg, point)
+    except ValueError:
+        return False
+    return True
+
+
+def tune_scenario(
+    name: str,
+    cfg: SwarmConfig,
+    grid: Grid,
+    seed: int,
+    episodes: int,
+    refinement: Refinement = Refinement(),
+) -> dict[str, Any]:
+    """Evaluate every point of ``grid`` on ``cfg``, refine the winner (``refinement``,
+    module docstring); return the result's record ``{"gains", "mean_return",
+    "success_rate", "seed", "episodes", "points"}`` (``points``: every point
+    evaluated), with ``"grid_gains"``, ``"grid_return"`` and ``"refine_rounds"`` (the
+    rounds that moved it) where the refinement ran."""
+    points = grid_points(grid)
+    best, score = _best_of(name, cfg, points, seed, episodes)
+    gains, evaluated = points[best], len(points)
+    record: dict[str, Any] = {}
+    if refinement.rounds > 0:
+        grid_return, moved = float(score["mean_return"]), 0
+        for _ in range(refinement.rounds):
+            neighbours = [
+                p
+                for p in refinement_points(gains, grid, refinement.factor)
+                if _accepted(name, cfg, p)
+            ]
+            if not neighbours:
+                break
+            evaluated += len(neighbours)
+            i, candidate = _best_of(name, cfg, neighbours, seed, episodes)
+            if not candidate["mean_return"] > score["mean_return"]:
+                break
+            gains, score, moved = neighbours[i], candidate, moved + 1
+        record = {
+            "grid_gains": points[best],
+            "grid_return": round(grid_return, 4),
+            "refine_rounds": moved,
+        }
     return {
-        "gains": points[best],
-        "mean_return": round(float(scores[best]["mean_return"]), 4),
-        "success_rate": round(float(scores[best]["success_rate"]), 4),
+        "gains": gains,
+        "mean_return": round(float(score["mean_return"]), 4),
+        "success_rate": round(float(score["success_rate"]), 4),
         "seed": seed,
         "episodes": episodes,
-        "points": len(points),
+        "points": evaluated,
+        **record,
     }
 
 
@@ -173,7 +295,7 @@ def _main(args: argparse.Namespace) -> int:
 
     out = Path(args.out) if args.out else TUNED_PATH
     try:
-        seed, episodes, grids = load_grids(args.grids)
+        seed, episodes, grids, refinement = load_grids(args.grids)
         entries = load_matrix(args.matrix).select(args.only)
         if out.exists() and not out.is_file():
             raise CliError(f"--out {out} is not a file")
@@ -192,10 +314,16 @@ def _main(args: argparse.Namespace) -> int:
             print(
                 f"{PROG}: {name} on {key}: {len(grid_points(grids[name]))} points ...", flush=True
             )
-            record = tune_scenario(name, cfg, grids[name], seed, episodes)
+            record = tune_scenario(name, cfg, grids[name], seed, episodes, refinement)
             tuned.setdefault(name, {})[key] = record
+            refined = (
+                f" (the grid's best {record['grid_return']:.2f}, refined in "
+                f"{record['refine_rounds']} round(s))"
+                if "grid_return" in record
+                else ""
+            )
             print(
-                f"  best {record['gains']}: return {record['mean_return']:.2f}, "
+                f"  best {record['gains']}: return {record['mean_return']:.2f}{refined}, "
                 f"success {record['success_rate']:.0%}",
                 flush=True,
             )
@@ -207,7 +335,8 @@ def _write(out: Path, tuned: Mapping[str, Any], grids: str) -> None:
     header = (
         "# Written by swarm-tune (train/tune_baselines.py) from the grids of\n"
         f"# {Path(grids).name}: per baseline and scenario (<task>/<dynamics>), the gains with\n"
-        "# the highest mean return on the training seed; the controllers read them\n"
+        "# the highest mean return on the training seed (refined around the grid's\n"
+        "# best where the grid file says so); the controllers read them\n"
         "# (agents/tuned.py). Rerun `swarm-tune` rather than editing by hand.\n"
     )
     body = yaml.safe_dump({"baselines": dict(tuned)}, sort_keys=True)
