@@ -244,6 +244,26 @@ def test_swarm_tune_refinement_skips_gains_out_of_range(tmp_path):
     assert 0 <= record["gains"]["approach"] <= 1
 
 
+def test_swarm_tune_writes_an_unmoved_winner_without_yaml_aliases(tmp_path, monkeypatch):
+    import train.tune_baselines as tb
+
+    def scores(name, cfg, points, seed, episodes):  # the grid's point beats every step
+        return 0, {"mean_return": 1.0 if len(points) == 1 else 0.0, "success_rate": 1.0}
+
+    monkeypatch.setattr(tb, "_best_of", scores)
+    grids = tmp_path / "grids.yaml"
+    grids.write_text(
+        yaml.safe_dump({"grids": {"pd": {"k_p": [2.0], "k_d": [0.5]}}, "refine": {"rounds": 3}})
+    )
+    out = tmp_path / "tuned.yaml"
+    assert tb.main(["--grids", str(grids), "--only", "navigation/zone", "--out", str(out)]) == 0
+    text = out.read_text()
+    assert "&id" not in text and "*id" not in text  # a readable file, each mapping written out
+    record = yaml.safe_load(text)["baselines"]["pd"]["navigation/zone"]
+    assert record["gains"] == record["grid_gains"] == {"k_p": 2.0, "k_d": 0.5}
+    assert record["refine_rounds"] == 0 and record["points"] == 1 + 4
+
+
 @pytest.mark.parametrize(
     "refine",
     [{"rounds": -1}, {"factor": 1.0}, {"rounds": 2, "step": 2}, [2, 1.25], {"rounds": True}],

@@ -245,7 +245,7 @@ def tune_scenario(
                 break
             gains, score, moved = neighbours[i], candidate, moved + 1
         record = {
-            "grid_gains": points[best],
+            "grid_gains": dict(points[best]),  # a copy: no YAML alias when they are equal
             "grid_return": round(grid_return, 4),
             "refine_rounds": moved,
         }
