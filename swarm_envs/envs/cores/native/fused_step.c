@@ -21,9 +21,10 @@
  * vectorised (float32 with the inlined exp_f32 below; float64 calls glibc's vector exp,
  * libmvec, declared SIMD), and the swarms are spread over OpenMP threads. Called through
  * ctypes. The GCC vector extensions used (vector_size, __builtin_shuffle,
- * __builtin_convertvector) lower to narrower vectors or scalars where AVX-512 is
- * missing; AVX-512 gets min/max intrinsics for the k-NN keys and compressed stores for
- * the observations.
+ * __builtin_convertvector) are 64 bytes wide, 32 with AVX2 and without AVX-512 (see
+ * LANES), and lower to narrower vectors or scalars where the registers are narrower;
+ * AVX-512 gets min/max intrinsics for the k-NN keys and compressed stores for the
+ * observations.
  */
 #include <math.h>
 #include <stdint.h>
@@ -58,6 +59,26 @@ double exp(double);
  * swarm_envs.envs.task.agent_status.masks), read by fused_step_body.h. */
 static const int8_t status_flags[STATUS_COUNT] = STATUS_FLAGS;
 
+/* x86-64 below AVX2 (the portable build) has no fused multiply-add and no vector
+ * rounding (SSE4.1): fmaf there is a software routine called value by value, and floorf
+ * a call; the pair loop, which takes both in exp_f32, was several times slower so. There
+ * the product and the sum are rounded apart (the last bits of e^x differ from the other
+ * builds'), and floor(t) is the truncation less one where that is above t, exact for
+ * |t| < 2^31 (in exp_f32 |t| <= 128). */
+#if defined(__x86_64__) && !defined(__FMA__)
+#define MUL_ADD_F32(a, b, c) ((a) * (b) + (c))
+#else
+#define MUL_ADD_F32(a, b, c) fmaf((a), (b), (c))
+#endif
+#if defined(__x86_64__) && !defined(__SSE4_1__)
+static inline float floor_f32(float t) {
+    const float n = (float)(int32_t)t;
+    return n > t ? n - 1.0f : n;
+}
+#else
+#define floor_f32 floorf
+#endif
+
 /* e^x in float32, inlined so that the pair loop vectorises without calls
  * (docs/performance.md, "Inside the C step", says what each choice here saves).
  * Cephes' expf: x = n ln2 + r with |r| <= ln2/2 (ln2 in two parts), e^r by a degree-6
@@ -73,16 +94,16 @@ static inline float exp_f32(float x) {
     int32_t sb = (int32_t)ub;
     sb = sb < 0x42B0999A ? sb : 0x42B0999A; /* x <= 88.3f: n <= 127 */
     memcpy(&x, &sb, sizeof x);
-    float n = floorf(x * 1.44269504088896341f + 0.5f);
-    float r = fmaf(n, -0.693359375f, x);
-    r = fmaf(n, 2.12194440e-4f, r);
+    float n = floor_f32(x * 1.44269504088896341f + 0.5f);
+    float r = MUL_ADD_F32(n, -0.693359375f, x);
+    r = MUL_ADD_F32(n, 2.12194440e-4f, r);
     float p = 1.9875691500e-4f;
-    p = fmaf(p, r, 1.3981999507e-3f);
-    p = fmaf(p, r, 8.3334519073e-3f);
-    p = fmaf(p, r, 4.1665795894e-2f);
-    p = fmaf(p, r, 1.6666665459e-1f);
-    p = fmaf(p, r, 5.0000001201e-1f);
-    float y = fmaf(p, r * r, r) + 1.0f;
+    p = MUL_ADD_F32(p, r, 1.3981999507e-3f);
+    p = MUL_ADD_F32(p, r, 8.3334519073e-3f);
+    p = MUL_ADD_F32(p, r, 4.1665795894e-2f);
+    p = MUL_ADD_F32(p, r, 1.6666665459e-1f);
+    p = MUL_ADD_F32(p, r, 5.0000001201e-1f);
+    float y = MUL_ADD_F32(p, r * r, r) + 1.0f;
     int32_t bits = ((int32_t)n + 127) << 23; /* 2^n, n in [-126, 127] */
     float scale;
     memcpy(&scale, &bits, sizeof scale); /* a bit cast (folded; it vectorises) */
@@ -123,9 +144,23 @@ const char *fused_step_statuses(void) { return KERNEL_STATUSES; }
 #define ABITS uint32_t /* a REAL's bits, and its exponent's */
 #define EXP_MASK 0x7F800000u
 #define INDEX int32_t
+/* The lanes of a vector: 16 floats (64 bytes), but 8 (one register) with AVX2 and
+ * without AVX-512. There the 64-byte vectors would be two registers each: GCC permutes
+ * their lanes by run-time indices (the pair pass's rotations) one by one, and their sums
+ * do not fit in the registers; the step was 3 to 4 times slower so. The tiles of the pair
+ * pass are LANES agents wide, so the order in which a force's terms are summed, and with
+ * it the last bits of the results, differs between the x86-64-v3 build and the others. */
+#if defined(__AVX512F__) || !defined(__AVX2__)
 #define LANES 16
 typedef float vreal_f32 __attribute__((vector_size(64)));
 typedef int32_t vindex_f32 __attribute__((vector_size(64)));
+typedef uint64_t vkey __attribute__((vector_size(64)));
+#else
+#define LANES 8
+typedef float vreal_f32 __attribute__((vector_size(32)));
+typedef int32_t vindex_f32 __attribute__((vector_size(32)));
+typedef uint64_t vkey __attribute__((vector_size(32)));
+#endif
 #define VREAL vreal_f32
 #define VINDEX vindex_f32
 #define EXP exp_f32
@@ -135,27 +170,51 @@ typedef int32_t vindex_f32 __attribute__((vector_size(64)));
 #define FUSED_SWARM fused_swarm_f32
 #define STABLE_SUBSTEP stable_substep_f32
 #define SWARM_STATS swarm_stats_f32
-typedef uint64_t vkey __attribute__((vector_size(64)));
-/* The keys of lanes [8h, 8h + 8) of the 16-lane int32 vectors bits and ci: lane l's
- * bits above its ci, (bits << 32) | ci as 64-bit integers. On a little-endian machine the
- * two words of a key are its lane of ci then its lane of bits: one interleaving shuffle. */
+/* The keys of lanes [h LANES/2, (h + 1) LANES/2) of the int32 vectors bits and ci: lane
+ * l's bits above its ci, (bits << 32) | ci as 64-bit integers. On a little-endian machine
+ * the two words of a key are its lane of ci then its lane of bits: one interleaving
+ * shuffle. */
 #if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+#if LANES == 16
 #define KEY_HALF(bits, ci, h)                                                          \
     ((h) ? (vkey)__builtin_shufflevector((ci), (bits), 8, 24, 9, 25, 10, 26, 11, 27, 12, \
                                          28, 13, 29, 14, 30, 15, 31)                    \
          : (vkey)__builtin_shufflevector((ci), (bits), 0, 16, 1, 17, 2, 18, 3, 19, 4,   \
                                          20, 5, 21, 6, 22, 7, 23))
 #else
+#define KEY_HALF(bits, ci, h)                                                          \
+    ((h) ? (vkey)__builtin_shufflevector((ci), (bits), 4, 12, 5, 13, 6, 14, 7, 15)      \
+         : (vkey)__builtin_shufflevector((ci), (bits), 0, 8, 1, 9, 2, 10, 3, 11))
+#endif
+#else
+#if LANES == 16
 #define KEY_WORDS(v, h)                                                                \
     __builtin_convertvector(                                                           \
         (h) ? __builtin_shufflevector((v), (v), 8, 9, 10, 11, 12, 13, 14, 15)          \
             : __builtin_shufflevector((v), (v), 0, 1, 2, 3, 4, 5, 6, 7),               \
         vkey)
+#else
+#define KEY_WORDS(v, h)                                                                \
+    __builtin_convertvector((h) ? __builtin_shufflevector((v), (v), 4, 5, 6, 7)       \
+                                : __builtin_shufflevector((v), (v), 0, 1, 2, 3),       \
+                            vkey)
+#endif
 #define KEY_HALF(bits, ci, h) ((KEY_WORDS(bits, h) << 32) | KEY_WORDS(ci, h))
 #endif
 #ifdef __AVX512F__
 static inline vkey key_min(vkey a, vkey b) { return (vkey)_mm512_min_epu64((__m512i)a, (__m512i)b); }
 static inline vkey key_max(vkey a, vkey b) { return (vkey)_mm512_max_epu64((__m512i)a, (__m512i)b); }
+#elif defined(__AVX2__)
+/* AVX2 compares signed 64-bit integers, not unsigned ones (GCC compares those lane by
+ * lane): with their top bits flipped, the keys compare in signed order as they do in
+ * unsigned order. */
+typedef int64_t vkey_signed __attribute__((vector_size(sizeof(vkey))));
+static inline vkey key_lt(vkey a, vkey b) {
+    const vkey top = (vkey){0} + ((uint64_t)1 << 63);
+    return (vkey)((vkey_signed)(a ^ top) < (vkey_signed)(b ^ top));
+}
+static inline vkey key_min(vkey a, vkey b) { vkey lt = key_lt(a, b); return (a & lt) | (b & ~lt); }
+static inline vkey key_max(vkey a, vkey b) { vkey lt = key_lt(a, b); return (b & lt) | (a & ~lt); }
 #else
 static inline vkey key_min(vkey a, vkey b) { vkey lt = (vkey)(a < b); return (a & lt) | (b & ~lt); }
 static inline vkey key_max(vkey a, vkey b) { vkey lt = (vkey)(a < b); return (b & lt) | (a & ~lt); }
@@ -196,9 +255,15 @@ static inline vkey key_max(vkey a, vkey b) { vkey lt = (vkey)(a < b); return (b 
 #define ABITS uint64_t
 #define EXP_MASK 0x7FF0000000000000u
 #define INDEX int64_t
+#if defined(__AVX512F__) || !defined(__AVX2__)
 #define LANES 8
 typedef double vreal_f64 __attribute__((vector_size(64)));
 typedef int64_t vindex_f64 __attribute__((vector_size(64)));
+#else
+#define LANES 4
+typedef double vreal_f64 __attribute__((vector_size(32)));
+typedef int64_t vindex_f64 __attribute__((vector_size(32)));
+#endif
 #define VREAL vreal_f64
 #define VINDEX vindex_f64
 #define EXP exp

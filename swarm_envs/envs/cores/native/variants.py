@@ -55,8 +55,9 @@ __all__ = [
 #: The variant built for the compiler's default target (no ``-march``): a library that
 #: runs on any CPU of the architecture.
 PORTABLE = "portable"
-#: The fixed flags. Without AVX-512 the kernel's 64-byte vectors become several narrower
-#: registers each, and GCC's RTL partial redundancy elimination (``-fgcse``) and load CSE
+#: The fixed flags. Where the kernel's vectors are wider than the registers (the
+#: ``portable`` build's 64-byte vectors are four SSE2 registers each), GCC's RTL partial
+#: redundancy elimination (``-fgcse``) and load CSE
 #: after register allocation (``-fgcse-after-reload``) then take most of a build's time
 #: over the result; the vectorised loops do not need them (``docs/performance.md``).
 BASE_FLAGS = (
