@@ -119,7 +119,7 @@ CC_TIMEOUT_ENV = "SWARM_ENVS_CC_TIMEOUT"
 DEFAULT_CC_TIMEOUT = 600.0
 #: What a build at first use usually takes, for the warning that announces it (the build
 #: times of ``docs/performance.md``, "Building the C step").
-BUILD_TIME = "20-40 s of CPU"
+BUILD_TIME = "10-40 s of CPU"
 _SOURCES = variants.SOURCES
 
 _LOCK = threading.Lock()

@@ -61,10 +61,10 @@ static const int8_t status_flags[STATUS_COUNT] = STATUS_FLAGS;
 
 /* x86-64 below AVX2 (the portable build) has no fused multiply-add and no vector
  * rounding (SSE4.1): fmaf there is a software routine called value by value, and floorf
- * a call; the pair loop, which takes both in exp_f32, was several times slower so. There
- * the product and the sum are rounded apart (the last bits of e^x differ from the other
- * builds'), and floor(t) is the truncation less one where that is above t, exact for
- * |t| < 2^31 (in exp_f32 |t| <= 128). */
+ * a call; the step, whose pair loop takes both in exp_f32, was up to 3.4 times slower
+ * so. There the product and the sum are rounded apart (the last bits of e^x differ from
+ * the other builds'), and floor(t) is the truncation less one where that is above t,
+ * exact for |t| < 2^31 (in exp_f32 |t| <= 128). */
 #if defined(__x86_64__) && !defined(__FMA__)
 #define MUL_ADD_F32(a, b, c) ((a) * (b) + (c))
 #else
@@ -147,7 +147,7 @@ const char *fused_step_statuses(void) { return KERNEL_STATUSES; }
 /* The lanes of a vector: 16 floats (64 bytes), but 8 (one register) with AVX2 and
  * without AVX-512. There the 64-byte vectors would be two registers each: GCC permutes
  * their lanes by run-time indices (the pair pass's rotations) one by one, and their sums
- * do not fit in the registers; the step was 3 to 4 times slower so. The tiles of the pair
+ * do not fit in the registers; the step was up to 3.8 times slower so. The tiles of the pair
  * pass are LANES agents wide, so the order in which a force's terms are summed, and with
  * it the last bits of the results, differs between the x86-64-v3 build and the others. */
 #if defined(__AVX512F__) || !defined(__AVX2__)
