@@ -14,12 +14,17 @@ velocity and informed flag. :class:`InformedFollowerController` does that:
   the speed is fixed (the zone model) a leader cannot slow down for its flock, and
   one that outruns it leaves the flock without a guide;
 - an uninformed agent matches the velocity of its informed neighbours and closes on
-  them: ``a_i = sat((k_v ⟨v_j − v_i⟩ + k_c ⟨r_j − r_i⟩) / u_max)``, the means over the
-  informed neighbours in its observation; with none in view, over all its neighbours
-  (velocity matching and cohesion, a flock that carries the information on).
+  a point ``λ`` ahead of them along their heading:
+  ``a_i = sat((k_v ⟨v_j − v_i⟩ + k_c (⟨r_j − r_i⟩ + λ ĥ)) / u_max)``, the means over the
+  informed neighbours in its observation and ``ĥ`` the direction of their mean velocity
+  ``⟨v_j⟩``; with none in view, over all its neighbours and with no lead (velocity
+  matching and cohesion, a flock that carries the information on). Without a lead
+  (``λ = 0``) the followers fall in behind their leader; with one they converge on its
+  course, and a flock at constant speed reaches a goal in a compact group instead of a
+  file.
 
-All six gains are tuned on training seeds (``swarm-tune``), like the PD's; ``k_l = 0``
-(the default) is the untethered leader.
+All seven gains are tuned on training seeds (``swarm-tune``), like the PD's; ``k_l = 0``
+and ``λ = 0`` (the defaults) are the untethered leader and followers that close on it.
 """
 
 from __future__ import annotations
@@ -47,6 +52,8 @@ class InformedFollowerController(SaturatedPDController):
         k_l: tether gain ``≥ 0`` of the informed agents (0: no tether).
         tether: the length ``ℓ ≥ 0`` of the tether: the mean neighbour offset beyond
             which it pulls.
+        lead: the lead ``λ ≥ 0``: how far ahead of their informed neighbours, along
+            their heading, the uninformed agents close (0: on the neighbours).
         Every ``None`` gain is the tuned one of the env's scenario (``follow`` in
         ``configs/baselines/tuned.yaml``), else the default.
 
@@ -65,6 +72,7 @@ class InformedFollowerController(SaturatedPDController):
     DEFAULT_K_C: float = 0.5
     DEFAULT_K_L: float = 0.0
     DEFAULT_TETHER: float = 1.0
+    DEFAULT_LEAD: float = 0.0
     _TUNED_NAME = "follow"
 
     def __init__(
@@ -77,6 +85,7 @@ class InformedFollowerController(SaturatedPDController):
         saturation: str | None = None,
         k_l: float | None = None,
         tether: float | None = None,
+        lead: float | None = None,
     ) -> None:
         from agents.tuned import Gain, tuned_gains
 
@@ -93,12 +102,14 @@ class InformedFollowerController(SaturatedPDController):
         tether_value: Gain = tuned.get("tether", self.DEFAULT_TETHER) if tether is None else tether
         self.k_l: float = check_real(owner, "k_l", k_l_value, low=0.0)
         self.tether: float = check_real(owner, "tether", tether_value, low=0.0)
+        lead_value: Gain = tuned.get("lead", self.DEFAULT_LEAD) if lead is None else lead
+        self.lead: float = check_real(owner, "lead", lead_value, low=0.0)
         self.obs_neighbor_scale: float = self.cfg.obs_neighbor_scale
 
     def __repr__(self) -> str:
         return (
             f"{type(self).__name__}(k_p={self.k_p:g}, k_d={self.k_d:g}, k_v={self.k_v:g}, "
-            f"k_c={self.k_c:g}, k_l={self.k_l:g}, tether={self.tether:g}, "
+            f"k_c={self.k_c:g}, k_l={self.k_l:g}, tether={self.tether:g}, lead={self.lead:g}, "
             f"saturation={self.saturation!r})"
         )
 
@@ -115,6 +126,13 @@ class InformedFollowerController(SaturatedPDController):
         count = np.maximum(weight.sum(axis=1, keepdims=True), 1.0)
         mean_velocity = np.einsum("nk,nkd->nd", weight, rel_velocity) / count
         mean_offset = np.einsum("nk,nkd->nd", weight, offset) / count
+        if self.lead > 0:
+            # A point ahead of the informed neighbours, along their mean velocity.
+            heading = mean_velocity + obs[:, d : 2 * d] * self.obs_velocity_scale
+            speed = np.sqrt(np.einsum("nd,nd->n", heading, heading))[:, None]
+            ahead = told.sum(axis=1, keepdims=True) > 0
+            scale = np.where(ahead & (speed > 0), self.lead / np.where(speed > 0, speed, 1.0), 0.0)
+            mean_offset = mean_offset + scale * heading
         followers = saturate(
             (self.k_v * mean_velocity + self.k_c * mean_offset) / self.u_max, self.saturation
         )

@@ -112,6 +112,38 @@ def test_followers_match_their_informed_neighbours():
     np.testing.assert_allclose(action[0], [1.0 * 3.0 / cfg.u_max, 0.0], atol=1e-6)
 
 
+def test_followers_close_on_a_point_ahead_of_their_informed_neighbours():
+    cfg = task_config("informed", n_agents=3, n_neighbors=2)
+    own = 2 * cfg.dim + 1
+
+    def follower_action(lead, neighbour_informed, own_velocity=(0.0, 0.0)):
+        ctrl = InformedFollowerController(
+            cfg, k_p=1.0, k_d=0.0, k_v=0.0, k_c=1.0, k_l=0.0, lead=lead, saturation="norm"
+        )
+        obs = np.zeros((1, ctrl.obs_dim), np.float32)  # an uninformed agent
+        obs[0, cfg.dim : 2 * cfg.dim] = np.array(own_velocity) / cfg.obs_velocity_scale
+        # one neighbour 1 to the left, moving (+1, 0) in absolute terms
+        relative = np.array([1.0, 0.0]) - np.array(own_velocity)
+        obs[0, own : own + 2] = np.array([0.0, 1.0]) / cfg.obs_neighbor_scale
+        obs[0, own + 2 : own + 4] = relative / cfg.obs_velocity_scale
+        obs[0, own + 4] = 1.0  # real
+        obs[0, own + 5] = float(neighbour_informed)
+        return ctrl.predict(obs)[0][0]
+
+    u = cfg.u_max
+    np.testing.assert_allclose(follower_action(0.0, True), [0.0, 1.0 / u], atol=1e-6)
+    # λ = 2 along the neighbour's heading (+x): the target (2, 1), whatever the agent's own
+    # velocity (the heading is the neighbour's absolute one)
+    np.testing.assert_allclose(follower_action(2.0, True), [2.0 / u, 1.0 / u], atol=1e-6)
+    np.testing.assert_allclose(
+        follower_action(2.0, True, own_velocity=(0.0, -0.5)), [2.0 / u, 1.0 / u], atol=1e-6
+    )
+    # no informed neighbour in view: no lead, the agent closes on its neighbours
+    np.testing.assert_allclose(follower_action(2.0, False), [0.0, 1.0 / u], atol=1e-6)
+    with pytest.raises(ValueError, match="lead"):
+        InformedFollowerController(cfg, lead=-1.0)
+
+
 @pytest.mark.parametrize(
     ("k_l", "behind", "expected"),
     [
@@ -557,16 +589,19 @@ def test_residual_record_rebuilds_the_baseline_it_was_trained_on():
     from train.residual import make_baseline, residual_record
 
     cfg = task_config("informed")
-    tethered = InformedFollowerController(cfg, k_l=3.0, tether=2.0)
+    tethered = InformedFollowerController(cfg, k_l=3.0, tether=2.0, lead=1.5)
     record = residual_record("follow", tethered)
     assert (record["gains"]["k_l"], record["gains"]["tether"]) == (3.0, 2.0)
+    assert record["gains"]["lead"] == 1.5
     assert record["scale"] == 1.0
     rebuilt = make_baseline("follow", cfg, record["gains"])
     assert (rebuilt.k_l, rebuilt.tether, rebuilt.k_p) == (3.0, 2.0, tethered.k_p)
-    # A record made before the tether existed rebuilds the untethered leader, whatever
-    # the tuned table holds today.
-    older = {k: v for k, v in record["gains"].items() if k not in ("k_l", "tether")}
+    assert rebuilt.lead == 1.5
+    # A record made before the tether and the lead existed rebuilds the untethered
+    # leader and followers without a lead, whatever the tuned table holds today.
+    older = {k: v for k, v in record["gains"].items() if k not in ("k_l", "tether", "lead")}
     assert make_baseline("follow", cfg, older).k_l == 0.0
+    assert make_baseline("follow", cfg, older).lead == 0.0
 
 
 def test_residual_needs_shared_mode_and_a_known_baseline():

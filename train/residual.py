@@ -50,6 +50,7 @@ _GAIN_ATTRS = (
     "k_c",
     "k_l",
     "tether",
+    "lead",
     "saturation",
     "approach",
     "spin",
@@ -58,8 +59,9 @@ _GAIN_ATTRS = (
 
 #: Gains a controller gained after residual models recorded it, with the value that
 #: leaves it as it was: a record without them rebuilds the baseline it was trained on,
-#: not today's tuned one (``follow``'s leader tether, off before it existed).
-_GAINS_BEFORE_RECORDED = {"follow": {"k_l": 0.0}}
+#: not today's tuned one (``follow``'s leader tether and its followers' lead, off before
+#: they existed).
+_GAINS_BEFORE_RECORDED = {"follow": {"k_l": 0.0, "lead": 0.0}}
 
 
 def check_baseline_name(name: Any) -> str:
