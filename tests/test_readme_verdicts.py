@@ -33,7 +33,7 @@ FULL_RUN_VERDICTS = {
     "vs_fig2": "reproduced",
     "vs_fig3": "partly reproduced",
     "vs_fig4": "reproduced",
-    "vs_fig5": "not reproduced",
+    "vs_fig5": "reproduced",
 }
 #: Fig. 11's second verdict, with self-propulsion (``self_propelled_verdict``).
 FIG11_SELF_PROPELLED = "reproduced"
