@@ -8,8 +8,8 @@ evolution strategies: each generation draws ``population / 2`` Gaussian directio
 same starts, informed agents and failure schedules; the observation and action noise of
 perturbed configs and the piecewise model's random force are drawn step by step for all
 swarms at once, so they differ between candidates), shapes the candidates' mean returns
-into centred ranks and steps ``θ`` along ``Σ_k (rank⁺_k − rank⁻_k) ε_k / (population σ)`` with Adam, less
-``weight_decay · θ``. All candidates' episodes step together on one
+into centred ranks and steps ``θ`` along ``Σ_k (rank⁺_k − rank⁻_k) ε_k / (population σ)``
+with Adam, less ``weight_decay · θ``. All candidates' episodes step together on one
 batched core (``(population + 1) × n_swarms`` swarms), each until its episode ends; a
 candidate that makes its swarm unstable ends that episode there (the config's
 ``on_unstable`` is taken as ``"truncate"``), which its return pays for.
