@@ -23,8 +23,9 @@ velocity and informed flag. :class:`InformedFollowerController` does that:
   course, and a flock at constant speed reaches a goal in a compact group instead of a
   file.
 
-All seven gains are tuned on training seeds (``swarm-tune``), like the PD's; ``k_l = 0``
-and ``λ = 0`` (the defaults) are the untethered leader and followers that close on it.
+The gains are tuned on training seeds (``swarm-tune``, over the grid of
+``configs/baselines/grids.yaml``, which holds ``λ`` at 0), like the PD's; ``k_l = 0`` and
+``λ = 0`` (the defaults) are the untethered leader and followers that close on it.
 """
 
 from __future__ import annotations
