@@ -12,7 +12,11 @@ velocity and informed flag. :class:`InformedFollowerController` does that:
   them), a pull ``k_l (|m| − ℓ) m̂`` toward them is added before the saturation,
   ``a_i = sat((k_p (r_g − r_i) − k_d v_i + k_l max(0, |m| − ℓ) m̂) / u_max)``. Where
   the speed is fixed (the zone model) a leader cannot slow down for its flock, and
-  one that outruns it leaves the flock without a guide;
+  one that outruns it leaves the flock without a guide. With ``goal_pull="saturated"``
+  the PD law is saturated first, ``u_max · sat((k_p (r_g − r_i) − k_d v_i) / u_max)``, and
+  the tether added to that: far from the goal the raw law grows with the distance, and
+  a leader whose tether only balances it runs ``ℓ + k_p |r_g − r_i| / k_l`` ahead of its
+  flock, out of the followers' view; saturated, it stays within ``ℓ + √d u_max / k_l``;
 - an uninformed agent matches the velocity of its informed neighbours and closes on
   a point ``λ`` ahead of them along their heading:
   ``a_i = sat((k_v ⟨v_j − v_i⟩ + k_c (⟨r_j − r_i⟩ + λ ĥ)) / u_max)``, the means over the
@@ -24,8 +28,9 @@ velocity and informed flag. :class:`InformedFollowerController` does that:
   file.
 
 The gains are tuned on training seeds (``swarm-tune``, over the grid of
-``configs/baselines/grids.yaml``, which holds ``λ`` at 0), like the PD's; ``k_l = 0`` and
-``λ = 0`` (the defaults) are the untethered leader and followers that close on it.
+``configs/baselines/grids.yaml``), like the PD's; ``k_l = 0``, ``λ = 0`` and
+``goal_pull="raw"`` (the defaults) are the untethered leader and followers that close
+on it.
 """
 
 from __future__ import annotations
@@ -55,6 +60,9 @@ class InformedFollowerController(SaturatedPDController):
             which it pulls.
         lead: the lead ``λ ≥ 0``: how far ahead of their informed neighbours, along
             their heading, the uninformed agents close (0: on the neighbours).
+        goal_pull: ``"raw"``: the tether is added to the PD law as it is; ``"saturated"``:
+            to the PD law saturated into the action box first, so a tether stretched by
+            ``u_max / k_l`` holds the leader back whatever its distance to the goal.
         Every ``None`` gain is the tuned one of the env's scenario (``follow`` in
         ``configs/baselines/tuned.yaml``), else the default.
 
@@ -74,6 +82,8 @@ class InformedFollowerController(SaturatedPDController):
     DEFAULT_K_L: float = 0.0
     DEFAULT_TETHER: float = 1.0
     DEFAULT_LEAD: float = 0.0
+    DEFAULT_GOAL_PULL: str = "raw"
+    GOAL_PULLS: tuple[str, ...] = ("raw", "saturated")
     _TUNED_NAME = "follow"
 
     def __init__(
@@ -87,6 +97,7 @@ class InformedFollowerController(SaturatedPDController):
         k_l: float | None = None,
         tether: float | None = None,
         lead: float | None = None,
+        goal_pull: str | None = None,
     ) -> None:
         from agents.tuned import Gain, tuned_gains
 
@@ -105,13 +116,19 @@ class InformedFollowerController(SaturatedPDController):
         self.tether: float = check_real(owner, "tether", tether_value, low=0.0)
         lead_value: Gain = tuned.get("lead", self.DEFAULT_LEAD) if lead is None else lead
         self.lead: float = check_real(owner, "lead", lead_value, low=0.0)
+        pull: Gain = (
+            tuned.get("goal_pull", self.DEFAULT_GOAL_PULL) if goal_pull is None else goal_pull
+        )
+        if pull not in self.GOAL_PULLS:
+            raise ValueError(f"{owner}: goal_pull must be one of {self.GOAL_PULLS}, got {pull!r}")
+        self.goal_pull: str = str(pull)
         self.obs_neighbor_scale: float = self.cfg.obs_neighbor_scale
 
     def __repr__(self) -> str:
         return (
             f"{type(self).__name__}(k_p={self.k_p:g}, k_d={self.k_d:g}, k_v={self.k_v:g}, "
             f"k_c={self.k_c:g}, k_l={self.k_l:g}, tether={self.tether:g}, lead={self.lead:g}, "
-            f"saturation={self.saturation!r})"
+            f"goal_pull={self.goal_pull!r}, saturation={self.saturation!r})"
         )
 
     def _actions(self, obs: np.ndarray, deterministic: bool) -> np.ndarray:
@@ -141,6 +158,8 @@ class InformedFollowerController(SaturatedPDController):
         pd = self.command(
             obs[:, :d] * self.obs_goal_scale, obs[:, d : 2 * d] * self.obs_velocity_scale
         )
+        if self.goal_pull == "saturated":
+            pd = self.u_max * saturate(pd / self.u_max, self.saturation)
         if self.k_l > 0:
             flock = np.einsum("nk,nkd->nd", real, offset) / np.maximum(
                 real.sum(axis=1, keepdims=True), 1.0

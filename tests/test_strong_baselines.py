@@ -172,6 +172,32 @@ def test_leaders_are_tethered_to_their_flock(k_l, behind, expected):
         InformedFollowerController(cfg, k_l=-1.0)
 
 
+def test_a_saturated_goal_pull_lets_the_tether_hold_a_far_leader_back():
+    # An informed agent 30 from the goal with its flock 2 behind: the raw PD pull (30)
+    # swamps the tether (1 · 1.5); saturated to u_max first, the tether takes half of it.
+    cfg = task_config("informed", n_agents=3, n_neighbors=2)
+    own = 2 * cfg.dim + 1
+
+    def leader_action(goal_pull):
+        ctrl = InformedFollowerController(
+            cfg, k_p=1.0, k_d=0.0, k_l=1.0, tether=0.5, saturation="norm", goal_pull=goal_pull
+        )
+        obs = np.zeros((1, ctrl.obs_dim), np.float32)
+        block = (ctrl.obs_dim - own) // 2
+        obs[0, : cfg.dim] = [30.0 / cfg.obs_goal_scale, 0.0]
+        obs[0, 2 * cfg.dim] = 1.0
+        for j in range(2):
+            obs[0, own + j * block : own + j * block + 2] = [-2.0 / cfg.obs_neighbor_scale, 0]
+            obs[0, own + j * block + 4] = 1.0
+        return ctrl.predict(obs)[0][0]
+
+    np.testing.assert_allclose(leader_action("raw"), [1.0, 0.0], atol=1e-6)
+    expected = (cfg.u_max - 1.5) / cfg.u_max
+    np.testing.assert_allclose(leader_action("saturated"), [expected, 0.0], atol=1e-6)
+    with pytest.raises(ValueError, match=r"goal_pull must be one of \('raw', 'saturated'\)"):
+        InformedFollowerController(cfg, goal_pull="capped")
+
+
 def test_followers_need_the_informed_task():
     with pytest.raises(ValueError, match="task='informed'"):
         InformedFollowerController(SwarmConfig())
@@ -589,19 +615,22 @@ def test_residual_record_rebuilds_the_baseline_it_was_trained_on():
     from train.residual import make_baseline, residual_record
 
     cfg = task_config("informed")
-    tethered = InformedFollowerController(cfg, k_l=3.0, tether=2.0, lead=1.5)
+    tethered = InformedFollowerController(cfg, k_l=3.0, tether=2.0, lead=1.5, goal_pull="saturated")
     record = residual_record("follow", tethered)
     assert (record["gains"]["k_l"], record["gains"]["tether"]) == (3.0, 2.0)
     assert record["gains"]["lead"] == 1.5
     assert record["scale"] == 1.0
     rebuilt = make_baseline("follow", cfg, record["gains"])
     assert (rebuilt.k_l, rebuilt.tether, rebuilt.k_p) == (3.0, 2.0, tethered.k_p)
-    assert rebuilt.lead == 1.5
-    # A record made before the tether and the lead existed rebuilds the untethered
-    # leader and followers without a lead, whatever the tuned table holds today.
-    older = {k: v for k, v in record["gains"].items() if k not in ("k_l", "tether", "lead")}
+    assert (rebuilt.lead, rebuilt.goal_pull) == (1.5, "saturated")
+    # A record made before the tether, the lead and the saturated goal pull existed
+    # rebuilds the untethered leader, with its raw pull, and followers without a lead,
+    # whatever the tuned table holds today.
+    newer = ("k_l", "tether", "lead", "goal_pull")
+    older = {k: v for k, v in record["gains"].items() if k not in newer}
     assert make_baseline("follow", cfg, older).k_l == 0.0
     assert make_baseline("follow", cfg, older).lead == 0.0
+    assert make_baseline("follow", cfg, older).goal_pull == "raw"
 
 
 def test_residual_needs_shared_mode_and_a_known_baseline():

@@ -1,12 +1,12 @@
 """``swarm-demo`` (``make demo``): train, evaluate against the best baseline, report.
 
-1. trains ``configs/train/demo_informed.yaml`` into ``OUT``: a shared PPO policy that
-   corrects the informed task's strongest simple baseline (``follow``, a residual
-   policy), where only 1 to 3 of 10 agents observe the goal;
+1. trains ``configs/train/demo_zone.yaml`` into ``OUT``: a shared policy that corrects
+   the strongest simple controller of navigation on Couzin's zone model (his
+   informed-individual rule, ``informed``; a residual policy), trained by evolution
+   strategies;
 2. evaluates the trained policy beside every baseline of the task
-   (:func:`agents.baseline_names`: the paper's goal-sink controller on the informed
-   agents, ``pd`` on the informed agents and ``follow``, with the gains ``swarm-tune``
-   found on training seeds),
+   (:func:`agents.baseline_names`: ``informed`` and the saturated PD law ``pd``, with
+   the gains ``swarm-tune`` found on training seeds),
    ``zero`` (the passive swarm) and ``random``, on ``--episodes`` episodes whose seed
    (``--seed``) training never used, writing ``results.json``, ``summary.md``,
    ``curves.png`` and one GIF per policy into ``OUT``;
@@ -39,7 +39,7 @@ from train.config import load_train_config, parse_overrides
 
 PROG = "swarm-demo"
 
-DEFAULT_CONFIG = CONFIG_ROOT / "train" / "demo_informed.yaml"
+DEFAULT_CONFIG = CONFIG_ROOT / "train" / "demo_zone.yaml"
 LEARNED = "learned"
 
 
