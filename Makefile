@@ -8,8 +8,8 @@ OUT    ?= reproductions
 .PHONY: help install demo test test-slow lint format reproduce bench benchmark clean
 
 help:
-	@echo "make demo       the main job: train a shared PPO policy, evaluate it against the"
-	@echo "                analytic controller, write runs/demo/ (report, plots, GIFs)"
+	@echo "make demo       the main job: train a shared policy, evaluate it against every"
+	@echo "                baseline of its task, write runs/demo/ (report, plots, GIFs)"
 	@echo "make test       create .venv if missing, install, run ruff, mypy, codespell and pytest"
 	@echo "make test-slow  the same, plus the slow tests (full training runs)"
 	@echo "make lint       ruff (lint, format check), mypy (types) and codespell, as CI runs them"

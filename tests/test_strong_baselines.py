@@ -731,6 +731,26 @@ def test_swarm_eval_compares_every_baseline_by_default(tmp_path):
     assert "Lower bound on the time to goal" in (out / "summary.md").read_text()
 
 
+def test_bound_line_names_every_near_optimal_baseline():
+    from train.evaluate.report import bound_line
+
+    results = {
+        "time_to_goal_bound": 10.0,
+        "best_baseline": "informed",
+        "baselines": ["informed", "pd", "potential"],
+        "policies": {
+            "informed": {"time_over_bound": 0.0525},
+            "pd": {"time_over_bound": 0.027},
+            "potential": {"time_over_bound": 0.30},
+            "learned": {"time_over_bound": 0.01},  # not a baseline: never named
+        },
+    }
+    line = bound_line(results)
+    assert "The best baseline, informed, takes +5.25% more (room to gain)." in line
+    assert "pd takes +2.70% more, within 5% of it: near-optimal on time" in line
+    assert "potential takes" not in line and "learned" not in line
+
+
 def test_free_agent_time_bounds_a_swarm_without_pair_forces():
     # Without pair forces every agent is on its own: the estimate becomes a bound, and
     # it is tighter than the centroid's.

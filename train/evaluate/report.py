@@ -85,7 +85,9 @@ def csv_cell(measures: Mapping[str, Any], key: str) -> Any:
 
 def bound_line(results: Mapping[str, Any]) -> str:
     """One sentence on the lower bound on the time to goal of ``results``' episodes
-    (:mod:`train.evaluate.bound`), and how close the best baseline comes to it."""
+    (:mod:`train.evaluate.bound`), how close the best baseline comes to it, and which
+    other baselines arrive within :data:`~train.evaluate.bound.NEAR_OPTIMAL` of it (the
+    best baseline is the one with the highest return, not always the fastest)."""
     bound = results.get("time_to_goal_bound")
     if bound is None:
         why = results.get("bound_undefined") or "not computed"
@@ -103,6 +105,13 @@ def bound_line(results: Mapping[str, Any]) -> str:
             else "room to gain"
         )
         line += f" The best baseline, {best}, takes {over:+.2%} more ({near})."
+    for name in results.get("baselines", ()):
+        other = results["policies"].get(name, {}).get("time_over_bound")
+        if name != best and other is not None and other <= NEAR_OPTIMAL:
+            line += (
+                f" {name} takes {other:+.2%} more, within {NEAR_OPTIMAL:.0%} of it: "
+                "near-optimal on time, though not the best by return."
+            )
     alone = results.get("free_agent_time")
     if alone is not None:
         line += (
