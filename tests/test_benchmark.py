@@ -309,6 +309,39 @@ def test_stopped_training_resumes_and_a_changed_config_is_refused(tmp_path, tiny
     assert capsys.readouterr().out.count("training PPO for 768 timesteps") == 2
 
 
+def test_a_residual_model_on_since_retuned_gains_is_refused(tmp_path, monkeypatch):
+    from train.benchmark.run import StaleModelError, existing_run
+
+    train_file = tmp_path / "residual.yaml"
+    train_file.write_text(yaml.safe_dump({**TINY_TRAIN, "residual": "pd"}))
+    matrix = {
+        "entries": [
+            {
+                "name": "nav",
+                "task": "navigation",
+                "dynamics": "social_potential",
+                "train": str(train_file),
+            }
+        ]
+    }
+    (tmp_path / "matrix.yaml").write_text(yaml.safe_dump(matrix))
+    e = load_matrix(tmp_path / "matrix.yaml").entries[0]
+    tc = entry_train_config(e, 0, quick=False)
+    folder = tmp_path / "run"
+    train(tc, folder, progress_bar=False, tensorboard=False, verbose=0)
+    assert existing_run(tc, folder) == "reuse"
+    # swarm-tune rewrote the PD law's gains since: the same config, another baseline
+    import agents.tuned
+
+    tuned = agents.tuned.tuned_gains
+    monkeypatch.setattr(
+        agents.tuned, "tuned_gains", lambda name, cfg: {**tuned(name, cfg), "k_p": 123.0}
+    )
+    with pytest.raises(StaleModelError, match=r"whose gains k_p differ from today's tuned `pd`"):
+        existing_run(tc, folder)
+    assert existing_run(tc, folder, overwrite=True) == "train"
+
+
 @pytest.mark.parametrize(
     ("extra", "match"),
     [

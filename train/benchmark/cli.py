@@ -15,8 +15,8 @@ the same ``--episodes`` episodes (``--eval-seed``). ``OUT/results.json``,
 Stopping and continuing: Ctrl-C (or SIGTERM) stops a training at its next update
 boundary and saves it; the finished models stay. Running the same command again reuses
 every finished model, resumes the stopped one and trains the rest. A model folder that
-holds a run of another config is refused; ``--overwrite`` retrains the selected entries
-from scratch.
+holds a run of another config, or a residual policy on a baseline whose tuned gains have
+changed since, is refused; ``--overwrite`` retrains the selected entries from scratch.
 
 ``--baselines-only`` trains nothing and evaluates the baselines alone (the best one
 marked, the lower bound on the time to goal): the table of what a learned policy must

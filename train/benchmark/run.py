@@ -152,7 +152,8 @@ def existing_run(tc: TrainConfig, folder: Path, *, overwrite: bool = False) -> s
     (nothing there, an unfinished run without checkpoint, or ``overwrite``).
 
     Raises:
-        StaleModelError: ``folder`` holds a run of another config (without ``overwrite``).
+        StaleModelError: ``folder`` holds a run of another config, or a residual policy
+            on since retuned baseline gains (without ``overwrite``).
     """
     from train.checkpoints import checkpoint_timesteps, latest_checkpoint
 
@@ -176,8 +177,46 @@ def existing_run(tc: TrainConfig, folder: Path, *, overwrite: bool = False) -> s
         ckpt is not None and checkpoint_timesteps(ckpt) >= tc.total_timesteps
     )
     if finished and (folder / "model.zip").is_file():
+        _check_residual_baseline(tc, folder / "model.zip")
         return "reuse"
-    return "resume" if ckpt is not None else "train"
+    if ckpt is None:
+        return "train"
+    _check_residual_baseline(tc, ckpt / "model.zip")
+    return "resume"
+
+
+def _check_residual_baseline(tc: TrainConfig, model_path: Path) -> None:
+    """Refuse a residual model whose recorded baseline is not the one ``tc`` trains on
+    today: its config may be unchanged while ``swarm-tune`` has since rewritten the
+    baseline's gains (``configs/baselines/tuned.yaml``).
+
+    Raises:
+        StaleModelError: the recorded baseline, gains or scale differ from today's.
+    """
+    if tc.residual is None or not model_path.is_file():
+        return
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    from train.residual import RESIDUAL, make_baseline, residual_record
+
+    data, _, _ = load_from_zip_file(model_path, load_data=True, device="cpu")
+    recorded = (data or {}).get(RESIDUAL) or {}
+    today = residual_record(
+        tc.residual, make_baseline(tc.residual, tc.swarm_config()), tc.residual_scale
+    )
+    recorded = {"scale": 1.0, **recorded}
+    if recorded != today:
+        changed = sorted(
+            key
+            for key in set(recorded.get("gains", {})) | set(today["gains"])
+            if recorded.get("gains", {}).get(key) != today["gains"].get(key)
+        )
+        what = f"gains {', '.join(changed)}" if changed else "baseline or scale"
+        raise StaleModelError(
+            f"{model_path.parent} holds a residual policy on `{recorded.get('baseline')}` "
+            f"whose {what} differ from today's tuned `{tc.residual}` "
+            f"(configs/baselines/tuned.yaml); use --overwrite to retrain it, or another --out"
+        )
 
 
 def train_seed(
