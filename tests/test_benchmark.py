@@ -309,7 +309,7 @@ def test_stopped_training_resumes_and_a_changed_config_is_refused(tmp_path, tiny
     assert capsys.readouterr().out.count("training PPO for 768 timesteps") == 2
 
 
-def test_a_residual_model_on_since_retuned_gains_is_refused(tmp_path, monkeypatch):
+def test_a_residual_model_on_gains_tuned_anew_since_is_refused(tmp_path, monkeypatch):
     from train.benchmark.run import StaleModelError, existing_run
 
     train_file = tmp_path / "residual.yaml"

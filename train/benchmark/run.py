@@ -153,7 +153,7 @@ def existing_run(tc: TrainConfig, folder: Path, *, overwrite: bool = False) -> s
 
     Raises:
         StaleModelError: ``folder`` holds a run of another config, or a residual policy
-            on since retuned baseline gains (without ``overwrite``).
+            whose baseline gains were tuned anew since (without ``overwrite``).
     """
     from train.checkpoints import checkpoint_timesteps, latest_checkpoint
 
