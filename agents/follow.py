@@ -120,7 +120,7 @@ class InformedFollowerController(SaturatedPDController):
             tuned.get("goal_pull", self.DEFAULT_GOAL_PULL) if goal_pull is None else goal_pull
         )
         if pull not in self.GOAL_PULLS:
-            raise ValueError(f"{owner}: goal_pull must be one of {self.GOAL_PULLS}, got {pull!r}")
+            raise ValueError(f"{owner}.goal_pull must be one of {self.GOAL_PULLS}, got {pull!r}")
         self.goal_pull: str = str(pull)
         self.obs_neighbor_scale: float = self.cfg.obs_neighbor_scale
 

@@ -186,36 +186,42 @@ def existing_run(tc: TrainConfig, folder: Path, *, overwrite: bool = False) -> s
 
 
 def _check_residual_baseline(tc: TrainConfig, model_path: Path) -> None:
-    """Refuse a residual model whose recorded baseline is not the one ``tc`` trains on
-    today: its config may be unchanged while ``swarm-tune`` has since rewritten the
-    baseline's gains (``configs/baselines/tuned.yaml``).
+    """Refuse a residual model whose baseline is not the one ``tc`` trains on today: its
+    config may be unchanged while ``swarm-tune`` has since rewritten the baseline's gains
+    (``configs/baselines/tuned.yaml``). The model's baseline is the one it rebuilds from
+    its record (:func:`train.residual.as_policy`), so a record older than a gain compares
+    with the value that gain had then.
 
     Raises:
-        StaleModelError: the recorded baseline, gains or scale differ from today's.
+        StaleModelError: the baseline, its gains or the scale differ from today's.
     """
     if tc.residual is None or not model_path.is_file():
         return
-    from stable_baselines3.common.save_util import load_from_zip_file
+    from train.evaluate.policies import load_sb3_model
+    from train.residual import RESIDUAL, ResidualPolicy, make_baseline, residual_record
 
-    from train.residual import RESIDUAL, make_baseline, residual_record
-
-    data, _, _ = load_from_zip_file(model_path, load_data=True, device="cpu")
-    recorded = (data or {}).get(RESIDUAL) or {}
+    policy = load_sb3_model(model_path)
+    if not isinstance(policy, ResidualPolicy):
+        raise StaleModelError(
+            f"{model_path.parent} holds a policy without a baseline, where `{tc.residual}` "
+            "is asked for; use --overwrite to retrain it, or another --out"
+        )
+    name = getattr(policy, RESIDUAL)["baseline"]
+    there = residual_record(name, policy.baseline, policy.scale)
     today = residual_record(
         tc.residual, make_baseline(tc.residual, tc.swarm_config()), tc.residual_scale
     )
-    recorded = {"scale": 1.0, **recorded}
-    if recorded != today:
-        changed = sorted(
-            key
-            for key in set(recorded.get("gains", {})) | set(today["gains"])
-            if recorded.get("gains", {}).get(key) != today["gains"].get(key)
+    if there != today:
+        gains = sorted(
+            k
+            for k in set(there["gains"]) | set(today["gains"])
+            if there["gains"].get(k) != today["gains"].get(k)
         )
-        what = f"gains {', '.join(changed)}" if changed else "baseline or scale"
+        what = f"gains {', '.join(gains)}" if gains else "baseline or scale"
         raise StaleModelError(
-            f"{model_path.parent} holds a residual policy on `{recorded.get('baseline')}` "
-            f"whose {what} differ from today's tuned `{tc.residual}` "
-            f"(configs/baselines/tuned.yaml); use --overwrite to retrain it, or another --out"
+            f"{model_path.parent} holds a residual policy on `{name}` whose {what} differ "
+            f"from today's tuned `{tc.residual}` (configs/baselines/tuned.yaml); use "
+            "--overwrite to retrain it, or another --out"
         )
 
 
