@@ -21,14 +21,18 @@ velocity and informed flag. :class:`InformedFollowerController` does that:
   a point ``λ`` ahead of them along their heading:
   ``a_i = sat((k_v ⟨v_j − v_i⟩ + k_c (⟨r_j − r_i⟩ + λ ĥ)) / u_max)``, the means over the
   informed neighbours in its observation and ``ĥ`` the direction of their mean velocity
-  ``⟨v_j⟩``; with none in view, over all its neighbours and with no lead (velocity
-  matching and cohesion, a flock that carries the information on). Without a lead
-  (``λ = 0``) the followers fall in behind their leader; with one they converge on its
-  course, and a flock at constant speed reaches a goal in a compact group instead of a
-  file.
+  ``⟨v_j⟩``; with none in view, over all its neighbours, and the point ``λ_f`` ahead of
+  them along their mean heading (velocity matching and cohesion, a flock that carries
+  the information on). Without a lead (``λ = 0``) the followers fall in behind their
+  leader; with one they converge on its course, and a flock at constant speed reaches a
+  goal in a compact group instead of a file. The flock's lead ``λ_f`` (``flock_lead``)
+  lets the agents that see no informed agent push the flock on along the way it
+  already goes, instead of only matching it: the information reaches the rear of a
+  flock with one informed agent sooner, at the risk of carrying on a flock that goes
+  the wrong way (too long a lead).
 
 The gains are tuned on training seeds (``swarm-tune``, over the grid of
-``configs/baselines/grids.yaml``), like the PD's; ``k_l = 0``, ``λ = 0`` and
+``configs/baselines/grids.yaml``), like the PD's; ``k_l = 0``, ``λ = λ_f = 0`` and
 ``goal_pull="raw"`` (the defaults) are the untethered leader and followers that close
 on it.
 """
@@ -60,6 +64,9 @@ class InformedFollowerController(SaturatedPDController):
             which it pulls.
         lead: the lead ``λ ≥ 0``: how far ahead of their informed neighbours, along
             their heading, the uninformed agents close (0: on the neighbours).
+        flock_lead: the flock's lead ``λ_f ≥ 0``: how far ahead of their neighbours,
+            along their mean heading, the uninformed agents with no informed neighbour
+            in view close (0: on the neighbours).
         goal_pull: ``"raw"``: the tether is added to the PD law as it is; ``"saturated"``:
             to the PD law saturated into the action box first, so a tether stretched by
             ``u_max / k_l`` holds the leader back whatever its distance to the goal.
@@ -82,6 +89,7 @@ class InformedFollowerController(SaturatedPDController):
     DEFAULT_K_L: float = 0.0
     DEFAULT_TETHER: float = 1.0
     DEFAULT_LEAD: float = 0.0
+    DEFAULT_FLOCK_LEAD: float = 0.0
     DEFAULT_GOAL_PULL: str = "raw"
     GOAL_PULLS: tuple[str, ...] = ("raw", "saturated")
     _TUNED_NAME = "follow"
@@ -98,6 +106,7 @@ class InformedFollowerController(SaturatedPDController):
         tether: float | None = None,
         lead: float | None = None,
         goal_pull: str | None = None,
+        flock_lead: float | None = None,
     ) -> None:
         from agents.tuned import Gain, tuned_gains
 
@@ -116,6 +125,10 @@ class InformedFollowerController(SaturatedPDController):
         self.tether: float = check_real(owner, "tether", tether_value, low=0.0)
         lead_value: Gain = tuned.get("lead", self.DEFAULT_LEAD) if lead is None else lead
         self.lead: float = check_real(owner, "lead", lead_value, low=0.0)
+        flock_lead_value: Gain = (
+            tuned.get("flock_lead", self.DEFAULT_FLOCK_LEAD) if flock_lead is None else flock_lead
+        )
+        self.flock_lead: float = check_real(owner, "flock_lead", flock_lead_value, low=0.0)
         pull: Gain = (
             tuned.get("goal_pull", self.DEFAULT_GOAL_PULL) if goal_pull is None else goal_pull
         )
@@ -128,7 +141,8 @@ class InformedFollowerController(SaturatedPDController):
         return (
             f"{type(self).__name__}(k_p={self.k_p:g}, k_d={self.k_d:g}, k_v={self.k_v:g}, "
             f"k_c={self.k_c:g}, k_l={self.k_l:g}, tether={self.tether:g}, lead={self.lead:g}, "
-            f"goal_pull={self.goal_pull!r}, saturation={self.saturation!r})"
+            f"flock_lead={self.flock_lead:g}, goal_pull={self.goal_pull!r}, "
+            f"saturation={self.saturation!r})"
         )
 
     def _actions(self, obs: np.ndarray, deterministic: bool) -> np.ndarray:
@@ -144,12 +158,14 @@ class InformedFollowerController(SaturatedPDController):
         count = np.maximum(weight.sum(axis=1, keepdims=True), 1.0)
         mean_velocity = np.einsum("nk,nkd->nd", weight, rel_velocity) / count
         mean_offset = np.einsum("nk,nkd->nd", weight, offset) / count
-        if self.lead > 0:
-            # A point ahead of the informed neighbours, along their mean velocity.
+        if self.lead > 0 or self.flock_lead > 0:
+            # A point ahead of the neighbours followed (the informed ones where there are
+            # any: lead; else all: flock_lead), along their mean velocity.
             heading = mean_velocity + obs[:, d : 2 * d] * self.obs_velocity_scale
             speed = np.sqrt(np.einsum("nd,nd->n", heading, heading))[:, None]
             ahead = told.sum(axis=1, keepdims=True) > 0
-            scale = np.where(ahead & (speed > 0), self.lead / np.where(speed > 0, speed, 1.0), 0.0)
+            length = np.where(ahead, self.lead, self.flock_lead)
+            scale = np.where(speed > 0, length / np.where(speed > 0, speed, 1.0), 0.0)
             mean_offset = mean_offset + scale * heading
         followers = saturate(
             (self.k_v * mean_velocity + self.k_c * mean_offset) / self.u_max, self.saturation

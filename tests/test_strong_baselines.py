@@ -144,6 +144,44 @@ def test_followers_close_on_a_point_ahead_of_their_informed_neighbours():
         InformedFollowerController(cfg, lead=-1.0)
 
 
+def test_followers_with_no_informed_neighbour_close_ahead_of_their_flock():
+    cfg = task_config("informed", n_agents=3, n_neighbors=2)
+    own = 2 * cfg.dim + 1
+    u = cfg.u_max
+
+    def follower_action(flock_lead, neighbour_informed, own_velocity=(0.0, 0.0), moving=True):
+        ctrl = InformedFollowerController(
+            cfg, k_p=1.0, k_d=0.0, k_v=0.0, k_c=1.0, k_l=0.0, lead=2.0,
+            flock_lead=flock_lead, saturation="norm",
+        )  # fmt: skip
+        obs = np.zeros((1, ctrl.obs_dim), np.float32)  # an uninformed agent
+        obs[0, cfg.dim : 2 * cfg.dim] = np.array(own_velocity) / cfg.obs_velocity_scale
+        # two neighbours 1 to the left and 1 to the right of the agent, both moving
+        # (0, 0.5) in absolute terms (or standing still)
+        absolute = np.array([0.0, 0.5 if moving else 0.0])
+        for j, side in enumerate((-1.0, 1.0)):
+            block = own + j * (2 * cfg.dim + 2)
+            obs[0, block : block + 2] = np.array([side, 0.0]) / cfg.obs_neighbor_scale
+            obs[0, block + 2 : block + 4] = (absolute - own_velocity) / cfg.obs_velocity_scale
+            obs[0, block + 4] = 1.0  # real
+            obs[0, block + 5] = float(neighbour_informed and j == 0)
+        return ctrl.predict(obs)[0][0]
+
+    # No informed neighbour: the point λ_f ahead of the neighbours' mean (0, 0) along
+    # their heading (+y), whatever the agent's own velocity.
+    np.testing.assert_allclose(follower_action(0.0, False), [0.0, 0.0], atol=1e-6)
+    np.testing.assert_allclose(follower_action(0.3, False), [0.0, 0.3 / u], atol=1e-6)
+    np.testing.assert_allclose(
+        follower_action(0.3, False, own_velocity=(0.2, -0.4)), [0.0, 0.3 / u], atol=1e-6
+    )
+    # A flock at rest has no heading: no lead.
+    np.testing.assert_allclose(follower_action(0.3, False, moving=False), [0.0, 0.0], atol=1e-6)
+    # An informed neighbour in view: its lead (λ = 2 ahead of it, at (-1, 0)), not the flock's.
+    np.testing.assert_allclose(follower_action(0.3, True), [-1.0 / u, 2.0 / u], atol=1e-6)
+    with pytest.raises(ValueError, match="flock_lead"):
+        InformedFollowerController(cfg, flock_lead=-0.1)
+
+
 @pytest.mark.parametrize(
     ("k_l", "behind", "expected"),
     [
@@ -615,21 +653,24 @@ def test_residual_record_rebuilds_the_baseline_it_was_trained_on():
     from train.residual import make_baseline, residual_record
 
     cfg = task_config("informed")
-    tethered = InformedFollowerController(cfg, k_l=3.0, tether=2.0, lead=1.5, goal_pull="saturated")
+    tethered = InformedFollowerController(
+        cfg, k_l=3.0, tether=2.0, lead=1.5, goal_pull="saturated", flock_lead=0.25
+    )
     record = residual_record("follow", tethered)
     assert (record["gains"]["k_l"], record["gains"]["tether"]) == (3.0, 2.0)
-    assert record["gains"]["lead"] == 1.5
+    assert (record["gains"]["lead"], record["gains"]["flock_lead"]) == (1.5, 0.25)
     assert record["scale"] == 1.0
     rebuilt = make_baseline("follow", cfg, record["gains"])
     assert (rebuilt.k_l, rebuilt.tether, rebuilt.k_p) == (3.0, 2.0, tethered.k_p)
-    assert (rebuilt.lead, rebuilt.goal_pull) == (1.5, "saturated")
-    # A record made before the tether, the lead and the saturated goal pull existed
+    assert (rebuilt.lead, rebuilt.goal_pull, rebuilt.flock_lead) == (1.5, "saturated", 0.25)
+    # A record made before the tether, the leads and the saturated goal pull existed
     # rebuilds the untethered leader, with its raw pull, and followers without a lead,
     # whatever the tuned table holds today.
-    newer = ("k_l", "tether", "lead", "goal_pull")
+    newer = ("k_l", "tether", "lead", "goal_pull", "flock_lead")
     older = {k: v for k, v in record["gains"].items() if k not in newer}
     assert make_baseline("follow", cfg, older).k_l == 0.0
     assert make_baseline("follow", cfg, older).lead == 0.0
+    assert make_baseline("follow", cfg, older).flock_lead == 0.0
     assert make_baseline("follow", cfg, older).goal_pull == "raw"
 
 

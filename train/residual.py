@@ -51,6 +51,7 @@ _GAIN_ATTRS = (
     "k_l",
     "tether",
     "lead",
+    "flock_lead",
     "goal_pull",
     "saturation",
     "approach",
@@ -60,9 +61,11 @@ _GAIN_ATTRS = (
 
 #: Gains a controller gained after residual models recorded it, with the value that
 #: leaves it as it was: a record without them rebuilds the baseline it was trained on,
-#: not today's tuned one (``follow``'s leader tether, its followers' lead and its
+#: not today's tuned one (``follow``'s leader tether, its followers' leads and its
 #: leader's saturated goal pull, off before they existed).
-_GAINS_BEFORE_RECORDED = {"follow": {"k_l": 0.0, "lead": 0.0, "goal_pull": "raw"}}
+_GAINS_BEFORE_RECORDED = {
+    "follow": {"k_l": 0.0, "lead": 0.0, "goal_pull": "raw", "flock_lead": 0.0}
+}
 
 
 def check_baseline_name(name: Any) -> str:
