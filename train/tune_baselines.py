@@ -11,6 +11,12 @@ ties go to the earlier point. The winners are written to
 (``"<task>/<dynamics>"``, :func:`agents.tuned.scenario_key`), with the return they
 scored, so that ``make_controller("pd", env)`` and every evaluation use them.
 
+Where one of a baseline's grid points can fail in rare episodes (a flock that stalls),
+a few episodes may not hold one, and the grid's best on them can be a point that fails
+more often: where the grid file asks for it (``select: {<baseline>: {top, episodes}}``),
+the grid's ``top`` best points are scored again on ``episodes`` episodes of the same seed,
+and the best of them is the grid's winner (then refined on those episodes).
+
 A grid is coarse: where the grid file asks for it (``refine: {rounds, factor}``), the
 grid's winner is then refined on the same episodes by a local search: each round tries
 every numeric gain of the current best multiplied and divided by ``factor`` (a zero
@@ -43,6 +49,7 @@ __all__ = [
     "DEFAULT_GRIDS",
     "Grid",
     "Refinement",
+    "Selection",
     "grid_points",
     "load_grids",
     "main",
@@ -68,6 +75,15 @@ class Refinement:
     factor: float = 1.25
 
 
+@dataclass(frozen=True)
+class Selection:
+    """The second look at the grid's best points (module docstring): its ``top ≥ 1``
+    best points scored again on ``episodes ≥ 1`` episodes."""
+
+    top: int
+    episodes: int
+
+
 def evaluation_seeds() -> tuple[int, ...]:
     """The seeds the evaluations use (the benchmark's and the demo's, and the periodic
     evaluation's during training): a tuning seed must be none of them."""
@@ -79,22 +95,25 @@ def evaluation_seeds() -> tuple[int, ...]:
 
 def load_grids(
     path: str | Path = DEFAULT_GRIDS,
-) -> tuple[int, int, dict[str, Grid], Refinement]:
-    """``(seed, episodes, {baseline: {gain: values}}, refinement)`` from a grid file.
+) -> tuple[int, int, dict[str, Grid], Refinement, dict[str, Selection]]:
+    """``(seed, episodes, {baseline: {gain: values}}, refinement, {baseline: selection})``
+    from a grid file.
 
     Raises:
         ValueError: an unknown key, a baseline that is not a simple one, an empty grid
             or one of values that are neither numbers nor names, an evaluation seed as
-            the tuning seed, or a ``refine`` section that is not ``{rounds: integer
-            >= 0, factor: number > 1}``.
+            the tuning seed, a ``refine`` section that is not ``{rounds: integer >= 0,
+            factor: number > 1}``, or a ``select`` section that does not map baselines
+            of ``grids`` to ``{top: integer >= 1, episodes: integer >= 1}``.
     """
     from agents import CONTROLLERS, SIMPLE
 
     data = read_yaml_mapping(path, "grid file")
-    unknown = sorted(set(data) - {"seed", "episodes", "grids", "refine"})
+    unknown = sorted(set(data) - {"seed", "episodes", "grids", "refine", "select"})
     if unknown:
         raise ValueError(
-            f"{path}: unknown key(s) {', '.join(unknown)}; allowed: seed, episodes, grids, refine"
+            f"{path}: unknown key(s) {', '.join(unknown)}; allowed: seed, episodes, grids, "
+            "refine, select"
         )
     seed = check_seed("seed", data.get("seed", 0))
     if seed in evaluation_seeds():
@@ -124,7 +143,35 @@ def load_grids(
                     f"{path}: grids.{name}.{gain} must be a non-empty list of numbers or names"
                 )
             grids[name][str(gain)] = [v if isinstance(v, str) else float(v) for v in values]
-    return seed, episodes, grids, _refinement(path, data.get("refine"))
+    refinement = _refinement(path, data.get("refine"))
+    return seed, episodes, grids, refinement, _selections(path, data.get("select"), grids)
+
+
+def _selections(path: str | Path, section: Any, grids: Mapping[str, Grid]) -> dict[str, Selection]:
+    if section is None:
+        return {}
+    if not isinstance(section, Mapping):
+        raise ValueError(
+            f"{path}: select must map baselines to {{top: integer >= 1, episodes: integer "
+            f">= 1}}, got {section!r}"
+        )
+    out: dict[str, Selection] = {}
+    for name, entry in section.items():
+        if name not in grids:
+            raise ValueError(
+                f"{path}: select.{name}: not a baseline of grids; known: {', '.join(grids)}"
+            )
+        values = dict(entry) if isinstance(entry, Mapping) else {}
+        counts = all(
+            isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in values.values()
+        )
+        if set(values) != {"top", "episodes"} or not counts:
+            raise ValueError(
+                f"{path}: select.{name} must be {{top: integer >= 1, episodes: integer >= 1}}, "
+                f"got {entry!r}"
+            )
+        out[str(name)] = Selection(values["top"], values["episodes"])
+    return out
 
 
 def _refinement(path: str | Path, section: Any) -> Refinement:
@@ -186,19 +233,31 @@ def make_tuned(name: str, cfg: SwarmConfig, point: Mapping[str, Any]) -> Any:
     return CONTROLLERS[name](cfg, **point)
 
 
-def _best_of(
+def _scores(
     name: str, cfg: SwarmConfig, points: Sequence[Mapping[str, Gain]], seed: int, episodes: int
-) -> tuple[int, dict[str, Any]]:
-    """The index of the point with the highest mean return (ties: the earlier) and its
-    scores, every point evaluated on the same ``episodes`` episodes of ``seed``."""
+) -> list[dict[str, Any]]:
+    """Every point's scores, each evaluated on the same ``episodes`` episodes of ``seed``."""
     from train.evaluate import evaluate_policies
 
     policies = {f"p{i}": make_tuned(name, cfg, p) for i, p in enumerate(points)}
     results = evaluate_policies(
         policies, cfg, episodes, seed, progress=False, gif=False, plots=False
     )
-    scores = [results["policies"][f"p{i}"] for i in range(len(points))]
-    best = max(range(len(points)), key=lambda i: (scores[i]["mean_return"], -i))
+    return [results["policies"][f"p{i}"] for i in range(len(points))]
+
+
+def _ranked(scores: Sequence[Mapping[str, Any]]) -> list[int]:
+    """The points' indices, the highest mean return first (ties: the earlier)."""
+    return sorted(range(len(scores)), key=lambda i: (-scores[i]["mean_return"], i))
+
+
+def _best_of(
+    name: str, cfg: SwarmConfig, points: Sequence[Mapping[str, Gain]], seed: int, episodes: int
+) -> tuple[int, dict[str, Any]]:
+    """The index of the point with the highest mean return (ties: the earlier) and its
+    scores, every point evaluated on the same ``episodes`` episodes of ``seed``."""
+    scores = _scores(name, cfg, points, seed, episodes)
+    best = _ranked(scores)[0]
     return best, scores[best]
 
 
@@ -219,18 +278,30 @@ def tune_scenario(
     seed: int,
     episodes: int,
     refinement: Refinement = Refinement(),
+    selection: Selection | None = None,
 ) -> dict[str, Any]:
-    """Evaluate every point of ``grid`` on ``cfg``, refine the winner (``refinement``,
-    module docstring); return the result's record ``{"gains", "mean_return",
-    "success_rate", "seed", "episodes", "points"}`` (``points``: every point
-    evaluated), with ``"grid_gains"``, ``"grid_return"`` and ``"refine_rounds"`` (the
-    rounds that moved it) where the refinement ran."""
+    """Evaluate every point of ``grid`` on ``cfg``, score its best ones again
+    (``selection``), refine the winner (``refinement``; module docstring); return the
+    result's record ``{"gains", "mean_return", "success_rate", "seed", "episodes",
+    "points"}`` (``episodes``: those the result was scored on; ``points``: every
+    evaluation of a point), with ``"grid_gains"``, ``"grid_return"`` and
+    ``"refine_rounds"`` (the rounds that moved it) where the refinement ran, and
+    ``"grid_episodes"`` and ``"selected_from"`` (the points scored again) where the
+    selection did."""
     points = grid_points(grid)
-    best, score = _best_of(name, cfg, points, seed, episodes)
-    gains, evaluated = points[best], len(points)
     record: dict[str, Any] = {}
+    if selection is None:
+        best, score = _best_of(name, cfg, points, seed, episodes)
+        gains, evaluated = points[best], len(points)
+    else:
+        finalists = [points[i] for i in _ranked(_scores(name, cfg, points, seed, episodes))]
+        finalists = finalists[: selection.top]
+        best, score = _best_of(name, cfg, finalists, seed, selection.episodes)
+        gains, evaluated = finalists[best], len(points) + len(finalists)
+        record = {"grid_episodes": episodes, "selected_from": len(finalists)}
+        episodes = selection.episodes
     if refinement.rounds > 0:
-        grid_return, moved = float(score["mean_return"]), 0
+        grid_best, grid_return, moved = gains, float(score["mean_return"]), 0
         for _ in range(refinement.rounds):
             neighbours = [
                 p
@@ -244,8 +315,8 @@ def tune_scenario(
             if not candidate["mean_return"] > score["mean_return"]:
                 break
             gains, score, moved = neighbours[i], candidate, moved + 1
-        record = {
-            "grid_gains": dict(points[best]),  # a copy: no YAML alias when they are equal
+        record |= {
+            "grid_gains": dict(grid_best),  # a copy: no YAML alias when they are equal
             "grid_return": round(grid_return, 4),
             "refine_rounds": moved,
         }
@@ -295,7 +366,7 @@ def _main(args: argparse.Namespace) -> int:
 
     out = Path(args.out) if args.out else TUNED_PATH
     try:
-        seed, episodes, grids, refinement = load_grids(args.grids)
+        seed, episodes, grids, refinement, selections = load_grids(args.grids)
         entries = load_matrix(args.matrix).select(args.only)
         if out.exists() and not out.is_file():
             raise CliError(f"--out {out} is not a file")
@@ -314,7 +385,9 @@ def _main(args: argparse.Namespace) -> int:
             print(
                 f"{PROG}: {name} on {key}: {len(grid_points(grids[name]))} points ...", flush=True
             )
-            record = tune_scenario(name, cfg, grids[name], seed, episodes, refinement)
+            record = tune_scenario(
+                name, cfg, grids[name], seed, episodes, refinement, selections.get(name)
+            )
             tuned.setdefault(name, {})[key] = record
             refined = (
                 f" (the grid's best {record['grid_return']:.2f}, refined in "
@@ -322,6 +395,11 @@ def _main(args: argparse.Namespace) -> int:
                 if "grid_return" in record
                 else ""
             )
+            if "selected_from" in record:
+                refined += (
+                    f"; chosen among the grid's {record['selected_from']} best on "
+                    f"{record['grid_episodes']} episodes, on {record['episodes']}"
+                )
             print(
                 f"  best {record['gains']}: return {record['mean_return']:.2f}{refined}, "
                 f"success {record['success_rate']:.0%}",
