@@ -41,7 +41,7 @@ NOT_RUN: dict[str, str] = {
     "pip install -e .[dev,distributed]": "installs packages (network)",
     "pip install -e .[dev,fast]": "installs packages (network)",
     "pip install -e .[dev,benchmarl]": "installs packages (network)",
-    "swarm-tune": "rewrites the shipped configs/baselines/tuned.yaml (minutes); "
+    "swarm-tune": "rewrites the shipped configs/baselines/tuned.yaml (about an hour); "
     "tests/test_strong_baselines.py runs it on a tiny grid into a temporary file",
     "swarm-benchmark --baselines-only": "every baseline of the matrix on 100 episodes "
     "(minutes); tests/test_strong_baselines.py runs it on two entries",
