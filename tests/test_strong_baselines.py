@@ -344,7 +344,7 @@ def test_swarm_tune_refinement_skips_gains_out_of_range(tmp_path):
 def test_swarm_tune_writes_an_unmoved_winner_without_yaml_aliases(tmp_path, monkeypatch):
     import train.tune_baselines as tb
 
-    def scores(name, cfg, points, seed, episodes):  # the grid's point beats every step
+    def scores(name, cfg, points, seed, episodes, progress=False):  # the grid's point wins
         return 0, {"mean_return": 1.0 if len(points) == 1 else 0.0, "success_rate": 1.0}
 
     monkeypatch.setattr(tb, "_best_of", scores)
@@ -370,7 +370,7 @@ def test_swarm_tune_chooses_among_the_grid_best_on_more_episodes(tmp_path, monke
     many = {1.0: 1.5, 2.0: 2.5, 4.0: 0.5}
     calls = []
 
-    def scores(name, cfg, points, seed, episodes):
+    def scores(name, cfg, points, seed, episodes, progress=False):
         calls.append((len(points), episodes))
         table = few if episodes == 4 else many
         return [{"mean_return": table[p["k_p"]], "success_rate": 1.0} for p in points]
@@ -397,6 +397,23 @@ def test_swarm_tune_chooses_among_the_grid_best_on_more_episodes(tmp_path, monke
     assert record["mean_return"] == 2.5 and record["episodes"] == 40
     assert record["grid_episodes"] == 4 and record["selected_from"] == 2
     assert record["points"] == 3 + 2
+
+
+def test_swarm_tune_reports_progress_through_a_long_grid(tmp_path, capsys, monkeypatch):
+    import train.tune_baselines as tb
+
+    monkeypatch.setattr(tb, "PROGRESS_POINTS", 2)
+    grids = tmp_path / "grids.yaml"
+    grids.write_text(
+        yaml.safe_dump({"episodes": 1, "grids": {"pd": {"k_p": [1.0, 2.0, 4.0, 8.0, 16.0]}}})
+    )
+    out = tmp_path / "tuned.yaml"
+    assert tb.main(["--grids", str(grids), "--only", "navigation/zone", "--out", str(out)]) == 0
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if "points scored" in ln]
+    # A line after every 2 points but the last chunk: 2 and 4 of the 5.
+    assert [ln.split()[0] for ln in lines] == ["2/5", "4/5"]
+    assert all("on 1 episodes in" in ln and "s to go" in ln for ln in lines)
+    assert yaml.safe_load(out.read_text())["baselines"]["pd"]["navigation/zone"]["points"] == 5
 
 
 @pytest.mark.parametrize(

@@ -33,6 +33,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import sys
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -64,6 +65,9 @@ DEFAULT_GRIDS = CONFIG_ROOT / "baselines" / "grids.yaml"
 
 #: A grid: each gain's values (numbers, or names such as ``saturation``'s).
 Grid = dict[str, list[Gain]]
+
+#: Points scored between two progress lines (``tune_scenario(progress=True)``).
+PROGRESS_POINTS = 500
 
 
 @dataclass(frozen=True)
@@ -234,16 +238,36 @@ def make_tuned(name: str, cfg: SwarmConfig, point: Mapping[str, Any]) -> Any:
 
 
 def _scores(
-    name: str, cfg: SwarmConfig, points: Sequence[Mapping[str, Gain]], seed: int, episodes: int
+    name: str,
+    cfg: SwarmConfig,
+    points: Sequence[Mapping[str, Gain]],
+    seed: int,
+    episodes: int,
+    progress: bool = False,
 ) -> list[dict[str, Any]]:
-    """Every point's scores, each evaluated on the same ``episodes`` episodes of ``seed``."""
+    """Every point's scores, each evaluated on the same ``episodes`` episodes of ``seed``;
+    with ``progress``, a line on stdout after every :data:`PROGRESS_POINTS` points but
+    the last (how many, the time taken and about how long the rest takes)."""
     from train.evaluate import evaluate_policies
 
-    policies = {f"p{i}": make_tuned(name, cfg, p) for i, p in enumerate(points)}
-    results = evaluate_policies(
-        policies, cfg, episodes, seed, progress=False, gif=False, plots=False
-    )
-    return [results["policies"][f"p{i}"] for i in range(len(points))]
+    scores: list[dict[str, Any]] = []
+    start = time.monotonic()
+    for first in range(0, len(points), PROGRESS_POINTS):
+        chunk = points[first : first + PROGRESS_POINTS]
+        policies = {f"p{i}": make_tuned(name, cfg, p) for i, p in enumerate(chunk)}
+        results = evaluate_policies(
+            policies, cfg, episodes, seed, progress=False, gif=False, plots=False
+        )
+        scores.extend(results["policies"][f"p{i}"] for i in range(len(chunk)))
+        if progress and len(scores) < len(points):
+            spent = time.monotonic() - start
+            left = spent * (len(points) - len(scores)) / len(scores)
+            print(
+                f"  {len(scores)}/{len(points)} points scored on {episodes} episodes in "
+                f"{spent:.0f} s; about {left:.0f} s to go",
+                flush=True,
+            )
+    return scores
 
 
 def _ranked(scores: Sequence[Mapping[str, Any]]) -> list[int]:
@@ -252,11 +276,16 @@ def _ranked(scores: Sequence[Mapping[str, Any]]) -> list[int]:
 
 
 def _best_of(
-    name: str, cfg: SwarmConfig, points: Sequence[Mapping[str, Gain]], seed: int, episodes: int
+    name: str,
+    cfg: SwarmConfig,
+    points: Sequence[Mapping[str, Gain]],
+    seed: int,
+    episodes: int,
+    progress: bool = False,
 ) -> tuple[int, dict[str, Any]]:
     """The index of the point with the highest mean return (ties: the earlier) and its
     scores, every point evaluated on the same ``episodes`` episodes of ``seed``."""
-    scores = _scores(name, cfg, points, seed, episodes)
+    scores = _scores(name, cfg, points, seed, episodes, progress)
     best = _ranked(scores)[0]
     return best, scores[best]
 
@@ -279,6 +308,7 @@ def tune_scenario(
     episodes: int,
     refinement: Refinement = Refinement(),
     selection: Selection | None = None,
+    progress: bool = False,
 ) -> dict[str, Any]:
     """Evaluate every point of ``grid`` on ``cfg``, score its best ones again
     (``selection``), refine the winner (``refinement``; module docstring); return the
@@ -287,16 +317,18 @@ def tune_scenario(
     evaluation of a point), with ``"grid_gains"``, ``"grid_return"`` and
     ``"refine_rounds"`` (the rounds that moved it) where the refinement ran, and
     ``"grid_episodes"`` and ``"selected_from"`` (the points scored again) where the
-    selection did."""
+    selection did. With ``progress``, a long evaluation prints a line on stdout every
+    :data:`PROGRESS_POINTS` points."""
     points = grid_points(grid)
     record: dict[str, Any] = {}
     if selection is None:
-        best, score = _best_of(name, cfg, points, seed, episodes)
+        best, score = _best_of(name, cfg, points, seed, episodes, progress)
         gains, evaluated = points[best], len(points)
     else:
-        finalists = [points[i] for i in _ranked(_scores(name, cfg, points, seed, episodes))]
+        ranked = _ranked(_scores(name, cfg, points, seed, episodes, progress))
+        finalists = [points[i] for i in ranked]
         finalists = finalists[: selection.top]
-        best, score = _best_of(name, cfg, finalists, seed, selection.episodes)
+        best, score = _best_of(name, cfg, finalists, seed, selection.episodes, progress)
         gains, evaluated = finalists[best], len(points) + len(finalists)
         record = {"grid_episodes": episodes, "selected_from": len(finalists)}
         episodes = selection.episodes
@@ -311,7 +343,7 @@ def tune_scenario(
             if not neighbours:
                 break
             evaluated += len(neighbours)
-            i, candidate = _best_of(name, cfg, neighbours, seed, episodes)
+            i, candidate = _best_of(name, cfg, neighbours, seed, episodes, progress)
             if not candidate["mean_return"] > score["mean_return"]:
                 break
             gains, score, moved = neighbours[i], candidate, moved + 1
@@ -386,7 +418,14 @@ def _main(args: argparse.Namespace) -> int:
                 f"{PROG}: {name} on {key}: {len(grid_points(grids[name]))} points ...", flush=True
             )
             record = tune_scenario(
-                name, cfg, grids[name], seed, episodes, refinement, selections.get(name)
+                name,
+                cfg,
+                grids[name],
+                seed,
+                episodes,
+                refinement,
+                selections.get(name),
+                progress=True,
             )
             tuned.setdefault(name, {})[key] = record
             refined = (
