@@ -345,9 +345,10 @@ def test_swarm_tune_writes_an_unmoved_winner_without_yaml_aliases(tmp_path, monk
     import train.tune_baselines as tb
 
     def scores(name, cfg, points, seed, episodes, progress=False):  # the grid's point wins
-        return 0, {"mean_return": 1.0 if len(points) == 1 else 0.0, "success_rate": 1.0}
+        value = 1.0 if len(points) == 1 else 0.0
+        return [{"mean_return": value, "success_rate": 1.0} for _ in points]
 
-    monkeypatch.setattr(tb, "_best_of", scores)
+    monkeypatch.setattr(tb, "_scores", scores)
     grids = tmp_path / "grids.yaml"
     grids.write_text(
         yaml.safe_dump({"grids": {"pd": {"k_p": [2.0], "k_d": [0.5]}}, "refine": {"rounds": 3}})

@@ -275,17 +275,9 @@ def _ranked(scores: Sequence[Mapping[str, Any]]) -> list[int]:
     return sorted(range(len(scores)), key=lambda i: (-scores[i]["mean_return"], i))
 
 
-def _best_of(
-    name: str,
-    cfg: SwarmConfig,
-    points: Sequence[Mapping[str, Gain]],
-    seed: int,
-    episodes: int,
-    progress: bool = False,
-) -> tuple[int, dict[str, Any]]:
+def _best(scores: Sequence[Mapping[str, Any]]) -> tuple[int, Mapping[str, Any]]:
     """The index of the point with the highest mean return (ties: the earlier) and its
-    scores, every point evaluated on the same ``episodes`` episodes of ``seed``."""
-    scores = _scores(name, cfg, points, seed, episodes, progress)
+    scores."""
     best = _ranked(scores)[0]
     return best, scores[best]
 
@@ -322,13 +314,13 @@ def tune_scenario(
     points = grid_points(grid)
     record: dict[str, Any] = {}
     if selection is None:
-        best, score = _best_of(name, cfg, points, seed, episodes, progress)
+        best, score = _best(_scores(name, cfg, points, seed, episodes, progress))
         gains, evaluated = points[best], len(points)
     else:
         ranked = _ranked(_scores(name, cfg, points, seed, episodes, progress))
         finalists = [points[i] for i in ranked]
         finalists = finalists[: selection.top]
-        best, score = _best_of(name, cfg, finalists, seed, selection.episodes, progress)
+        best, score = _best(_scores(name, cfg, finalists, seed, selection.episodes, progress))
         gains, evaluated = finalists[best], len(points) + len(finalists)
         record = {"grid_episodes": episodes, "selected_from": len(finalists)}
         episodes = selection.episodes
@@ -343,7 +335,7 @@ def tune_scenario(
             if not neighbours:
                 break
             evaluated += len(neighbours)
-            i, candidate = _best_of(name, cfg, neighbours, seed, episodes, progress)
+            i, candidate = _best(_scores(name, cfg, neighbours, seed, episodes, progress))
             if not candidate["mean_return"] > score["mean_return"]:
                 break
             gains, score, moved = neighbours[i], candidate, moved + 1
