@@ -318,8 +318,7 @@ def tune_scenario(
         gains, evaluated = points[best], len(points)
     else:
         ranked = _ranked(_scores(name, cfg, points, seed, episodes, progress))
-        finalists = [points[i] for i in ranked]
-        finalists = finalists[: selection.top]
+        finalists = [points[i] for i in ranked[: selection.top]]
         best, score = _best(_scores(name, cfg, finalists, seed, selection.episodes, progress))
         gains, evaluated = finalists[best], len(points) + len(finalists)
         record = {"grid_episodes": episodes, "selected_from": len(finalists)}
