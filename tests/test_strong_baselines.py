@@ -413,7 +413,7 @@ def test_swarm_tune_reports_progress_through_a_long_grid(tmp_path, capsys, monke
     lines = [ln for ln in capsys.readouterr().out.splitlines() if "points scored" in ln]
     # A line after every 2 points but the last chunk: 2 and 4 of the 5.
     assert [ln.split()[0] for ln in lines] == ["2/5", "4/5"]
-    assert all("on 1 episodes in" in ln and "s to go" in ln for ln in lines)
+    assert all("on 1 episode in" in ln and "s to go" in ln for ln in lines)
     assert yaml.safe_load(out.read_text())["baselines"]["pd"]["navigation/zone"]["points"] == 5
 
 

@@ -263,7 +263,8 @@ def _scores(
             spent = time.monotonic() - start
             left = spent * (len(points) - len(scores)) / len(scores)
             print(
-                f"  {len(scores)}/{len(points)} points scored on {episodes} episodes in "
+                f"  {len(scores)}/{len(points)} points scored on {episodes} "
+                f"episode{'' if episodes == 1 else 's'} in "
                 f"{spent:.0f} s; about {left:.0f} s to go",
                 flush=True,
             )
