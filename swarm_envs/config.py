@@ -125,7 +125,7 @@ def _warn_empty_slots(owner: str, n_agents: int, n_neighbors: int) -> None:
     warnings.warn(
         f"{owner}.n_neighbors={n_neighbors} with n_agents={n_agents}: each agent has "
         f"{n_agents - 1} other{'s' if n_agents != 2 else ''}, so {empty} of its {n_neighbors} "
-        "neighbour slots are always "
+        f"neighbour slots {'is' if empty == 1 else 'are'} always "
         f"empty (zero, mask 0). Set n_neighbors <= {max(n_agents - 1, 0)} for a compact "
         "observation, or keep it to share one observation layout with larger swarms",
         UserWarning,
