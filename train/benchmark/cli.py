@@ -42,6 +42,7 @@ from swarm_envs import tune_allocator
 from train.benchmark.matrix import DEFAULT_MATRIX, Matrix, load_matrix
 from train.benchmark.report import MEASURE_DOCS, write_results
 from train.benchmark.run import (
+    DEFAULT_EPISODES,
     DEFAULT_EVAL_SEED,
     Settings,
     entry_train_config,
@@ -57,7 +58,6 @@ DEFAULT_OUT = "runs/benchmark"
 QUICK_OUT = "runs/benchmark_quick"
 DEFAULT_SEEDS = (0, 1, 2)
 QUICK_SEEDS = (0, 1)
-DEFAULT_EPISODES = 100
 QUICK_EPISODES = 10
 
 

@@ -41,6 +41,7 @@ from train.evaluate.harness import best_baseline
 from train.evaluate.measures import finite
 
 __all__ = [
+    "DEFAULT_EPISODES",
     "DEFAULT_EVAL_SEED",
     "ModelRecord",
     "Settings",
@@ -55,6 +56,10 @@ __all__ = [
 
 #: Seed of the evaluation episodes unless ``--eval-seed`` says otherwise.
 DEFAULT_EVAL_SEED = 2026
+#: Evaluation episodes per policy unless ``--episodes`` says otherwise: enough that an
+#: effect carried by rare episodes (one stalled or lost in a hundred) is measured, not
+#: sampled once or twice.
+DEFAULT_EPISODES = 500
 
 Log = Callable[[str], None]
 
@@ -68,7 +73,7 @@ class Settings:
     """How the entries are run: seeds, episodes, evaluation seed, bootstrap."""
 
     seeds: tuple[int, ...] = (0, 1, 2)
-    episodes: int = 100
+    episodes: int = DEFAULT_EPISODES
     eval_seed: int = DEFAULT_EVAL_SEED
     quick: bool = False
     overwrite: bool = False
