@@ -234,7 +234,8 @@ START_FITS_NEEDED = 15
 def check_start_fits(cfg: SwarmConfig) -> None:
     """Refuse a Lagrangian config whose random starts rarely place the bins apart.
 
-    The Lagrangian model needs every pair of bins apart at the start (``R_ij > 0``);
+    The Lagrangian model needs every pair of bins apart at the start, by a small gap
+    (:func:`~swarm_envs.physics.lagrangian.well_separated`);
     a reset redraws a swarm's start up to ``MAX_START_DRAWS`` (1000) times, then raises.
     The config itself refuses a start radius at which the bins can never fit
     (:func:`swarm_envs.config.lagrangian_min_init_radius`); this check draws trial
@@ -248,7 +249,7 @@ def check_start_fits(cfg: SwarmConfig) -> None:
     if cfg.dynamics != "lagrangian" or cfg.n_agents < 2:
         return
     from swarm_envs.envs.dynamics import MAX_START_DRAWS
-    from swarm_envs.physics.lagrangian import pair_clearance
+    from swarm_envs.physics.lagrangian import well_separated
 
     n, d = cfg.n_agents, cfg.dim
     rng = np.random.default_rng(0)
@@ -265,7 +266,7 @@ def check_start_fits(cfg: SwarmConfig) -> None:
             )
         k = min(batch, cap, MAX_START_DRAWS - drawn)
         x = uniform_ball(rng, (k, n, d), cfg.init_radius)
-        fits += int((pair_clearance(x, cfg.lagrangian) > 0).all(axis=(-2, -1)).sum())
+        fits += int(well_separated(x, cfg.lagrangian).sum())
         drawn += k
         batch *= 4
 

@@ -53,7 +53,7 @@ from swarm_envs.physics.lagrangian import (
     lagrangian_frame,
     lagrangian_value,
     lagrangian_velocity,
-    pair_clearance,
+    well_separated,
 )
 from swarm_envs.physics.piecewise import interaction_forces, random_force
 from swarm_envs.physics.social_potential import (
@@ -463,8 +463,9 @@ class PiecewiseDynamics(Dynamics):
 class LagrangianDynamics(Dynamics):
     """Vanualailai & Sharma's first-order model ``ẋ = −α ∂L/∂x + u`` (eq. 7).
 
-    Starts are redrawn until no two bins overlap (all ``R_ij > 0``); the velocity is
-    the model's ``ẋ``. The substep length is carried per swarm between steps.
+    Starts are redrawn until every pair of bins is apart by a small gap
+    (:func:`~swarm_envs.physics.lagrangian.well_separated`: 2 % of their radii's sum);
+    the velocity is the model's ``ẋ``. The substep length is carried per swarm between steps.
     """
 
     def __init__(self, cfg: SwarmConfig, batch: int, dtype: np.dtype) -> None:
@@ -484,17 +485,17 @@ class LagrangianDynamics(Dynamics):
     ) -> None:
         cfg, p = self.cfg, self.cfg.lagrangian
         if cfg.n_agents > 1:
-            bad = idx[~(pair_clearance(x[idx], p) > 0).all(axis=(-2, -1))]
+            bad = idx[~well_separated(x[idx], p)]
             draws = 0
             while bad.size:
                 if draws == MAX_START_DRAWS:
                     raise ValueError(
-                        f"could not place {cfg.n_agents} agents with non-overlapping bins "
-                        f"(lagrangian.r) in a disc of init_radius={cfg.init_radius} after "
+                        f"could not place {cfg.n_agents} agents with their bins (lagrangian.r) "
+                        f"apart in a disc of init_radius={cfg.init_radius} after "
                         f"{MAX_START_DRAWS} draws; increase init_radius or reduce lagrangian.r"
                     )
                 x[bad] = uniform_ball(rng, (bad.size, cfg.n_agents, cfg.dim), cfg.init_radius)
-                bad = bad[~(pair_clearance(x[bad], p) > 0).all(axis=(-2, -1))]
+                bad = bad[~well_separated(x[bad], p)]
                 draws += 1
         v[idx] = lagrangian_velocity(x[idx], p, self._centre(goal[idx]))
         self._substep[idx] = cfg.dt

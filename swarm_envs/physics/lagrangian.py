@@ -64,6 +64,9 @@ GRADIENTS = ("seed", "exact")
 #: Per-substep floor on the pair clearance: a step is rejected if some pair would keep
 #: less than this fraction of its current ``R_ij`` (so ``R_ij`` stays ``> 0``).
 CLEARANCE_KEEP = 0.5
+#: The gap a start keeps between every pair of bins, as a fraction of their radii's sum:
+#: ``|x_i − x_j| ≥ (1 + START_GAP)(r_i + r_j)`` (:func:`well_separated`).
+START_GAP = 0.02
 #: Accepted substeps grow by this factor (capped by the frame length ``dt``).
 STEP_GROWTH = 1.5
 #: Below ``dt · MIN_STEP_FRACTION`` a substep is not attempted: the state is held (a
@@ -457,6 +460,32 @@ def simulate_lagrangian(
     return xs, vs
 
 
+def well_separated(x: np.ndarray, params: LagrangianParams, gap: float = START_GAP) -> np.ndarray:
+    """Whether every pair of ``x`` ``(..., N, d)`` is at least ``(1 + gap)(r_i + r_j)``
+    apart (and ``R_ij > 0``), shaped ``(...)``: a start the step rules can integrate.
+
+    Bins that nearly touch make ``R_ij`` nearly 0, and ``L`` and the velocity so large
+    that no substep above ``dt · MIN_STEP_FRACTION`` passes the step rules: the swarm
+    would be held where it starts. With ``gap = 0.02`` the pair needs
+    ``R_ij ≥ ½((1.02)² − 1)(r_i + r_j)²``; point bins (``r = 0``) only ``R_ij > 0``.
+
+    >>> p = LagrangianParams(r=0.05)
+    >>> bool(well_separated(np.array([[0.0, 0.0], [0.1001, 0.0]]), p))
+    False
+    >>> bool(well_separated(np.array([[0.0, 0.0], [0.103, 0.0]]), p))
+    True
+    """
+    if gap < 0:
+        raise ValueError(f"gap must be >= 0, got {gap}")
+    x, _ = check_state(x)
+    n = x.shape[-2]
+    if n < 2:
+        return np.ones(x.shape[:-2], dtype=bool)
+    arr, _, _, R_ij, _ = _terms(x, params, None)
+    need = 0.5 * ((1.0 + gap) ** 2 - 1.0) * arr["r_sum"] ** 2
+    return np.asarray(((R_ij > 0) & (R_ij >= need)).all(axis=(-2, -1)))
+
+
 def check_start_clearance(x: np.ndarray, params: LagrangianParams) -> None:
     """Raise :class:`ValueError` unless every pair clearance ``R_ij`` of ``x`` is ``> 0``."""
     if x.shape[-2] > 1:
@@ -617,6 +646,7 @@ def lagrangian_frame(
 
 __all__ = [
     "GRADIENTS",
+    "START_GAP",
     "LagrangianFrame",
     "LagrangianParams",
     "check_start_clearance",
@@ -628,4 +658,5 @@ __all__ = [
     "min_pair_clearance",
     "pair_clearance",
     "simulate_lagrangian",
+    "well_separated",
 ]
