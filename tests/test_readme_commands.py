@@ -43,7 +43,7 @@ NOT_RUN: dict[str, str] = {
     "pip install -e .[dev,benchmarl]": "installs packages (network)",
     "swarm-tune": "rewrites the shipped configs/baselines/tuned.yaml (about an hour); "
     "tests/test_strong_baselines.py runs it on a tiny grid into a temporary file",
-    "swarm-benchmark --baselines-only": "every baseline of the matrix on 500 episodes "
+    "swarm-benchmark --baselines-only": "every baseline of the matrix on 2,000 episodes "
     "(minutes); tests/test_strong_baselines.py runs it on two entries",
     "tensorboard --logdir runs/ppo/tensorboard": "a web server that runs until stopped; "
     "the tiny run checks that the folder it reads exists",

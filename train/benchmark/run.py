@@ -59,7 +59,7 @@ DEFAULT_EVAL_SEED = 2026
 #: Evaluation episodes per policy unless ``--episodes`` says otherwise: enough that an
 #: effect carried by rare episodes (one stalled or lost in a hundred) is measured, not
 #: sampled once or twice.
-DEFAULT_EPISODES = 500
+DEFAULT_EPISODES = 2000
 
 Log = Callable[[str], None]
 
