@@ -10,12 +10,14 @@ import pytest
 from swarm_envs.papers import vanualailai_sharma as vs_paper
 from swarm_envs.physics.lagrangian import (
     LagrangianParams,
+    lagrangian_frame,
     lagrangian_gradient,
     lagrangian_value,
     lagrangian_velocity,
     min_pair_clearance,
     pair_clearance,
     simulate_lagrangian,
+    well_separated,
 )
 
 
@@ -233,3 +235,19 @@ def test_reproduction_quick(tmp_path):
     assert res["fig1_exact_gradient"]["centroid_displacement"] < 1e-8
     loaded = json.loads((tmp_path / "vanualailai_sharma.json").read_text())
     assert loaded["fig3"]["paper"]["beta"] == 100.0
+
+
+@pytest.mark.parametrize("gap", [0.1001, 0.10001])
+def test_a_pair_of_bins_all_but_touching_is_flagged_not_held_silently(gap):
+    # Two bins (r = 0.05) a hair apart: rule 2 rejects every substep above dt·2⁻⁴⁰ when
+    # the gap is 0.01 % of r_i + r_j, and the frame must say so (over_cap) rather than
+    # hold the swarm as if at rest; at 0.1 % the frame integrates.
+    p = LagrangianParams.navigation()
+    x = np.array([[[0.0, 0.0], [gap, 0.0], [1.0, 1.0]]])
+    goal = np.array([[5.0, 0.0]])
+    control = np.ones_like(x) * 0.5
+    frame = lagrangian_frame(x, p, dt=0.1, goal=goal, control=control, max_substeps=1000)
+    held = bool((frame.x == x).all())
+    assert bool(frame.over_cap[0]) == held
+    assert held == (gap < 0.1001)
+    assert well_separated(x, p) == np.array([False])

@@ -501,7 +501,8 @@ class LagrangianFrame(NamedTuple):
     """One frame of :func:`lagrangian_frame`: the new positions ``x``, the velocity ``v``
     (``ẋ`` at ``x``, control included), the substep length to carry into the next frame,
     the accepted substeps per batch element (``substeps``, float) and where the frame
-    was cut short at ``max_substeps`` (``over_cap``, bool)."""
+    was cut short at ``max_substeps`` or held in a state the step rules cannot integrate
+    (``over_cap``, bool)."""
 
     x: np.ndarray
     v: np.ndarray
@@ -553,7 +554,9 @@ def lagrangian_frame(
             start at ``dt``).
         max_substeps: the most substeps a batch element may accept in this frame
             (``None``: no cap). An element that reaches it with time left stops there,
-            its state held, and is marked in ``over_cap``.
+            its state held, and is marked in ``over_cap``; so is one whose substep falls
+            below ``dt · MIN_STEP_FRACTION`` while rule 1 or 2 still rejects it (a state
+            the rules cannot integrate, not an equilibrium).
 
     Returns:
         A :class:`LagrangianFrame`.
@@ -613,6 +616,7 @@ def lagrangian_frame(
         dv = v_try - v[rows]
         err = 0.5 * h_try * np.sqrt(np.einsum("mik,mik->mi", dv, dv).max(axis=-1))
         ok &= err <= params.step_tol * np.sqrt(2.0 * np.maximum(min_clear, 0.0))
+        safe = ok.copy()  # rules 1 and 2: the substep can be integrated
         if exact:
             ok &= L_try <= L[rows]
         acc = rows[ok]
@@ -627,12 +631,16 @@ def lagrangian_frame(
         grown = np.where(h_try < h_old, h_old, np.minimum(h_try * STEP_GROWTH, dt))
         new_h = np.where(ok, grown, h_try * 0.5)
         stuck = ~ok & (new_h < h_min)
+        # Held while rule 1 or 2 still rejects the shortest substep: no equilibrium, a
+        # state the rules cannot integrate (bins all but touching). Marked, not silent.
+        over_cap[rows[stuck & ~safe]] = True
         if exact:
-            # Predicted decrease h Σ α (∂L/∂x)² lost in L's round-off: hold the state.
+            # Predicted decrease h Σ α (∂L/∂x)² lost in L's round-off: hold the state
+            # (only where rule 3 alone rejects the substep).
             v_rows = v[rows]
             drop = h_try * np.einsum("mik,mik->m", v_rows, v_rows / alpha)
             eps = np.finfo(x.dtype).eps
-            stuck |= ~ok & (drop <= ROUNDOFF_HOLD * eps * np.abs(L[rows]))
+            stuck |= ~ok & safe & (drop <= ROUNDOFF_HOLD * eps * np.abs(L[rows]))
         remaining[rows[stuck]] = 0.0
         h[rows] = np.where(stuck, np.maximum(h_try, h_min), new_h)
     return LagrangianFrame(
