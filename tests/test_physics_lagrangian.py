@@ -251,3 +251,13 @@ def test_a_pair_of_bins_all_but_touching_is_flagged_not_held_silently(gap):
     assert bool(frame.over_cap[0]) == held
     assert held == (gap < 0.1001)
     assert well_separated(x, p) == np.array([False])
+
+
+def test_simulate_refuses_a_frame_it_cannot_integrate():
+    p = LagrangianParams.navigation()
+    x0 = np.array([[0.0, 0.0], [0.100003, 0.0], [1.0, 1.0]])  # 0.003 % from touching
+    with pytest.raises(RuntimeError, match="frame 1 cannot be integrated"):
+        simulate_lagrangian(p, x0, np.zeros_like(x0), dt=0.1, steps=3)
+    x0[1, 0] = 0.103  # well separated: it runs
+    xs, _ = simulate_lagrangian(p, x0, np.zeros_like(x0), dt=0.1, steps=3)
+    assert xs.shape == (4, 3, 2)

@@ -414,11 +414,13 @@ def simulate_lagrangian(
 
     A rejected substep is halved; an accepted one lets the next grow by
     :data:`STEP_GROWTH` (capped at ``dt``). If the substep falls below
-    ``dt · MIN_STEP_FRACTION`` the state is held for the rest of the frame (a
-    numerical equilibrium where round-off decides the sign of ``ΔL``); for the exact
-    gradient the same happens once the predicted decrease ``h Σ α (∂L/∂x)²`` is below
-    :data:`ROUNDOFF_HOLD` ulps of ``L``. Batch elements
-    choose their substeps independently, so a batch equals its elements run one by one.
+    ``dt · MIN_STEP_FRACTION`` while only rule 3 rejects it, the state is held for the
+    rest of the frame (a numerical equilibrium where round-off decides the sign of
+    ``ΔL``); for the exact gradient the same happens once the predicted decrease
+    ``h Σ α (∂L/∂x)²`` is below :data:`ROUNDOFF_HOLD` ulps of ``L``. Where rule 1 or 2
+    still rejects it, the state cannot be integrated and ``RuntimeError`` is raised.
+    Batch elements choose their substeps independently, so a batch equals its elements
+    run one by one.
 
     Args:
         params: model parameters (``params.gradient`` picks eq. 6 or ``∇L``).
@@ -434,6 +436,8 @@ def simulate_lagrangian(
 
     Raises:
         ValueError: bad ``dt``/``steps``, shapes, or a start with some ``R_ij ≤ 0``.
+        RuntimeError: a frame the step rules cannot integrate (bins all but touching:
+            rule 1 or 2 rejects even a substep of ``dt · MIN_STEP_FRACTION``).
 
     >>> x0 = np.array([[-3.0, 0.0], [3.0, 0.0], [0.0, 4.0]])
     >>> p = LagrangianParams(gamma=1.0, beta=1.0, r=0.5, gradient="exact")
@@ -455,7 +459,15 @@ def simulate_lagrangian(
     xs[0], vs[0] = x, v
     h = None
     for k in range(1, steps + 1):
-        x, v, h = lagrangian_step(x, params, dt=dt, goal=goal_arr, substep=h)
+        frame = lagrangian_frame(x, params, dt=dt, goal=goal_arr, substep=h)
+        if frame.over_cap.any():  # no cap here: a state the step rules cannot integrate
+            raise RuntimeError(
+                f"simulate_lagrangian: frame {k} cannot be integrated: a pair of bins is "
+                f"all but touching (min R_ij = {float(min_pair_clearance(x, params).min()):.3g}), "
+                "so no substep above dt·2^-40 keeps the step rules; start the bins further "
+                "apart (well_separated) or use smaller lagrangian r"
+            )
+        x, v, h = frame.x, frame.v, frame.substep
         xs[k], vs[k] = x, v
     return xs, vs
 
