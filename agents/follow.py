@@ -39,7 +39,8 @@ on it.
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Mapping
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -47,7 +48,22 @@ from agents.pd import SaturatedPDController, saturate
 from swarm_envs.envs.task.observation import block_size, own_size
 from swarm_envs.physics._validation import check_real
 
-__all__ = ["InformedFollowerController"]
+__all__ = ["SCHEDULED_GAINS", "InformedFollowerController", "NeighbourView"]
+
+#: The gains of :class:`InformedFollowerController` a learned gain schedule may set per
+#: agent (:meth:`InformedFollowerController.actions_with_gains`).
+SCHEDULED_GAINS = ("k_p", "k_d", "k_l", "k_v", "k_c", "tether", "lead", "flock_lead")
+
+
+class NeighbourView(NamedTuple):
+    """Each agent's neighbours as :class:`InformedFollowerController` reads them: offsets
+    and relative velocities ``(n, k, d)``, and ``(n, k)`` weights: 1 for a real neighbour
+    (``real``), 1 for a real informed one (``informed``), else 0."""
+
+    offset: np.ndarray
+    rel_velocity: np.ndarray
+    real: np.ndarray
+    informed: np.ndarray
 
 
 class InformedFollowerController(SaturatedPDController):
@@ -145,43 +161,74 @@ class InformedFollowerController(SaturatedPDController):
             f"saturation={self.saturation!r})"
         )
 
-    def _actions(self, obs: np.ndarray, deterministic: bool) -> np.ndarray:
+    def gains(self) -> dict[str, float]:
+        """The gains a gain schedule may vary per agent (:data:`SCHEDULED_GAINS`), as
+        this controller holds them."""
+        return {name: float(getattr(self, name)) for name in SCHEDULED_GAINS}
+
+    def neighbour_view(self, obs: np.ndarray) -> NeighbourView:
+        """What the controller reads of each agent's neighbours in per-agent observations
+        ``(n, obs_dim)`` (float64, world units)."""
         d, k = self.dim, self.cfg.n_neighbors
-        informed = obs[:, 2 * d] > 0.5
         blocks = obs[:, own_size(self.cfg) :].reshape(len(obs), k, block_size(self.cfg))
-        offset = blocks[..., :d] * self.obs_neighbor_scale
-        rel_velocity = blocks[..., d : 2 * d] * self.obs_velocity_scale
         real = blocks[..., 2 * d]
-        told = blocks[..., -1] * real
+        return NeighbourView(
+            offset=blocks[..., :d] * self.obs_neighbor_scale,
+            rel_velocity=blocks[..., d : 2 * d] * self.obs_velocity_scale,
+            real=real,
+            informed=blocks[..., -1] * real,
+        )
+
+    def _actions(self, obs: np.ndarray, deterministic: bool) -> np.ndarray:
+        return self.actions_with_gains(obs, {})
+
+    def actions_with_gains(self, obs: np.ndarray, gains: Mapping[str, Any]) -> np.ndarray:
+        """Actions ``(n, d)`` for per-agent observations ``(n, obs_dim)`` with ``gains``
+        in place of the controller's own: each of :data:`SCHEDULED_GAINS` a number or a
+        column ``(n, 1)``, one value per agent (a learned gain schedule,
+        :mod:`train.gain_schedule`); a gain not given is the controller's."""
+        unknown = sorted(set(gains) - set(SCHEDULED_GAINS))
+        if unknown:
+            raise ValueError(
+                f"unknown gains {unknown}; a schedule may set {', '.join(SCHEDULED_GAINS)}"
+            )
+        g = {**self.gains(), **gains}
+        d = self.dim
+        informed = obs[:, 2 * d] > 0.5
+        view = self.neighbour_view(obs)
+        offset, rel_velocity, real, told = view.offset, view.rel_velocity, view.real, view.informed
         # Informed neighbours where there are any, else every real neighbour.
         weight = np.where(told.sum(axis=1, keepdims=True) > 0, told, real)
         count = np.maximum(weight.sum(axis=1, keepdims=True), 1.0)
         mean_velocity = np.einsum("nk,nkd->nd", weight, rel_velocity) / count
         mean_offset = np.einsum("nk,nkd->nd", weight, offset) / count
-        if self.lead > 0 or self.flock_lead > 0:
+        if np.any(g["lead"] > 0) or np.any(g["flock_lead"] > 0):
             # A point ahead of the neighbours followed (the informed ones where there are
             # any: lead; else all: flock_lead), along their mean velocity.
             heading = mean_velocity + obs[:, d : 2 * d] * self.obs_velocity_scale
             speed = np.sqrt(np.einsum("nd,nd->n", heading, heading))[:, None]
             ahead = told.sum(axis=1, keepdims=True) > 0
-            length = np.where(ahead, self.lead, self.flock_lead)
+            length = np.where(ahead, g["lead"], g["flock_lead"])
             scale = np.where(speed > 0, length / np.where(speed > 0, speed, 1.0), 0.0)
             mean_offset = mean_offset + scale * heading
         followers = saturate(
-            (self.k_v * mean_velocity + self.k_c * mean_offset) / self.u_max, self.saturation
+            (g["k_v"] * mean_velocity + g["k_c"] * mean_offset) / self.u_max, self.saturation
         )
         # The leaders' PD law, with the tether to all their real neighbours.
         pd = self.command(
-            obs[:, :d] * self.obs_goal_scale, obs[:, d : 2 * d] * self.obs_velocity_scale
+            obs[:, :d] * self.obs_goal_scale,
+            obs[:, d : 2 * d] * self.obs_velocity_scale,
+            g["k_p"],
+            g["k_d"],
         )
         if self.goal_pull == "saturated":
             pd = self.u_max * saturate(pd / self.u_max, self.saturation)
-        if self.k_l > 0:
+        if np.any(g["k_l"] > 0):
             flock = np.einsum("nk,nkd->nd", real, offset) / np.maximum(
                 real.sum(axis=1, keepdims=True), 1.0
             )
             length = np.sqrt(np.einsum("nd,nd->n", flock, flock))[:, None]
-            stretch = np.maximum(length - self.tether, 0.0) / np.where(length > 0, length, 1.0)
-            pd = pd + self.k_l * stretch * flock
+            stretch = np.maximum(length - g["tether"], 0.0) / np.where(length > 0, length, 1.0)
+            pd = pd + g["k_l"] * stretch * flock
         leaders = saturate(pd / self.u_max, self.saturation)
         return np.where(informed[:, None], leaders, followers)

@@ -116,11 +116,21 @@ class SaturatedPDController(Controller):
             )
         return saturate(self.command(offset, velocity) / self.u_max, self.saturation)
 
-    def command(self, offset: np.ndarray, velocity: np.ndarray) -> np.ndarray:
+    def command(
+        self,
+        offset: np.ndarray,
+        velocity: np.ndarray,
+        k_p: float | np.ndarray | None = None,
+        k_d: float | np.ndarray | None = None,
+    ) -> np.ndarray:
         """The PD law before its saturation, ``k_p (r_g − r_i) − k_d v_i`` (control
-        units, float64), for goal offsets and velocities shaped alike ``(..., d)``."""
+        units, float64), for goal offsets and velocities shaped alike ``(..., d)``; with
+        ``k_p``, ``k_d`` (numbers or arrays that broadcast, e.g. one per agent) in place
+        of the controller's own."""
+        k_p = self.k_p if k_p is None else k_p
+        k_d = self.k_d if k_d is None else k_d
         offset = np.asarray(offset, dtype=np.float64)
-        return self.k_p * offset - self.k_d * np.asarray(velocity, dtype=np.float64)
+        return k_p * offset - k_d * np.asarray(velocity, dtype=np.float64)
 
     def _actions(self, obs: np.ndarray, deterministic: bool) -> np.ndarray:
         d = self.dim

@@ -48,6 +48,10 @@ RESUME_KEYS = ("total_timesteps", "checkpoint_freq", "checkpoint_seconds", "chec
 #: Largest seed numpy's seeding accepts.
 MAX_SEED = 2**32 - 1
 MODES = ("shared", "central")
+
+#: What a residual policy corrects (``TrainConfig.residual_corrects``).
+RESIDUAL_CORRECTS = ("action", "gains")
+
 #: torch CPU threads of training and evaluation unless a config or flag says otherwise.
 DEFAULT_TORCH_THREADS = 1
 #: SB3 constructor arguments that the trainer sets itself (not allowed in ``hyperparams``).
@@ -168,6 +172,11 @@ class TrainConfig(RunConfig):
     """With ``residual``: timesteps at the start during which only the value function
     learns (:class:`train.residual.CriticWarmup`); the policy stays the baseline's. An
     actor-critic algorithm's (PPO); refused with SAC, whose critics are Q-functions."""
+    residual_corrects: str = "action"
+    """With ``residual``: what the policy corrects. ``action``: the baseline's action
+    (above); ``gains``: the baseline's gains, per agent, by a learned linear schedule of
+    a few features of its observation (:mod:`train.gain_schedule`; ``algo: ES``, a
+    baseline with a schedule, ``residual_scale`` 1)."""
     eval_freq: int = 0
     """Evaluate against the analytic controller every this many timesteps (0 = never)."""
     eval_episodes: int = 10
@@ -268,6 +277,7 @@ class TrainConfig(RunConfig):
                 f"residual_scale = {self.residual_scale} scales a residual policy's "
                 "correction; set residual to a baseline or leave residual_scale at 1"
             )
+        self._check_residual_corrects()
         self._check_env()  # a typo in the env part fails before any training starts
         if self.algo == ES:
             from train.es import check_es_hyperparams
@@ -288,6 +298,35 @@ class TrainConfig(RunConfig):
                     f"hyperparams.{key} is not a {self.algo} argument; "
                     f"allowed: {', '.join(sorted(allowed))}"
                 )
+
+    def _check_residual_corrects(self) -> None:
+        """``residual_corrects`` is one of :data:`RESIDUAL_CORRECTS`; ``gains`` needs a
+        ``residual`` with a gain schedule, ``algo: ES`` and ``residual_scale`` 1."""
+        if self.residual_corrects not in RESIDUAL_CORRECTS:
+            raise ValueError(
+                f"residual_corrects must be one of {', '.join(RESIDUAL_CORRECTS)}, "
+                f"got {self.residual_corrects!r}"
+            )
+        if self.residual_corrects == "action":
+            return
+        if self.residual is None:
+            raise ValueError(
+                "residual_corrects: gains schedules a baseline's gains; name the baseline "
+                "in residual"
+            )
+        if self.algo != ES:
+            raise ValueError(
+                f"residual_corrects: gains is trained by evolution strategies (algo ES), "
+                f"got algo {self.algo!r}"
+            )
+        if self.residual_scale != 1.0:
+            raise ValueError(
+                f"residual_scale = {self.residual_scale} scales an action correction; a "
+                "gain schedule has none: leave residual_scale at 1"
+            )
+        from train.gain_schedule import schedule_of
+
+        schedule_of(self.residual)
 
     def _check_encoder(self) -> None:
         """``encoder`` is null or one of :data:`train.encoders.ENCODERS`, with a shared

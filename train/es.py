@@ -19,6 +19,10 @@ every action, ES improves the return of the policy that is evaluated, the noise-
 mean: a residual policy (``residual: <baseline>``) starts at its baseline's return
 (the action layer starts near zero) and moves only where the deterministic return
 rises. ``total_timesteps`` counts the agent-steps every candidate's episodes took.
+With ``residual_corrects: gains``, ``θ`` is a gain schedule's weights instead
+(:mod:`train.gain_schedule`: the baseline acts with gains that depend on each agent's
+observation; zeros at the start, the baseline itself), recorded in the model's residual
+record; the PPO model's actor then stays untrained.
 
 A run writes what an SB3 run writes (:mod:`train.train`): ``model.zip`` is a PPO model
 whose actor holds ``θ`` (its value function is untrained; its log standard deviation
@@ -40,7 +44,7 @@ import time
 from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -110,6 +114,20 @@ def check_es_hyperparams(hyperparams: Mapping[str, Any]) -> dict[str, float | in
     if out["weight_decay"] < 0:
         raise ValueError(f"hyperparams.weight_decay must be >= 0, got {out['weight_decay']!r}")
     return out
+
+
+class Actor(Protocol):
+    """What ES trains: a flat parameter vector ``θ`` of ``size`` entries, and the
+    deterministic actions of many such vectors at once (:class:`ActorParameters`, an
+    SB3 actor; :class:`train.gain_schedule.ScheduleActor`, a gain schedule)."""
+
+    size: int
+
+    def flat(self) -> np.ndarray: ...
+
+    def load(self, theta: np.ndarray) -> None: ...
+
+    def actions(self, thetas: np.ndarray, obs: np.ndarray) -> np.ndarray: ...
 
 
 class ActorParameters:
@@ -183,7 +201,7 @@ class Rollouts:
     def __init__(
         self,
         cfg: Any,
-        actor: ActorParameters,
+        actor: Actor,
         baseline: Any,
         candidates: int,
         episodes: int,
@@ -302,7 +320,13 @@ def policy_model(tc: Any) -> Any:
     one-swarm training env (only its spaces are used)."""
     from train.train import build_model, make_training_env
 
-    small = replace(tc, n_swarms=1, algo="PPO", hyperparams={"n_steps": 2, "batch_size": 2})
+    small = replace(
+        tc,
+        n_swarms=1,
+        algo="PPO",
+        hyperparams={"n_steps": 2, "batch_size": 2},
+        residual_corrects="action",  # the model only carries a gain schedule's record
+    )
     venv = make_training_env(small)
     model = build_model(small, venv)
     return model
@@ -332,6 +356,7 @@ def train_es(
         write_atomic,
         write_checkpoint,
     )
+    from train.gain_schedule import ScheduleActor
     from train.interrupt import TrainingInterrupted, stop_on_signals
     from train.residual import RESIDUAL, make_baseline
     from train.train import PROGRESS_LINE_SECONDS, run_meta
@@ -340,7 +365,15 @@ def train_es(
     ckpt = latest_checkpoint(out) if resume else None
     # A resumed run keeps the baseline gains its model recorded, as SB3's runs do.
     model = policy_model(tc) if ckpt is None else PPO.load(ckpt / "model.zip", device=tc.device)
-    actor = ActorParameters(model.policy)
+    record = getattr(model, RESIDUAL, None) or {}
+    baseline = make_baseline(tc.residual, cfg, record["gains"]) if tc.residual else None
+    actor: Actor
+    if tc.residual_corrects == "gains":
+        assert tc.residual is not None  # TrainConfig checked
+        # The schedule acts as the baseline with scheduled gains: no action to add.
+        actor, baseline = ScheduleActor(model, baseline, tc.residual), None
+    else:
+        actor = ActorParameters(model.policy)
     hyper = check_es_hyperparams(tc.hyperparams)
     es = EvolutionStrategy(actor.flat(), hyper, tc.seed)
     timesteps, seconds_before = 0, 0.0
@@ -351,8 +384,6 @@ def train_es(
         es.restore(ckpt / STATE_FILE, state["es"])
         timesteps, seconds_before = int(state["timesteps"]), float(state["train_seconds"])
         history.extend(state.get("history", []))
-    record = getattr(model, RESIDUAL, None) or {}
-    baseline = make_baseline(tc.residual, cfg, record["gains"]) if tc.residual else None
     P = int(hyper["population"])
     rollouts = Rollouts(cfg, actor, baseline, P + 1, tc.n_swarms, record.get("scale", 1.0))
     clock = time.perf_counter()

@@ -220,9 +220,10 @@ class CriticWarmup(BaseCallback):
 def as_policy(model: Any) -> Any:
     """``model`` as the policy it acts as: a :class:`ResidualPolicy` for a model that
     records a baseline (:data:`RESIDUAL`; a record without a scale is a correction at
-    scale 1), the model itself otherwise. A :class:`ResidualPolicy` is returned as it
-    is: it already acts as its baseline plus its correction (wrapping it again would
-    add the baseline twice)."""
+    scale 1), a :class:`~train.gain_schedule.GainScheduledPolicy` for one that records
+    a gain schedule, the model itself otherwise. A :class:`ResidualPolicy` is returned
+    as it is: it already acts as its baseline plus its correction (wrapping it again
+    would add the baseline twice)."""
     if isinstance(model, ResidualPolicy):
         return model
     record = getattr(model, RESIDUAL, None)
@@ -234,4 +235,8 @@ def as_policy(model: Any) -> Any:
     trained = getattr(model, TRAINED_ENV, None) or {}
     cfg = load_swarm_config(None, dict(trained.get("env_config") or {}))
     baseline = make_baseline(record["baseline"], cfg, record.get("gains"))
+    if "schedule" in record:  # a gain schedule (residual_corrects: gains)
+        from train.gain_schedule import GainScheduledPolicy
+
+        return GainScheduledPolicy(model, baseline, record["baseline"], record["schedule"])
     return ResidualPolicy(model, baseline, record.get("scale", 1.0))
