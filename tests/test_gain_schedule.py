@@ -180,3 +180,21 @@ def test_es_trains_a_schedule_that_loads_as_the_policy_it_trained(tmp_path):
     np.testing.assert_allclose(b.predict(obs.astype(np.float32))[0], expected, atol=1e-6)
     result = run_episodes(b, cfg, 3, 0, record_episode=False)
     assert np.all(np.isfinite(result.returns))
+
+
+def test_rollouts_skip_ended_episodes_without_changing_any_return():
+    """A row-wise actor (the schedule's) is no longer observed or run for swarms whose
+    episodes ended; the candidates' returns and agent-steps are bit for bit those of the
+    full batch."""
+    from train.es import Rollouts, policy_model
+    from train.gain_schedule import ScheduleActor
+
+    tc = schedule_config(env={"task": "informed", **SMALL_ENV, "max_steps": 60})
+    cfg = tc.swarm_config()
+    actor = ScheduleActor(policy_model(tc), make_controller("follow", cfg), "follow")
+    thetas = np.random.default_rng(5).normal(0, 0.5, (3, actor.size))
+    skipping = Rollouts(cfg, actor, None, candidates=3, episodes=6).returns(thetas, (4, 0))
+    actor.rowwise = False  # every swarm observed and acted for until the last one ends
+    full = Rollouts(cfg, actor, None, candidates=3, episodes=6).returns(thetas, (4, 0))
+    assert skipping[1] == full[1]
+    assert skipping[0].tobytes() == full[0].tobytes()

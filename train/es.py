@@ -122,6 +122,10 @@ class Actor(Protocol):
     SB3 actor; :class:`train.gain_schedule.ScheduleActor`, a gain schedule)."""
 
     size: int
+    #: Whether each row's action is computed alone, bit for bit the same whatever rows
+    #: come with it: then a generation's swarms whose episodes ended are no longer
+    #: observed or acted for (an SB3 actor's batched matrix products are not).
+    rowwise: bool
 
     def flat(self) -> np.ndarray: ...
 
@@ -148,6 +152,7 @@ class ActorParameters:
                 raise ValueError(
                     f"ES trains actors of linear layers and tanh; the policy has {module!r}"
                 )
+        self.rowwise = False  # batched matrix products: a row's sums depend on the batch
         self.layers = [*hidden, policy.action_net]
         self.shapes = [(m.in_features, m.out_features) for m in self.layers]
         self.size = sum(i * o + o for i, o in self.shapes)
@@ -222,8 +227,6 @@ class Rollouts:
         taken (every candidate's swarms until their episodes ended). Every block's starts
         come from ``numpy.random.default_rng(SeedSequence(entropy))``: a tuple, so that
         no generation meets the episodes of an integer seed (an evaluation's)."""
-        from train.residual import apply_correction
-
         core, P, M = self.core, self.candidates, self.episodes
         if thetas.shape[0] != P:
             raise ValueError(f"expected {P} parameter vectors, got {thetas.shape[0]}")
@@ -236,13 +239,11 @@ class Rollouts:
         done = np.zeros(B, bool)
         agent_steps = 0
         for _ in range(self.cfg.max_steps):
-            obs = np.asarray(core.observe())
-            od = obs.shape[-1]
-            action = self.actor.actions(thetas, obs.reshape(P, M * N, od)).reshape(B * N, -1)
-            if self.baseline is not None:
-                base, _ = self.baseline.predict(obs.reshape(B * N, od))
-                action = apply_correction(base, action, self.scale)
-            reward, terminated, truncated, _ = core.step(action.reshape(B, N, -1))
+            # With a row-wise actor, the swarms whose episodes ended step on with zero
+            # actions, unobserved; their steps are not counted either way.
+            which = ~done if self.actor.rowwise and done.any() else None
+            action = self._actions(thetas, np.asarray(core.observe(which)), which)
+            reward, terminated, truncated, _ = core.step(action)
             live = ~done
             total[live] += reward[live]
             agent_steps += int(live.sum()) * N
@@ -250,6 +251,37 @@ class Rollouts:
             if done.all():
                 break
         return total.reshape(P, M).mean(axis=1), agent_steps
+
+    def _actions(self, thetas: np.ndarray, obs: np.ndarray, which: np.ndarray | None) -> np.ndarray:
+        """The actions ``(B, N, d)`` for the observations ``obs`` of the swarms ``which``
+        (bool ``(B,)``; ``None``: all), each from its candidate's parameters (and the
+        baseline), zero for the other swarms: an episode that has ended costs no
+        observation and no forward pass while the others finish."""
+        from train.residual import apply_correction
+
+        P, M, N = self.candidates, self.episodes, self.cfg.n_agents
+        od = obs.shape[-1]
+        if which is None:
+            action = self.actor.actions(thetas, obs.reshape(P, M * N, od)).reshape(P * M, N, -1)
+        else:
+            idx = np.flatnonzero(which)
+            candidate = idx // M
+            action = np.zeros((P * M, N, self.cfg.dim), np.float32)
+            for k in np.unique(candidate):
+                mine = candidate == k
+                rows = obs[mine].reshape(1, -1, od)
+                action[idx[mine]] = self.actor.actions(thetas[k : k + 1], rows).reshape(
+                    -1, N, self.cfg.dim
+                )
+        if self.baseline is not None:
+            base, _ = self.baseline.predict(obs.reshape(-1, od))
+            rows = action if which is None else action[which]
+            corrected = apply_correction(base, rows.reshape(base.shape), self.scale)
+            if which is None:
+                action = corrected.reshape(action.shape)
+            else:
+                action[which] = corrected.reshape(rows.shape)
+        return action
 
 
 def centred_ranks(values: np.ndarray) -> np.ndarray:

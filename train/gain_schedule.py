@@ -208,6 +208,7 @@ class ScheduleActor:
         self.name = name
         self.schedule = schedule_of(name)
         self.size = self.schedule.size
+        self.rowwise = True  # every feature, gain and action is computed row by row
         self._shape = (len(self.schedule.feature_names), len(self.schedule.gains))
 
     def flat(self) -> np.ndarray:
