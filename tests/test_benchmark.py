@@ -368,3 +368,55 @@ def test_an_entry_names_a_known_task_once():
         Entry(**entry(env={"task": "mill"}))
     informed = Entry(**entry(name="informed/zone", task="informed"))
     assert informed.train_config(seed=0).swarm_config().informed_fraction == 0.3
+
+
+# --------------------------------------------------------------------------- --jobs
+
+
+def test_parallel_training_gives_the_results_of_one_run_after_another(tmp_path, tiny, capsys):
+    base = ["--matrix", str(tiny["matrix"]), "--seeds", "0", "1", "--episodes", "3"]
+    base += ["--no-progress", "--resamples", "200"]
+    assert status([*base, "--out", str(tmp_path / "one")]) == 0
+    assert status([*base, "--out", str(tmp_path / "two"), "--jobs", "2"]) == 0
+    assert "training 2 runs, 2 at once" in capsys.readouterr().out
+    one = no_nan((tmp_path / "one" / "results.json").read_text())
+    two = no_nan((tmp_path / "two" / "results.json").read_text())
+    assert [m["action"] for m in two["entries"][0]["models"]] == ["trained", "trained"]
+    pairs = zip(one["entries"][0]["evaluations"], two["entries"][0]["evaluations"], strict=True)
+    for ea, eb in pairs:
+        ea.pop("eval_seconds"), eb.pop("eval_seconds")
+        assert ea == eb
+    assert status(["--jobs", "0", *base, "--out", str(tmp_path / "bad")]) == 2
+
+
+def test_a_signal_stops_parallel_training_which_resumes(tmp_path, tiny):
+    """SIGINT to the main process reaches each training process once: they save, the
+    benchmark exits with the signal's status, and running it again resumes them."""
+    import subprocess
+    import sys
+    import time
+
+    slow = {**TINY_TRAIN, "total_timesteps": 200 * 192}  # seconds: stopped before its end
+    tiny["train"].write_text(yaml.safe_dump(slow))
+    out = tmp_path / "bench"
+    argv = ["--matrix", str(tiny["matrix"]), "--out", str(out), "--seeds", "0", "1"]
+    argv += ["--episodes", "3", "--no-progress", "--resamples", "200", "--jobs", "2"]
+    code = "import sys; from train.benchmark.cli import main; sys.exit(main(sys.argv[1:]))"
+    proc = subprocess.Popen([sys.executable, "-c", code, *argv], stderr=subprocess.PIPE, text=True)
+    e = load_matrix(tiny["matrix"]).entries[0]
+    folders = [model_folder(out, e, seed) for seed in (0, 1)]
+    deadline = time.monotonic() + 120
+    while not all((f / "checkpoints").is_dir() for f in folders):
+        assert proc.poll() is None and time.monotonic() < deadline, "training did not start"
+        time.sleep(0.2)
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "stopped by SIGINT" in err and "run the same command again" in err
+    for f in folders:  # each saved once and stopped (a second signal would abort unsaved)
+        assert json.loads((f / "meta.json").read_text())["status"] == "interrupted"
+    assert status(argv) == 0  # again: both runs resume and finish
+    models = no_nan((out / "results.json").read_text())["entries"][0]["models"]
+    assert [m["action"] for m in models] == ["resumed", "resumed"]
+    assert [m["timesteps"] for m in models] == [200 * 192] * 2

@@ -112,6 +112,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=BOOTSTRAP_SEED,
         help=f"seed of the bootstrap (default {BOOTSTRAP_SEED})",
     )
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        help="training runs at once, each in a process of its own (default 1: one after "
+        "another); the evaluations follow",
+    )
     parser.add_argument("--no-progress", action="store_true", help="no training progress bars")
     parser.add_argument(
         "--baselines-only",
@@ -143,6 +150,8 @@ def settings_from_args(args: argparse.Namespace) -> Settings:
     if args.resamples < 1:
         raise CliError(f"--resamples must be an integer >= 1, got {args.resamples}")
     check_seed("--bootstrap-seed", args.bootstrap_seed)
+    if args.jobs < 1:
+        raise CliError(f"--jobs must be an integer >= 1, got {args.jobs}")
     return Settings(
         seeds=seeds,
         episodes=episodes,
@@ -154,6 +163,7 @@ def settings_from_args(args: argparse.Namespace) -> Settings:
         bootstrap_seed=args.bootstrap_seed,
         confidence=CONFIDENCE,
         baselines_only=args.baselines_only,
+        jobs=args.jobs,
     )
 
 
@@ -235,10 +245,20 @@ def _main(args: argparse.Namespace, argv: list[str]) -> int:
         f"{' (quick smoke run)' if s.quick else ''}; out = {out}"
     )
     try:
+        records = None
+        if s.jobs > 1 and not s.baselines_only:
+            from train.benchmark.parallel import train_in_parallel
+
+            records = train_in_parallel(
+                entries, s.seeds, out, jobs=s.jobs, quick=s.quick, overwrite=s.overwrite
+            )
         for entry in entries:
-            results["entries"].append(run_entry(entry, out, s))
+            mine = None if records is None else {k: records[entry.name, k] for k in s.seeds}
+            results["entries"].append(run_entry(entry, out, s, trained=mine))
             paths = write_results(results, out)
     except (TrainSetupError, OutDirError) as err:
+        return fail(PROG, err)
+    except RuntimeError as err:  # a training process failed (--jobs)
         return fail(PROG, err)
     except TrainingInterrupted as err:
         print(

@@ -2,7 +2,8 @@
 
 For each entry (:class:`~train.benchmark.matrix.Entry`) and training seed ``k`` the
 learned policy is trained into ``OUT/models/<entry>/seed<k>/`` with
-:func:`train.train.train`, one run after another in this process. A folder whose run
+:func:`train.train.train`, one run after another in this process (or several at once,
+each in a process of its own: :mod:`train.benchmark.parallel`). A folder whose run
 is ``completed`` with the same config is reused; one that was stopped (Ctrl-C, SIGTERM,
 a killed process) is resumed from its latest checkpoint; one whose config differs is
 refused unless ``overwrite`` retrains it. So a benchmark stopped at any point loses no
@@ -83,6 +84,9 @@ class Settings:
     confidence: float = CONFIDENCE
     baselines_only: bool = False
     """Evaluate the baselines only: nothing is trained, no learned policy is reported."""
+    jobs: int = 1
+    """Training runs at once, each in a process of its own (1: one after another, in
+    this process; :mod:`train.benchmark.parallel`)."""
 
     def to_dict(self) -> dict[str, Any]:
         out = {f.name: getattr(self, f.name) for f in fields(self)}
@@ -441,14 +445,24 @@ def model_folder(out: Path, entry: Entry, seed: int) -> Path:
     return out / "models" / Path(*entry.name.split("/")) / f"seed{seed}"
 
 
-def run_entry(entry: Entry, out: Path, s: Settings, log: Log = print) -> dict[str, Any]:
+def run_entry(
+    entry: Entry,
+    out: Path,
+    s: Settings,
+    log: Log = print,
+    trained: dict[int, ModelRecord] | None = None,
+) -> dict[str, Any]:
     """Train (or reuse) the models of every seed of ``entry``, evaluate them and its
-    baselines; the entry's results (see :mod:`train.benchmark.report`)."""
+    baselines; the entry's results (see :mod:`train.benchmark.report`). ``trained``:
+    the records of runs already trained for this entry, by seed (``--jobs``), used
+    instead of training here."""
     log(f"{entry.name}: task {entry.task}, dynamics {entry.dynamics}, train {entry.train}")
     configs = [entry_train_config(entry, seed, s.quick) for seed in s.seeds]
     models = (
         []
         if s.baselines_only
+        else [trained[seed] for seed in s.seeds]
+        if trained is not None
         else [
             train_seed(
                 tc,
