@@ -53,7 +53,7 @@ def test_zero_weights_are_the_baseline_exactly():
     obs = observations(cfg)
     ctrl = make_controller("follow", cfg)
     expected, _ = ctrl.predict(obs)
-    zero = np.zeros((len(SCHEDULE.feature_names), len(SCHEDULE.gains)))
+    zero = np.zeros(SCHEDULE.shape)
     np.testing.assert_array_equal(scheduled_actions(ctrl, SCHEDULE, zero, obs), expected)
 
 
@@ -83,9 +83,9 @@ def test_scheduled_gains_stay_within_a_factor_e_and_half_a_length():
     own = ctrl.gains()
     rng = np.random.default_rng(3)
     for scale in (0.1, 100.0):  # inside the clip, and far beyond it
-        w = rng.normal(0, scale, (len(SCHEDULE.feature_names), len(SCHEDULE.gains)))
+        w = rng.normal(0, scale, SCHEDULE.shape)
         gains = scheduled_gains(ctrl, SCHEDULE, w, obs)
-        assert set(gains) == set(SCHEDULE.gains)
+        assert set(gains) == set(SCHEDULE.gain_names)
         for name in SCHEDULE.scaled:
             assert np.all(gains[name] >= own[name] / np.e * (1 - 1e-12))
             assert np.all(gains[name] <= own[name] * np.e * (1 + 1e-12))
@@ -94,7 +94,7 @@ def test_scheduled_gains_stay_within_a_factor_e_and_half_a_length():
             assert np.all(np.abs(gains[name] - own[name]) <= LENGTH_SHIFT + 1e-12)
     # The bias row alone scales every agent's gain alike.
     bias = np.zeros_like(w)
-    bias[0, SCHEDULE.gains.index("k_v")] = 0.5
+    bias[0, SCHEDULE.gain_names.index("k_v")] = 0.5
     k_v = scheduled_gains(ctrl, SCHEDULE, bias, obs)["k_v"]
     np.testing.assert_allclose(k_v, own["k_v"] * np.exp(0.5))
 
@@ -111,7 +111,7 @@ def test_features_are_finite_and_one_row_per_agent():
 
 
 def test_a_record_from_another_schedule_is_refused():
-    w = np.zeros((len(SCHEDULE.feature_names), len(SCHEDULE.gains)))
+    w = np.zeros(SCHEDULE.shape)
     record = schedule_record("follow", w)
     np.testing.assert_array_equal(check_schedule_record(record, "follow"), w)
     with pytest.raises(ValueError, match="retrain"):
@@ -180,6 +180,8 @@ def test_es_trains_a_schedule_that_loads_as_the_policy_it_trained(tmp_path):
     np.testing.assert_allclose(b.predict(obs.astype(np.float32))[0], expected, atol=1e-6)
     result = run_episodes(b, cfg, 3, 0, record_episode=False)
     assert np.all(np.isfinite(result.returns))
+    with pytest.raises(ValueError, match="last axis"):
+        b.predict(obs[:, :-1].astype(np.float32))  # not an observation of its env
 
 
 def test_rollouts_skip_ended_episodes_without_changing_any_return():

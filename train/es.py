@@ -261,26 +261,18 @@ class Rollouts:
 
         P, M, N = self.candidates, self.episodes, self.cfg.n_agents
         od = obs.shape[-1]
-        if which is None:
-            action = self.actor.actions(thetas, obs.reshape(P, M * N, od)).reshape(P * M, N, -1)
-        else:
-            idx = np.flatnonzero(which)
-            candidate = idx // M
-            action = np.zeros((P * M, N, self.cfg.dim), np.float32)
-            for k in np.unique(candidate):
-                mine = candidate == k
-                rows = obs[mine].reshape(1, -1, od)
-                action[idx[mine]] = self.actor.actions(thetas[k : k + 1], rows).reshape(
-                    -1, N, self.cfg.dim
-                )
+        if which is None:  # block k of the swarms is candidate k's
+            rows = self.actor.actions(thetas, obs.reshape(P, M * N, od))
+        else:  # a row-wise actor: each observed swarm with its own candidate's vector
+            rows = self.actor.actions(thetas[np.flatnonzero(which) // M], obs)
+        rows = rows.reshape(len(obs), N, -1)  # (observed swarms, N, d)
         if self.baseline is not None:
             base, _ = self.baseline.predict(obs.reshape(-1, od))
-            rows = action if which is None else action[which]
-            corrected = apply_correction(base, rows.reshape(base.shape), self.scale)
-            if which is None:
-                action = corrected.reshape(action.shape)
-            else:
-                action[which] = corrected.reshape(rows.shape)
+            rows = apply_correction(base, rows.reshape(base.shape), self.scale).reshape(rows.shape)
+        if which is None:
+            return rows
+        action = np.zeros((P * M, N, rows.shape[-1]), np.float32)
+        action[which] = rows
         return action
 
 

@@ -92,14 +92,19 @@ class Schedule:
     feature_names: tuple[str, ...]
 
     @property
-    def gains(self) -> tuple[str, ...]:
+    def gain_names(self) -> tuple[str, ...]:
         """Every scheduled gain, in the order of ``W``'s columns."""
         return self.scaled + self.shifted
 
     @property
+    def shape(self) -> tuple[int, int]:
+        """The shape of ``W``: features × gains."""
+        return len(self.feature_names), len(self.gain_names)
+
+    @property
     def size(self) -> int:
-        """The entries of ``W``: features × gains."""
-        return len(self.feature_names) * len(self.gains)
+        """The entries of ``W``."""
+        return self.shape[0] * self.shape[1]
 
 
 #: The baselines a gain schedule can correct, by name (``agents.CONTROLLERS``).
@@ -144,7 +149,7 @@ def scheduled_gains(
     z = np.clip(np.einsum(per_agent, features, weights), -1.0, 1.0)
     own = baseline.gains()
     gains: dict[str, np.ndarray] = {}
-    for j, name in enumerate(schedule.gains):
+    for j, name in enumerate(schedule.gain_names):
         column = z[:, j : j + 1]
         if name in schedule.scaled:
             gains[name] = own[name] * np.exp(column)
@@ -169,17 +174,16 @@ def check_schedule_record(record: Any, name: str) -> np.ndarray:
     schedule = schedule_of(name)
     if not isinstance(record, Mapping) or "weights" not in record:
         raise ValueError(f"a gain schedule record holds weights, got {record!r}")
-    for key, today in (("features", schedule.feature_names), ("gains", schedule.gains)):
+    for key, today in (("features", schedule.feature_names), ("gains", schedule.gain_names)):
         if tuple(record.get(key, ())) != today:
             raise ValueError(
                 f"the model's gain schedule reads {key} {record.get(key)!r}; today's "
                 f"`{name}` schedule has {list(today)}: retrain it"
             )
     weights = np.asarray(record["weights"], np.float64)
-    if weights.shape != (len(schedule.feature_names), len(schedule.gains)):
+    if weights.shape != schedule.shape:
         raise ValueError(
-            f"the gain schedule's weights are shaped {weights.shape}, expected "
-            f"{(len(schedule.feature_names), len(schedule.gains))}"
+            f"the gain schedule's weights are shaped {weights.shape}, expected {schedule.shape}"
         )
     return weights
 
@@ -187,10 +191,10 @@ def check_schedule_record(record: Any, name: str) -> np.ndarray:
 def schedule_record(name: str, weights: np.ndarray) -> dict[str, Any]:
     """What a model records of its schedule (JSON-safe): features, gains, weights."""
     schedule = schedule_of(name)
-    w = np.asarray(weights, np.float64).reshape(len(schedule.feature_names), -1)
+    w = np.asarray(weights, np.float64).reshape(schedule.shape)
     return {
         "features": list(schedule.feature_names),
-        "gains": list(schedule.gains),
+        "gains": list(schedule.gain_names),
         "weights": w.tolist(),
     }
 
@@ -209,7 +213,6 @@ class ScheduleActor:
         self.schedule = schedule_of(name)
         self.size = self.schedule.size
         self.rowwise = True  # every feature, gain and action is computed row by row
-        self._shape = (len(self.schedule.feature_names), len(self.schedule.gains))
 
     def flat(self) -> np.ndarray:
         """The recorded ``W`` flattened (zeros: the baseline itself, before training)."""
@@ -232,7 +235,7 @@ class ScheduleActor:
         """Actions ``(P, n, d)`` (float32) of the ``P`` weight vectors ``thetas`` ``(P,
         size)`` for their observations ``(P, n, obs_dim)``."""
         P, n, od = obs.shape
-        weights = np.repeat(thetas.reshape(P, *self._shape), n, axis=0)
+        weights = np.repeat(thetas.reshape(P, *self.schedule.shape), n, axis=0)
         out = scheduled_actions(self.baseline, self.schedule, weights, obs.reshape(P * n, od))
         return out.reshape(P, n, -1).astype(np.float32)
 
@@ -254,6 +257,11 @@ class GainScheduledPolicy(ResidualPolicy):
         deterministic: bool = True,
     ) -> tuple[np.ndarray, Any]:
         obs = np.asarray(observation)
+        if obs.ndim == 0 or obs.shape[-1] != self.baseline.obs_dim:
+            raise ValueError(
+                f"observation has shape {obs.shape}; a gain-scheduled policy reads per-agent "
+                f"observations, last axis {self.baseline.obs_dim}"
+            )
         per_agent = obs.reshape(-1, obs.shape[-1])
         actions = scheduled_actions(self.baseline, self.schedule, self.weights, per_agent)
         return actions.astype(np.float32).reshape(*obs.shape[:-1], -1), state
