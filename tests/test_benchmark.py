@@ -373,19 +373,29 @@ def test_an_entry_names_a_known_task_once():
 # --------------------------------------------------------------------------- --jobs
 
 
-def test_parallel_training_gives_the_results_of_one_run_after_another(tmp_path, tiny, capsys):
+def test_parallel_training_gives_the_results_of_one_run_after_another(tmp_path, tiny, capfd):
+    """Two entries, each trained with two seeds and evaluated in processes of their
+    own: the same results, in the matrix's order, as everything in one process."""
+    matrix = yaml.safe_load(tiny["matrix"].read_text())
+    second = {**matrix["entries"][0], "name": "tiny/zone_n4", "env": {"n_agents": 4}}
+    second["evaluations"] = [{"label": "N4"}]
+    matrix["entries"].append(second)
+    tiny["matrix"].write_text(yaml.safe_dump(matrix))
     base = ["--matrix", str(tiny["matrix"]), "--seeds", "0", "1", "--episodes", "3"]
     base += ["--no-progress", "--resamples", "200"]
     assert status([*base, "--out", str(tmp_path / "one")]) == 0
     assert status([*base, "--out", str(tmp_path / "two"), "--jobs", "2"]) == 0
-    assert "training 2 runs, 2 at once" in capsys.readouterr().out
+    out = capfd.readouterr().out  # the processes' lines too
+    assert "training 4 runs and evaluating 2 entries, 2 at once" in out
+    assert "tiny/zone_n4 evaluation 'N4'" in out  # the evaluation's lines name their entry
     one = no_nan((tmp_path / "one" / "results.json").read_text())
     two = no_nan((tmp_path / "two" / "results.json").read_text())
-    assert [m["action"] for m in two["entries"][0]["models"]] == ["trained", "trained"]
-    pairs = zip(one["entries"][0]["evaluations"], two["entries"][0]["evaluations"], strict=True)
-    for ea, eb in pairs:
-        ea.pop("eval_seconds"), eb.pop("eval_seconds")
-        assert ea == eb
+    assert [e["name"] for e in two["entries"]] == ["tiny/zone", "tiny/zone_n4"]
+    for a, b in zip(one["entries"], two["entries"], strict=True):
+        assert [m["action"] for m in b["models"]] == ["trained", "trained"]
+        for ea, eb in zip(a["evaluations"], b["evaluations"], strict=True):
+            ea.pop("eval_seconds"), eb.pop("eval_seconds")
+            assert ea == eb
     assert status(["--jobs", "0", *base, "--out", str(tmp_path / "bad")]) == 2
 
 

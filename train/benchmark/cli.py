@@ -116,8 +116,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--jobs",
         type=int,
         default=1,
-        help="training runs at once, each in a process of its own (default 1: one after "
-        "another); the evaluations follow",
+        help="processes at once (default 1: everything in this process, one after "
+        "another): each training run, and each entry's evaluation once its runs are "
+        "trained, in a process of its own",
     )
     parser.add_argument("--no-progress", action="store_true", help="no training progress bars")
     parser.add_argument(
@@ -245,17 +246,19 @@ def _main(args: argparse.Namespace, argv: list[str]) -> int:
         f"{' (quick smoke run)' if s.quick else ''}; out = {out}"
     )
     try:
-        records = None
         if s.jobs > 1 and not s.baselines_only:
-            from train.benchmark.parallel import train_in_parallel
+            from train.benchmark.parallel import run_in_parallel
 
-            records = train_in_parallel(
-                entries, s.seeds, out, jobs=s.jobs, quick=s.quick, overwrite=s.overwrite
-            )
-        for entry in entries:
-            mine = None if records is None else {k: records[entry.name, k] for k in s.seeds}
-            results["entries"].append(run_entry(entry, out, s, trained=mine))
+            def written(done: list[dict[str, Any]]) -> None:
+                results["entries"] = done
+                write_results(results, out)
+
+            results["entries"] = run_in_parallel(entries, out, s, written=written)
             paths = write_results(results, out)
+        else:
+            for entry in entries:
+                results["entries"].append(run_entry(entry, out, s))
+                paths = write_results(results, out)
     except (TrainSetupError, OutDirError) as err:
         return fail(PROG, err)
     except RuntimeError as err:  # a training process failed (--jobs)

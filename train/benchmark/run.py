@@ -85,8 +85,9 @@ class Settings:
     baselines_only: bool = False
     """Evaluate the baselines only: nothing is trained, no learned policy is reported."""
     jobs: int = 1
-    """Training runs at once, each in a process of its own (1: one after another, in
-    this process; :mod:`train.benchmark.parallel`)."""
+    """Processes at once: each training run and each entry's evaluation in a process of
+    its own (1: everything in this process, one after another;
+    :mod:`train.benchmark.parallel`)."""
 
     def to_dict(self) -> dict[str, Any]:
         out = {f.name: getattr(self, f.name) for f in fields(self)}
