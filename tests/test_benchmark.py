@@ -67,8 +67,9 @@ def test_the_shipped_matrix_covers_every_task_and_dynamics():
         ("informed", "zone"),
         ("mill", "social_potential"),
     }
+    evaluated: dict[str, list[float]] = {}  # the informed task's fractions, per dynamics
     for e in m.entries:
-        assert e.name == f"{e.task}/{e.dynamics}"
+        assert e.name.split("_at_")[0] == f"{e.task}/{e.dynamics}"
         assert "analytic" in e.baselines
         tc = e.train_config(seed=2)
         cfg = tc.swarm_config()
@@ -76,9 +77,18 @@ def test_the_shipped_matrix_covers_every_task_and_dynamics():
         for evaluation in e.evaluations:
             ev = e.eval_config(evaluation, tc)
             assert ev.task == e.task and ev.dynamics == e.dynamics
-        if e.task == "informed":  # both fractions of the task's statement
+        if e.task == "informed":
             fractions = [e.eval_config(v, tc).informed_fraction for v in e.evaluations]
-            assert fractions == [0.1, 0.3]
+            evaluated.setdefault(e.dynamics, []).extend(fractions)
+            if "_at_" in e.name:  # a policy trained at the one fraction it is evaluated at
+                assert [cfg.informed_fraction] == fractions == [float(e.name.split("_at_")[1])]
+            else:  # trained on the task's mix of fractions
+                assert cfg.informed_fraction == (0.1, 0.3)
+    # both fractions of the task's statement, each in one row
+    assert {k: sorted(v) for k, v in evaluated.items()} == {
+        "social_potential": [0.1, 0.3],
+        "zone": [0.1, 0.3],
+    }
 
 
 def test_an_entry_with_evaluations_and_overrides():
