@@ -261,7 +261,7 @@ def _main(args: argparse.Namespace, argv: list[str]) -> int:
                 paths = write_results(results, out)
     except (TrainSetupError, OutDirError) as err:
         return fail(PROG, err)
-    except RuntimeError as err:  # a training process failed (--jobs)
+    except RuntimeError as err:  # a training or evaluation process failed (--jobs)
         return fail(PROG, err)
     except TrainingInterrupted as err:
         print(
