@@ -184,19 +184,33 @@ def test_es_trains_a_schedule_that_loads_as_the_policy_it_trained(tmp_path):
         b.predict(obs[:, :-1].astype(np.float32))  # not an observation of its env
 
 
-def test_rollouts_skip_ended_episodes_without_changing_any_return():
+def test_rollouts_skip_ended_episodes_without_changing_any_return(monkeypatch):
     """A row-wise actor (the schedule's) is no longer observed or run for swarms whose
-    episodes ended; the candidates' returns and agent-steps are bit for bit those of the
-    full batch."""
+    episodes ended, and the core shrinks to the live swarms once at most a quarter are
+    live; the candidates' returns and agent-steps are bit for bit those of the full
+    batch, generation after generation."""
+    from swarm_envs.envs.cores.numpy import SwarmNavCore
     from train.es import Rollouts, policy_model
     from train.gain_schedule import ScheduleActor
 
+    kept: list[int] = []
+    keep = SwarmNavCore.keep
+
+    def counting_keep(self: SwarmNavCore, rows: np.ndarray) -> None:
+        kept.append(len(rows))
+        keep(self, rows)
+
+    monkeypatch.setattr(SwarmNavCore, "keep", counting_keep)
     tc = schedule_config(env={"task": "informed", **SMALL_ENV, "max_steps": 60})
     cfg = tc.swarm_config()
     actor = ScheduleActor(policy_model(tc), make_controller("follow", cfg), "follow")
     thetas = np.random.default_rng(5).normal(0, 0.5, (3, actor.size))
-    skipping = Rollouts(cfg, actor, None, candidates=3, episodes=6).returns(thetas, (4, 0))
+    shrinking = Rollouts(cfg, actor, None, candidates=3, episodes=6)
+    skipping = [shrinking.returns(thetas, (4, g)) for g in range(2)]
+    assert kept and max(kept) <= 18 // 4  # it shrank (and again in the next generation)
     actor.rowwise = False  # every swarm observed and acted for until the last one ends
-    full = Rollouts(cfg, actor, None, candidates=3, episodes=6).returns(thetas, (4, 0))
-    assert skipping[1] == full[1]
-    assert skipping[0].tobytes() == full[0].tobytes()
+    full = Rollouts(cfg, actor, None, candidates=3, episodes=6)
+    for g, (returns, steps) in enumerate(skipping):
+        full_returns, full_steps = full.returns(thetas, (4, g))
+        assert steps == full_steps
+        assert returns.tobytes() == full_returns.tobytes()

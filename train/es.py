@@ -227,6 +227,8 @@ class Rollouts:
         taken (every candidate's swarms until their episodes ended). Every block's starts
         come from ``numpy.random.default_rng(SeedSequence(entropy))``: a tuple, so that
         no generation meets the episodes of an integer seed (an evaluation's)."""
+        from swarm_envs.envs.backends import make_core
+
         core, P, M = self.core, self.candidates, self.episodes
         if thetas.shape[0] != P:
             raise ValueError(f"expected {P} parameter vectors, got {thetas.shape[0]}")
@@ -238,42 +240,68 @@ class Rollouts:
         total = np.zeros(B)
         done = np.zeros(B, bool)
         agent_steps = 0
+        # A row-wise actor's rollouts shrink the core to the live swarms once at most a
+        # quarter of its rows are live (a stalled episode would keep every swarm
+        # stepping to max_steps): the same returns, bit for bit (SwarmNavCore.keep).
+        keeper = _row_keeper(core) if self.actor.rowwise else None
+        rows = np.arange(B)  # the swarm of each row of the core
         for _ in range(self.cfg.max_steps):
+            live = ~done[rows]
+            if keeper is not None and 4 * live.sum() <= len(rows):
+                keeper.keep(np.flatnonzero(live))
+                rows, live = rows[live], live[live]
             # With a row-wise actor, the swarms whose episodes ended step on with zero
             # actions, unobserved; their steps are not counted either way.
-            which = ~done if self.actor.rowwise and done.any() else None
-            action = self._actions(thetas, np.asarray(core.observe(which)), which)
+            which = live if self.actor.rowwise and not live.all() else None
+            obs = np.asarray(core.observe(which))
+            action = self._actions(thetas, obs, rows, which)
             reward, terminated, truncated, _ = core.step(action)
-            live = ~done
-            total[live] += reward[live]
+            total[rows[live]] += reward[live]
             agent_steps += int(live.sum()) * N
-            done |= terminated | truncated
+            done[rows] |= terminated | truncated
             if done.all():
                 break
+        if len(rows) < B:  # the next generation starts on a whole batch again
+            self.core = make_core(self.cfg, batch=B)
         return total.reshape(P, M).mean(axis=1), agent_steps
 
-    def _actions(self, thetas: np.ndarray, obs: np.ndarray, which: np.ndarray | None) -> np.ndarray:
-        """The actions ``(B, N, d)`` for the observations ``obs`` of the swarms ``which``
-        (bool ``(B,)``; ``None``: all), each from its candidate's parameters (and the
-        baseline), zero for the other swarms: an episode that has ended costs no
-        observation and no forward pass while the others finish."""
+    def _actions(
+        self, thetas: np.ndarray, obs: np.ndarray, rows: np.ndarray, which: np.ndarray | None
+    ) -> np.ndarray:
+        """The actions ``(R, N, d)`` for the core's ``R`` rows, whose swarms are ``rows``,
+        given the observations ``obs`` of the rows ``which`` (bool ``(R,)``; ``None``:
+        all, the whole batch): each from its candidate's parameters (and the baseline),
+        zero for the other rows: an episode that has ended costs no observation and no
+        forward pass while the others finish."""
         from train.residual import apply_correction
 
         P, M, N = self.candidates, self.episodes, self.cfg.n_agents
         od = obs.shape[-1]
-        if which is None:  # block k of the swarms is candidate k's
-            rows = self.actor.actions(thetas, obs.reshape(P, M * N, od))
+        if which is None and len(rows) == P * M:  # block k of the swarms is candidate k's
+            out = self.actor.actions(thetas, obs.reshape(P, M * N, od))
         else:  # a row-wise actor: each observed swarm with its own candidate's vector
-            rows = self.actor.actions(thetas[np.flatnonzero(which) // M], obs)
-        rows = rows.reshape(len(obs), N, -1)  # (observed swarms, N, d)
+            seen = rows if which is None else rows[which]
+            out = self.actor.actions(thetas[seen // M], obs)
+        out = out.reshape(len(obs), N, -1)  # (observed swarms, N, d)
         if self.baseline is not None:
             base, _ = self.baseline.predict(obs.reshape(-1, od))
-            rows = apply_correction(base, rows.reshape(base.shape), self.scale).reshape(rows.shape)
+            out = apply_correction(base, out.reshape(base.shape), self.scale).reshape(out.shape)
         if which is None:
-            return rows
-        action = np.zeros((P * M, N, rows.shape[-1]), np.float32)
-        action[which] = rows
+            return out
+        action = np.zeros((len(rows), N, out.shape[-1]), np.float32)
+        action[which] = out
         return action
+
+
+def _row_keeper(core: Any) -> Any:
+    """``core`` where it can shrink to some of its swarms with their episodes unchanged
+    (the numpy core, on a model whose step reads each swarm's own state alone), else
+    None."""
+    from swarm_envs.envs.cores.numpy import SwarmNavCore
+
+    if type(core) is SwarmNavCore and core.dynamics.ROWS_INDEPENDENT:
+        return core
+    return None
 
 
 def centred_ranks(values: np.ndarray) -> np.ndarray:

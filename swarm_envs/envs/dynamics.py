@@ -27,6 +27,8 @@ A user's model brings its own adapter, a subclass of :class:`Dynamics`
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -81,6 +83,17 @@ if __doc__ is not None:  # the table of the module docstring, from the registry
 MAX_START_DRAWS = 1000
 
 
+def _rows_of(value: Any, rows: np.ndarray, axis: int) -> Any:
+    """``value``'s swarms ``rows`` on ``axis``: an array, a named tuple of arrays (0-d
+    arrays, shared by every swarm, kept as they are) or None."""
+    if value is None:
+        return None
+    if isinstance(value, tuple):
+        return type(value)(*(_rows_of(v, rows, axis) for v in value))
+    value = np.asarray(value)
+    return value if value.ndim == 0 else np.take(value, rows, axis=axis)
+
+
 class Dynamics(ABC):
     """One model's step on a batch of swarms (see the module docstring): a model's
     ``ModelSpec.adapter``.
@@ -95,6 +108,20 @@ class Dynamics(ABC):
     a step over the cap into an unstable step. A model whose ``ModelSpec.applies_masks``
     is true honours :attr:`present` and :attr:`mobile`.
     """
+
+    #: The per-swarm state :meth:`keep` keeps: attribute name → the axis that holds the
+    #: swarm (arrays, named tuples of arrays, or None). A subclass adds its own.
+    ROW_STATE: ClassVar[Mapping[str, int]] = {
+        "substeps": 0,
+        "over_cap": 0,
+        "needed": 0,
+        "present": 0,
+        "mobile": 0,
+    }
+    #: Whether a swarm's step reads its own state alone, so that :meth:`keep` leaves the
+    #: kept swarms' trajectories the same bit for bit (a model drawing randomness for
+    #: the whole batch at each step does not).
+    ROWS_INDEPENDENT: bool = True
 
     def __init__(self, cfg: SwarmConfig, batch: int, dtype: np.dtype) -> None:
         self.cfg = cfg
@@ -151,6 +178,13 @@ class Dynamics(ABC):
         undone): recompute what the model carries for them. Nothing by default."""
         return None
 
+    def keep(self, rows: np.ndarray) -> None:
+        """Shrink the batch to the swarms ``rows`` (indices, in their new order): every
+        attribute of :attr:`ROW_STATE` keeps those rows."""
+        for name, axis in self.ROW_STATE.items():
+            setattr(self, name, _rows_of(getattr(self, name), rows, axis))
+        self.batch = len(rows)
+
     def _count(self, used: np.ndarray, over: np.ndarray, needed: np.ndarray) -> None:
         self.substeps, self.over_cap, self.needed = used, over, needed
 
@@ -189,6 +223,13 @@ class SocialPotentialDynamics(Dynamics):
     re-planned after each (:func:`~swarm_envs.physics.integrators.substep_plan`); every
     swarm plans its own, and only the swarms with time left are evaluated.
     """
+
+    ROW_STATE: ClassVar[Mapping[str, int]] = {
+        **Dynamics.ROW_STATE,
+        "_force": 0,
+        "_h_stable": 0,
+        "_damping": 1,
+    }
 
     def __init__(self, cfg: SwarmConfig, batch: int, dtype: np.dtype) -> None:
         super().__init__(cfg, batch, dtype)
@@ -347,6 +388,12 @@ class ZoneDynamics(Dynamics):
     informed subset (eq. 6) are drawn per swarm at reset; velocities are ``s_i η̂_i``.
     """
 
+    ROW_STATE: ClassVar[Mapping[str, int]] = {
+        **Dynamics.ROW_STATE,
+        "agent_params": 0,
+        "informed": 0,
+    }
+
     def __init__(self, cfg: SwarmConfig, batch: int, dtype: np.dtype) -> None:
         super().__init__(cfg, batch, dtype)
         shape = (batch, cfg.n_agents)
@@ -411,6 +458,8 @@ class PiecewiseDynamics(Dynamics):
     seeded from the reset's at every full reset, so a seed fixes the whole rollout.
     """
 
+    ROWS_INDEPENDENT = False  # its random force is drawn for the whole batch at each step
+
     def __init__(self, cfg: SwarmConfig, batch: int, dtype: np.dtype) -> None:
         super().__init__(cfg, batch, dtype)
         self._noise_rng: np.random.Generator | None = None
@@ -467,6 +516,8 @@ class LagrangianDynamics(Dynamics):
     (:func:`~swarm_envs.physics.lagrangian.well_separated`: 2 % of their radii's sum);
     the velocity is the model's ``ẋ``. The substep length is carried per swarm between steps.
     """
+
+    ROW_STATE: ClassVar[Mapping[str, int]] = {**Dynamics.ROW_STATE, "_substep": 0}
 
     def __init__(self, cfg: SwarmConfig, batch: int, dtype: np.dtype) -> None:
         super().__init__(cfg, batch, dtype)

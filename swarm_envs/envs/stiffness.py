@@ -52,6 +52,10 @@ class StiffnessWatch:
         self._steps = 0
         self._done = False
 
+    def keep(self, rows: np.ndarray) -> None:
+        """Watch the swarms ``rows`` only (a core shrinking its batch)."""
+        self._total = self._total[rows]
+
     def observe(self, stats: dict[str, np.ndarray]) -> None:
         """Count a step's ``substeps`` statistic; every :data:`STIFF_WINDOW` steps, judge
         the window and start a new one."""

@@ -154,6 +154,44 @@ class SwarmNavCore(TaskCore):
             self._stats["unstable"][idx] = 1.0
         return self.stats()
 
+    def keep(self, rows: np.ndarray) -> None:
+        """Shrink the batch to the swarms ``rows`` (indices, in their new order), each
+        going on as it would have in the whole batch, bit for bit: for a caller that
+        needs only some swarms' episodes to go on (evolution strategies' rollouts, once
+        most episodes have ended).
+
+        Raises:
+            ValueError: the model's step is not row by row (:attr:`Dynamics.ROWS_INDEPENDENT
+                <swarm_envs.envs.dynamics.Dynamics.ROWS_INDEPENDENT>`), or this core
+                keeps its state otherwise (a subclass).
+        """
+        if type(self) is not SwarmNavCore or not self.dynamics.ROWS_INDEPENDENT:
+            raise ValueError(
+                f"keep: the {self.cfg.dynamics!r} model on {type(self).__name__} does not "
+                "step each swarm on its own state alone"
+            )
+        rows = np.asarray(rows, dtype=np.intp)
+
+        def sub(a: Any) -> Any:
+            return None if a is None else a[rows]
+
+        self.x, self.v = self.x[rows], self.v[rows]
+        self.goal, self.t = self.goal[rows], self.t[rows]
+        self.informed, self.status, self._members = (
+            sub(self.informed),
+            sub(self.status),
+            sub(self._members),
+        )
+        self._stats = {key: value[rows] for key, value in self._stats.items()}
+        self._before = (self._before[0][rows], self._before[1][rows])
+        g = self._geometry
+        if g is not None:
+            self._geometry = PairGeometry([d[rows] for d in g.dx], g.rho[rows])
+        self._near = sub(self._near)
+        self.dynamics.keep(rows)
+        self.task.keep(rows)
+        self.batch = len(rows)
+
     def measured(self) -> dict[str, np.ndarray]:
         """The current statistics ``{name: (B,)}`` (the core's own; a measure replaces them)."""
         return self._stats

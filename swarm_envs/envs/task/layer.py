@@ -118,6 +118,11 @@ class HostRecords:
             self.prev[key][idx] = value[idx]
             self.start[key][idx] = value[idx]
 
+    def keep(self, rows: np.ndarray) -> None:
+        """Keep the swarms ``rows`` only (a core shrinking its batch)."""
+        self.prev = {key: value[rows] for key, value in self.prev.items()}
+        self.start = {key: value[rows] for key, value in self.start.items()}
+
     def follow(self, measured: Stats) -> None:
         # A copy: a reset writes the new episodes' rows into it.
         self.prev = {key: value.copy() for key, value in measured.items()}
@@ -164,6 +169,14 @@ class TaskLayer:
         self._energy_bound = energy_bound(cfg)
         self._no_swarm = np.zeros(batch, dtype=bool)
         self._stiffness = StiffnessWatch(cfg, batch)
+
+    def keep(self, rows: np.ndarray) -> None:
+        """Keep the swarms ``rows`` only, in that order (a core shrinking its batch:
+        :meth:`SwarmNavCore.keep <swarm_envs.envs.cores.numpy.SwarmNavCore.keep>`)."""
+        self.records.keep(rows)  # type: ignore[attr-defined]
+        self._no_swarm = self._no_swarm[rows]
+        self._stiffness.keep(rows)
+        self.batch = len(rows)
 
     # ------------------------------------------------------------------ episodes
     def reset(
