@@ -51,5 +51,5 @@ def test_kept_swarms_step_as_in_the_whole_batch(dynamics, task):
 def test_keep_refuses_a_model_whose_step_reads_the_whole_batch():
     core = SwarmNavCore(_config("piecewise"), batch=4)
     core.reset(np.random.default_rng(0))
-    with pytest.raises(ValueError, match="does not step each swarm on its own state alone"):
+    with pytest.raises(ValueError, match="does not declare that it steps each swarm"):
         core.keep(np.array([0, 2]))

@@ -299,7 +299,7 @@ def _row_keeper(core: Any) -> Any:
     None."""
     from swarm_envs.envs.cores.numpy import SwarmNavCore
 
-    if type(core) is SwarmNavCore and core.dynamics.ROWS_INDEPENDENT:
+    if type(core) is SwarmNavCore and core.dynamics.KEEPS_ROWS:
         return core
     return None
 

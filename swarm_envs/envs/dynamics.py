@@ -118,10 +118,11 @@ class Dynamics(ABC):
         "present": 0,
         "mobile": 0,
     }
-    #: Whether a swarm's step reads its own state alone, so that :meth:`keep` leaves the
-    #: kept swarms' trajectories the same bit for bit (a model drawing randomness for
-    #: the whole batch at each step does not).
-    ROWS_INDEPENDENT: bool = True
+    #: Whether :meth:`keep` may shrink the batch: the model's step reads each swarm's
+    #: own state alone and :attr:`ROW_STATE` names all of it, so that the kept swarms go
+    #: on the same bit for bit. Off unless a model says so (a model drawing randomness
+    #: for the whole batch at each step cannot).
+    KEEPS_ROWS: bool = False
 
     def __init__(self, cfg: SwarmConfig, batch: int, dtype: np.dtype) -> None:
         self.cfg = cfg
@@ -230,6 +231,7 @@ class SocialPotentialDynamics(Dynamics):
         "_h_stable": 0,
         "_damping": 1,
     }
+    KEEPS_ROWS = True
 
     def __init__(self, cfg: SwarmConfig, batch: int, dtype: np.dtype) -> None:
         super().__init__(cfg, batch, dtype)
@@ -393,6 +395,7 @@ class ZoneDynamics(Dynamics):
         "agent_params": 0,
         "informed": 0,
     }
+    KEEPS_ROWS = True
 
     def __init__(self, cfg: SwarmConfig, batch: int, dtype: np.dtype) -> None:
         super().__init__(cfg, batch, dtype)
@@ -458,7 +461,7 @@ class PiecewiseDynamics(Dynamics):
     seeded from the reset's at every full reset, so a seed fixes the whole rollout.
     """
 
-    ROWS_INDEPENDENT = False  # its random force is drawn for the whole batch at each step
+    # KEEPS_ROWS stays off: its random force is drawn for the whole batch at each step.
 
     def __init__(self, cfg: SwarmConfig, batch: int, dtype: np.dtype) -> None:
         super().__init__(cfg, batch, dtype)
@@ -518,6 +521,7 @@ class LagrangianDynamics(Dynamics):
     """
 
     ROW_STATE: ClassVar[Mapping[str, int]] = {**Dynamics.ROW_STATE, "_substep": 0}
+    KEEPS_ROWS = True
 
     def __init__(self, cfg: SwarmConfig, batch: int, dtype: np.dtype) -> None:
         super().__init__(cfg, batch, dtype)

@@ -161,14 +161,14 @@ class SwarmNavCore(TaskCore):
         most episodes have ended).
 
         Raises:
-            ValueError: the model's step is not row by row (:attr:`Dynamics.ROWS_INDEPENDENT
-                <swarm_envs.envs.dynamics.Dynamics.ROWS_INDEPENDENT>`), or this core
-                keeps its state otherwise (a subclass).
+            ValueError: the model does not allow it (:attr:`Dynamics.KEEPS_ROWS
+                <swarm_envs.envs.dynamics.Dynamics.KEEPS_ROWS>`), or this core keeps
+                its state otherwise (a subclass).
         """
-        if type(self) is not SwarmNavCore or not self.dynamics.ROWS_INDEPENDENT:
+        if type(self) is not SwarmNavCore or not self.dynamics.KEEPS_ROWS:
             raise ValueError(
                 f"keep: the {self.cfg.dynamics!r} model on {type(self).__name__} does not "
-                "step each swarm on its own state alone"
+                "declare that it steps each swarm on its own state alone (Dynamics.KEEPS_ROWS)"
             )
         rows = np.asarray(rows, dtype=np.intp)
 
