@@ -1,6 +1,6 @@
 # Every target creates the virtual environment itself (`.venv`) on first use.
 PYTHON ?= python3.11
-# Training runs of `make benchmark` at once, one process each (default: every CPU).
+# Processes of `make benchmark` at once: training runs and evaluations (default: every CPU).
 JOBS ?= $(shell nproc 2>/dev/null || echo 1)
 VENV   ?= .venv
 BIN    := $(VENV)/bin
@@ -18,7 +18,7 @@ help:
 	@echo "make reproduce  regenerate the paper figures (PNG + JSON + GIF) into $(OUT)/"
 	@echo "make bench      print the physics throughput table"
 	@echo "make benchmark  the results table: train every entry of configs/benchmark/results.yaml"
-	@echo "                (3 seeds, JOBS=$(JOBS) runs at once), evaluate against the baselines, write"
+	@echo "                (3 seeds, JOBS=$(JOBS) processes at once), evaluate against the baselines, write"
 	@echo "                runs/benchmark/results.{json,md,png} with 95 % bootstrap CIs (slow;"
 	@echo "                rerun to continue after Ctrl-C)"
 	@echo "make format     apply ruff format and autofixes"

@@ -173,7 +173,9 @@ class TaskLayer:
     def keep(self, rows: np.ndarray) -> None:
         """Keep the swarms ``rows`` only, in that order (a core shrinking its batch:
         :meth:`SwarmNavCore.keep <swarm_envs.envs.cores.numpy.SwarmNavCore.keep>`)."""
-        self.records.keep(rows)  # type: ignore[attr-defined]
+        if not isinstance(self.records, HostRecords):
+            raise ValueError("keep: only a core whose records are host arrays can shrink")
+        self.records.keep(rows)
         self._no_swarm = self._no_swarm[rows]
         self._stiffness.keep(rows)
         self.batch = len(rows)
