@@ -122,6 +122,37 @@ def test_curves_hold_the_last_value_after_an_episode_ends(cfg):
     assert len(b.trajectory["x"]) == b.lengths[0] + 1
 
 
+@pytest.mark.parametrize("central", [False, True])
+def test_a_core_shrunk_to_the_live_episodes_gives_the_same_results(cfg, monkeypatch, central):
+    """Once at most a quarter of the episodes are live the numpy core shrinks to them;
+    every recorded number is the whole batch's, bit for bit."""
+    import train.evaluate.episodes as episodes
+    from swarm_envs.envs.cores.numpy import SwarmNavCore
+
+    quick = replace(cfg, backend="numpy", goal_distance_min=2.0, goal_distance_max=6.0)
+    kept: list[int] = []
+    keep = SwarmNavCore.keep
+
+    def counting_keep(self: SwarmNavCore, rows: np.ndarray) -> None:
+        kept.append(len(rows))
+        keep(self, rows)
+
+    monkeypatch.setattr(SwarmNavCore, "keep", counting_keep)
+    policy = CentralPotential(quick) if central else PotentialFieldController(quick)
+    shrunk = run_episodes(policy, quick, 12, seed=3)
+    assert kept and kept[-1] <= 12 // 4  # it shrank
+    monkeypatch.setattr(episodes, "keeps_rows", lambda core: False)
+    whole = run_episodes(policy, quick, 12, seed=3)
+    assert len(set(whole.lengths.tolist())) > 3  # episodes of many lengths
+    for field in ("returns", "success", "lengths", "collisions", "effort", "unstable"):
+        assert getattr(shrunk, field).tobytes() == getattr(whole, field).tobytes(), field
+    for field in ("substeps", "integrated", "first_success", "times"):
+        assert getattr(shrunk, field).tobytes() == getattr(whole, field).tobytes(), field
+    for group in ("final", "curves", "trajectory"):
+        for key, value in getattr(whole, group).items():
+            assert getattr(shrunk, group)[key].tobytes() == value.tobytes(), (group, key)
+
+
 def test_central_policies_get_whole_swarm_observations(cfg):
     central = CentralPotential(cfg)
     assert policy_mode(central, cfg) == "central"

@@ -228,6 +228,7 @@ class Rollouts:
         come from ``numpy.random.default_rng(SeedSequence(entropy))``: a tuple, so that
         no generation meets the episodes of an integer seed (an evaluation's)."""
         from swarm_envs.envs.backends import make_core
+        from swarm_envs.envs.cores.numpy import keeps_rows
 
         core, P, M = self.core, self.candidates, self.episodes
         if thetas.shape[0] != P:
@@ -243,7 +244,7 @@ class Rollouts:
         # A row-wise actor's rollouts shrink the core to the live swarms once at most a
         # quarter of its rows are live (a stalled episode would keep every swarm
         # stepping to max_steps): the same returns, bit for bit (SwarmNavCore.keep).
-        keeper = _row_keeper(core) if self.actor.rowwise else None
+        keeper = core if self.actor.rowwise and keeps_rows(core) else None
         rows = np.arange(B)  # the swarm of each row of the core
         for _ in range(self.cfg.max_steps):
             live = ~done[rows]
@@ -291,17 +292,6 @@ class Rollouts:
         action = np.zeros((len(rows), N, out.shape[-1]), np.float32)
         action[which] = out
         return action
-
-
-def _row_keeper(core: Any) -> Any:
-    """``core`` where it can shrink to some of its swarms with their episodes unchanged
-    (the numpy core, on a model whose step reads each swarm's own state alone), else
-    None."""
-    from swarm_envs.envs.cores.numpy import SwarmNavCore
-
-    if type(core) is SwarmNavCore and core.dynamics.KEEPS_ROWS:
-        return core
-    return None
 
 
 def centred_ranks(values: np.ndarray) -> np.ndarray:

@@ -17,6 +17,7 @@ import numpy as np
 from agents.base import swarm_config_of
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.backends import make_core
+from swarm_envs.envs.cores.numpy import keeps_rows
 from swarm_envs.envs.perturbed import PerturbedCore
 from swarm_envs.envs.task.agent_status import ACTIVE
 from train.evaluate.policies import SpaceMismatchError, config_for_policy, policy_mode
@@ -149,24 +150,37 @@ def run_episodes(
 
     from tqdm.auto import tqdm
 
+    # Once at most a quarter of the episodes are live, a core that can (the numpy core,
+    # on a model that steps each swarm on its own state alone) shrinks to their swarms:
+    # one stalled episode would keep every swarm stepping to max_steps. The policy still
+    # sees the whole batch, the ended episodes' last inputs held, so that each live
+    # episode's actions, and so the results, are those of the whole batch.
+    keeper = core if keeps_rows(core) else None
+    rows = np.arange(B)  # the episode of each of the core's rows
+    held: np.ndarray | None = None  # every episode's policy input, once the core shrank
+    inputs = np.empty(0)
     bar = tqdm(total=cfg.max_steps, desc=name, unit="step", disable=not progress, leave=True)
     try:
         for _ in range(cfg.max_steps):
-            obs = core.observe()
+            if keeper is not None and 4 * (~done).sum() <= len(rows) and done[rows].any():
+                if held is None:  # the last step's inputs, of the whole batch
+                    held = np.array(inputs)
+                keeper.keep(np.flatnonzero(~done[rows]))
+                rows = np.flatnonzero(~done)
+            inputs = _policy_input(core, mode, cfg.observe_status)
+            if held is not None:
+                held[rows] = inputs
+                inputs = held
             if mode == "central":
-                central = obs.reshape(B, -1)
-                if cfg.observe_status:  # the central env's layout: every agent's flag last
-                    flags = (getattr(core, "status", np.zeros((B, N))) == ACTIVE).astype(np.float32)
-                    central = np.concatenate([central, flags], axis=1)
                 action, state = policy.predict(
-                    central,
+                    inputs,
                     state=state,
                     episode_start=episode_start,
                     deterministic=deterministic,
                 )
             else:
                 action, state = policy.predict(
-                    obs.reshape(B * N, -1),
+                    inputs.reshape(B * N, -1),
                     state=state,
                     episode_start=np.repeat(episode_start, N),
                     deterministic=deterministic,
@@ -182,7 +196,10 @@ def run_episodes(
             clipped = np.clip(a.astype(np.float64), -1.0, 1.0)
             if isinstance(core, PerturbedCore):  # the statuses before the step: who acts
                 clipped = np.where((core.status == ACTIVE)[..., None], clipped, 0.0)
-            reward, terminated, truncated, stats = core.step(a)  # validates, clips
+            if len(rows) < B:
+                reward, terminated, truncated, stats = _scattered(core.step(a[rows]), rows, B)
+            else:
+                reward, terminated, truncated, stats = core.step(a)  # validates, clips
             live = ~done
             returns[live] += reward[live]
             lengths[live] += 1
@@ -243,4 +260,40 @@ def run_episodes(
         trajectory=trajectory,
         start=start,
         first_success=first_success,
+    )
+
+
+def _policy_input(core: Any, mode: str, observe_status: bool) -> np.ndarray:
+    """The policy's input for each of the core's ``R`` swarms: ``(R, N, obs_dim)``
+    (shared), or the central env's flat observation ``(R, N·obs_dim [+ N])`` with every
+    agent's status flag last where ``observe_status``."""
+    obs = np.asarray(core.observe())
+    if mode != "central":
+        return obs
+    R, N = obs.shape[:2]
+    central = obs.reshape(R, -1)
+    if observe_status:
+        flags = (getattr(core, "status", np.zeros((R, N))) == ACTIVE).astype(np.float32)
+        central = np.concatenate([central, flags], axis=1)
+    return central
+
+
+def _scattered(
+    result: tuple[Any, Any, Any, dict[str, Any]], rows: np.ndarray, B: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """A step's ``(reward, terminated, truncated, stats)`` of a core shrunk to the
+    episodes ``rows``, spread over all ``B`` episodes (the ended ones: zero, never read)."""
+
+    def spread(values: Any) -> np.ndarray:
+        values = np.asarray(values)
+        out = np.zeros((B, *values.shape[1:]), values.dtype)
+        out[rows] = values
+        return out
+
+    reward, terminated, truncated, stats = result
+    return (
+        spread(reward),
+        spread(terminated),
+        spread(truncated),
+        {k: spread(v) for k, v in stats.items()},
     )

@@ -20,7 +20,7 @@ One step, for all swarms at once:
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, TypeGuard
 
 import numpy as np
 
@@ -47,7 +47,15 @@ from swarm_envs.envs.task.layer import Advance, HostRecords, TaskCore, TaskLayer
 from swarm_envs.physics import PairGeometry, pair_geometry
 from swarm_envs.physics.social_potential import present_geometry
 
-__all__ = ["SwarmNavCore"]
+__all__ = ["SwarmNavCore", "keeps_rows"]
+
+
+def keeps_rows(core: object) -> TypeGuard[SwarmNavCore]:
+    """Whether :meth:`SwarmNavCore.keep` can shrink ``core`` to some of its swarms: a
+    plain numpy core (not a subclass, which keeps its state otherwise, nor a wrapper)
+    whose model steps each swarm on its own state alone (:attr:`Dynamics.KEEPS_ROWS
+    <swarm_envs.envs.dynamics.Dynamics.KEEPS_ROWS>`)."""
+    return type(core) is SwarmNavCore and bool(core.dynamics.KEEPS_ROWS)
 
 
 class SwarmNavCore(TaskCore):
@@ -165,7 +173,7 @@ class SwarmNavCore(TaskCore):
                 <swarm_envs.envs.dynamics.Dynamics.KEEPS_ROWS>`), or this core keeps
                 its state otherwise (a subclass).
         """
-        if type(self) is not SwarmNavCore or not self.dynamics.KEEPS_ROWS:
+        if not keeps_rows(self):
             raise ValueError(
                 f"keep: the {self.cfg.dynamics!r} model on {type(self).__name__} does not "
                 "declare that it steps each swarm on its own state alone (Dynamics.KEEPS_ROWS)"
