@@ -1,9 +1,11 @@
 """Tuned gains of the simple baselines, read from ``configs/baselines/tuned.yaml``.
 
 ``swarm-tune`` (:mod:`train.tune_baselines`) writes that file: for each baseline and each
-scenario key ``"<task>/<dynamics>"``, the gains that scored the highest mean return on
+scenario key (:func:`scenario_key`), the gains that scored the highest mean return on
 the training seeds. A controller built without explicit gains looks its scenario up
-here (:func:`tuned_gains`); a scenario not in the file gets the controller's defaults.
+here (:func:`tuned_gains`): a config with a fixed informed fraction gets the gains tuned
+at that fraction where there are some, else those of its task and dynamics; a scenario
+not in the file gets the controller's defaults.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import yaml
 
 from swarm_envs.config import CONFIG_ROOT, SwarmConfig
 
-__all__ = ["TUNED_PATH", "load_tuned", "scenario_key", "tuned_gains"]
+__all__ = ["TUNED_PATH", "load_tuned", "scenario_key", "scenario_keys", "tuned_gains"]
 
 #: A tuned value: a gain, or the name of a choice (``saturation``).
 Gain = float | str
@@ -26,12 +28,26 @@ TUNED_PATH: Path = CONFIG_ROOT / "baselines" / "tuned.yaml"
 
 
 def scenario_key(cfg: SwarmConfig) -> str:
-    """The key of ``cfg``'s scenario in the tuned table: ``"<task>/<dynamics>"``.
+    """The key of ``cfg``'s scenario in the tuned table: ``"<task>/<dynamics>"``, and
+    ``"<task>/<dynamics>/informed=<f>"`` where ``cfg`` fixes its informed fraction ``f``
+    below 1 (a range drawn per episode, the informed task's default, has the plain key).
 
     >>> scenario_key(SwarmConfig(dynamics="zone"))
     'navigation/zone'
+    >>> scenario_key(SwarmConfig(task="informed", informed_fraction=0.1))
+    'informed/social_potential/informed=0.1'
     """
-    return f"{cfg.task}/{cfg.dynamics}"
+    return scenario_keys(cfg)[0]
+
+
+def scenario_keys(cfg: SwarmConfig) -> tuple[str, ...]:
+    """The keys :func:`tuned_gains` looks ``cfg`` up by, the most specific first: its
+    :func:`scenario_key`, then (for a fixed informed fraction) its task and dynamics'."""
+    plain = f"{cfg.task}/{cfg.dynamics}"
+    fraction = cfg.informed_fraction
+    if isinstance(fraction, int | float) and fraction < 1:
+        return (f"{plain}/informed={fraction:g}", plain)
+    return (plain,)
 
 
 @functools.cache
@@ -66,5 +82,10 @@ def load_tuned(path: Path = TUNED_PATH) -> dict[str, dict[str, dict[str, Gain]]]
 
 
 def tuned_gains(baseline: str, cfg: SwarmConfig) -> dict[str, Gain]:
-    """The tuned gains of ``baseline`` for ``cfg``'s scenario (``{}`` when untuned)."""
-    return dict(load_tuned().get(baseline, {}).get(scenario_key(cfg), {}))
+    """The tuned gains of ``baseline`` for ``cfg``'s scenario: those of the first of
+    :func:`scenario_keys` in the table (``{}`` when none is)."""
+    table = load_tuned().get(baseline, {})
+    for key in scenario_keys(cfg):
+        if key in table:
+            return dict(table[key])
+    return {}

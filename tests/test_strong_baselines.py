@@ -341,6 +341,56 @@ def test_swarm_tune_refinement_skips_gains_out_of_range(tmp_path):
     assert 0 <= record["gains"]["approach"] <= 1
 
 
+def test_a_fixed_informed_fraction_has_its_own_tuned_gains_else_the_tasks(monkeypatch):
+    import agents.tuned
+
+    # a range drawn per episode (the informed recipes' mix): the plain key
+    mix = dataclasses.replace(task_config("informed"), informed_fraction=(0.1, 0.3))
+    at = {f: dataclasses.replace(mix, informed_fraction=f) for f in (0.1, 0.3)}
+    assert scenario_key(mix) == "informed/social_potential"
+    assert scenario_key(at[0.1]) == "informed/social_potential/informed=0.1"
+    table = {
+        "pd": {
+            "informed/social_potential": {"k_p": 1.0},
+            "informed/social_potential/informed=0.1": {"k_p": 2.0},
+        }
+    }
+    monkeypatch.setattr(agents.tuned, "load_tuned", lambda: table)
+    assert tuned_gains("pd", at[0.1]) == {"k_p": 2.0}
+    assert tuned_gains("pd", at[0.3]) == {"k_p": 1.0}  # not tuned there: the task's
+    assert tuned_gains("pd", mix) == {"k_p": 1.0}
+    assert tuned_gains("follow", at[0.1]) == {}
+
+
+def test_swarm_tune_keys_an_entry_at_one_fraction_apart_and_tunes_a_scenario_once(
+    tmp_path, monkeypatch, capsys
+):
+    import train.tune_baselines as tb
+
+    tuned: list[str] = []
+
+    def scores(name, cfg, points, seed, episodes, progress=False):
+        tuned.append(scenario_key(cfg))
+        return [{"mean_return": 1.0, "success_rate": 1.0} for _ in points]
+
+    monkeypatch.setattr(tb, "_scores", scores)
+    matrix = tmp_path / "matrix.yaml"
+    shipped = yaml.safe_load(open(tb.DEFAULT_GRIDS.parent.parent / "benchmark" / "results.yaml"))
+    entries = {e["name"]: e for e in shipped["entries"]}
+    twin = dict(entries["informed/social_potential"], name="informed/social_potential_twin")
+    picked = [entries["informed/social_potential_at_0.1"], entries["informed/social_potential"]]
+    matrix.write_text(yaml.safe_dump({"entries": [*picked, twin]}))
+    grids = tmp_path / "grids.yaml"
+    grids.write_text(yaml.safe_dump({"grids": {"pd": {"k_p": [2.0], "k_d": [0.5]}}}))
+    out = tmp_path / "tuned.yaml"
+    assert tb.main(["--grids", str(grids), "--matrix", str(matrix), "--out", str(out)]) == 0
+    written = yaml.safe_load(out.read_text())["baselines"]["pd"]
+    keys = ["informed/social_potential/informed=0.1", "informed/social_potential"]
+    assert sorted(written) == sorted(keys)
+    assert tuned == keys  # the twin entry's scenario is not tuned again
+    assert capsys.readouterr().out.count("pd on informed/social_potential:") == 1
+
+
 def test_swarm_tune_writes_an_unmoved_winner_without_yaml_aliases(tmp_path, monkeypatch):
     import train.tune_baselines as tb
 

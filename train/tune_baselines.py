@@ -8,8 +8,10 @@ evaluation seed (``swarm-eval``, ``swarm-demo`` and ``swarm-benchmark`` evaluate
 others, and this command refuses theirs). The point with the highest mean return wins;
 ties go to the earlier point. The winners are written to
 ``configs/baselines/tuned.yaml`` (``--out``), keyed by baseline and scenario
-(``"<task>/<dynamics>"``, :func:`agents.tuned.scenario_key`), with the return they
-scored, so that ``make_controller("pd", env)`` and every evaluation use them.
+(``"<task>/<dynamics>"``, with ``"/informed=<f>"`` for an entry trained at one informed
+fraction: :func:`agents.tuned.scenario_key`), with the return they scored, so that
+``make_controller("pd", env)`` and every evaluation use them. Entries that share a
+scenario are tuned once.
 
 Where one of a baseline's grid points can fail in rare episodes (a flock that stalls),
 a few episodes may not hold one, and the grid's best on them can be a point that fails
@@ -399,13 +401,15 @@ def _main(args: argparse.Namespace) -> int:
     tuned: dict[str, dict[str, Any]] = {}
     if out.is_file():
         tuned = dict((yaml.safe_load(out.read_text(encoding="utf-8")) or {}).get("baselines", {}))
+    done: set[tuple[str, str]] = set()
     for entry in entries:
         tc = entry.train_config(seed=seed)
         cfg = load_swarm_config(tc.env_config, tc.env)
         for name in SIMPLE[cfg.task]:
-            if name not in grids:
-                continue
             key = scenario_key(cfg)
+            if name not in grids or (name, key) in done:
+                continue
+            done.add((name, key))
             print(
                 f"{PROG}: {name} on {key}: {len(grid_points(grids[name]))} points ...", flush=True
             )
@@ -443,7 +447,8 @@ def _main(args: argparse.Namespace) -> int:
 def _write(out: Path, tuned: Mapping[str, Any], grids: str) -> None:
     header = (
         "# Written by swarm-tune (train/tune_baselines.py) from the grids of\n"
-        f"# {Path(grids).name}: per baseline and scenario (<task>/<dynamics>), the gains with\n"
+        f"# {Path(grids).name}: per baseline and scenario (<task>/<dynamics>, and\n"
+        "# /informed=<f> for one informed fraction), the gains with\n"
         "# the highest mean return on the training seed (refined around the grid's\n"
         "# best where the grid file says so); the controllers read them\n"
         "# (agents/tuned.py). Rerun `swarm-tune` rather than editing by hand.\n"

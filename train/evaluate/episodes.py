@@ -4,7 +4,9 @@
 :func:`swarm_envs.envs.backends.make_core` from the config's ``backend`` and ``device``
 (float64 state), and records them in an :class:`EpisodeBatch`: per-episode totals,
 the group statistics at each episode's end, their curves over time, and episode 0's
-trajectory (for the GIF).
+trajectory (for the GIF). Once at most a quarter of the episodes are running, a numpy
+core whose model allows it (:func:`~swarm_envs.envs.cores.numpy.keeps_rows`) shrinks to
+their swarms, with the same results bit for bit.
 """
 
 from __future__ import annotations
