@@ -205,3 +205,19 @@ def mill_about_goal(n_agents: int, dim: int) -> Any:
         init_speed=1.0,
         max_steps=6,
     )
+
+
+def count_kept(monkeypatch: Any) -> list[int]:
+    """Spy on ``SwarmNavCore.keep``: the list it returns gets the number of rows each
+    call keeps (the call still shrinks the core)."""
+    from swarm_envs.envs.cores.numpy import SwarmNavCore
+
+    kept: list[int] = []
+    keep = SwarmNavCore.keep
+
+    def counting_keep(self: SwarmNavCore, rows: np.ndarray) -> None:
+        kept.append(len(rows))
+        keep(self, rows)
+
+    monkeypatch.setattr(SwarmNavCore, "keep", counting_keep)
+    return kept

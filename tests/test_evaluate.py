@@ -12,6 +12,7 @@ from pathlib import Path
 import gymnasium
 import numpy as np
 import pytest
+from helpers import count_kept
 
 from agents import PotentialFieldController, RandomController, ZeroController
 from swarm_envs import swarm_nav_v0
@@ -127,17 +128,9 @@ def test_a_core_shrunk_to_the_live_episodes_gives_the_same_results(cfg, monkeypa
     """Once at most a quarter of the episodes are live the numpy core shrinks to them;
     every recorded number is the whole batch's, bit for bit."""
     import train.evaluate.episodes as episodes
-    from swarm_envs.envs.cores.numpy import SwarmNavCore
 
     quick = replace(cfg, backend="numpy", goal_distance_min=2.0, goal_distance_max=6.0)
-    kept: list[int] = []
-    keep = SwarmNavCore.keep
-
-    def counting_keep(self: SwarmNavCore, rows: np.ndarray) -> None:
-        kept.append(len(rows))
-        keep(self, rows)
-
-    monkeypatch.setattr(SwarmNavCore, "keep", counting_keep)
+    kept = count_kept(monkeypatch)
     policy = CentralPotential(quick) if central else PotentialFieldController(quick)
     shrunk = run_episodes(policy, quick, 12, seed=3)
     assert kept and kept[-1] <= 12 // 4  # it shrank

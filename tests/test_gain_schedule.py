@@ -9,6 +9,7 @@ import json
 
 import numpy as np
 import pytest
+from helpers import count_kept
 
 from agents import make_controller
 from agents.follow import SCHEDULED_GAINS, InformedFollowerController
@@ -189,18 +190,10 @@ def test_rollouts_skip_ended_episodes_without_changing_any_return(monkeypatch):
     episodes ended, and the core shrinks to the live swarms once at most a quarter are
     live; the candidates' returns and agent-steps are bit for bit those of the full
     batch, generation after generation."""
-    from swarm_envs.envs.cores.numpy import SwarmNavCore
     from train.es import Rollouts, policy_model
     from train.gain_schedule import ScheduleActor
 
-    kept: list[int] = []
-    keep = SwarmNavCore.keep
-
-    def counting_keep(self: SwarmNavCore, rows: np.ndarray) -> None:
-        kept.append(len(rows))
-        keep(self, rows)
-
-    monkeypatch.setattr(SwarmNavCore, "keep", counting_keep)
+    kept = count_kept(monkeypatch)
     tc = schedule_config(env={"task": "informed", **SMALL_ENV, "max_steps": 60})
     cfg = tc.swarm_config()
     actor = ScheduleActor(policy_model(tc), make_controller("follow", cfg), "follow")
