@@ -22,7 +22,7 @@ from agents import (
 from agents.pd import saturate
 from agents.tuned import load_tuned, scenario_key, tuned_gains
 from swarm_envs import swarm_nav_v0
-from swarm_envs.config import SwarmConfig
+from swarm_envs.config import CONFIG_ROOT, SwarmConfig
 from swarm_envs.envs import observation_size
 from swarm_envs.envs.backends import make_core
 from swarm_envs.physics import SocialPotentialParams
@@ -375,7 +375,7 @@ def test_swarm_tune_keys_an_entry_at_one_fraction_apart_and_tunes_a_scenario_onc
 
     monkeypatch.setattr(tb, "_scores", scores)
     matrix = tmp_path / "matrix.yaml"
-    shipped = yaml.safe_load(open(tb.DEFAULT_GRIDS.parent.parent / "benchmark" / "results.yaml"))
+    shipped = yaml.safe_load((CONFIG_ROOT / "benchmark" / "results.yaml").read_text())
     entries = {e["name"]: e for e in shipped["entries"]}
     twin = dict(entries["informed/social_potential"], name="informed/social_potential_twin")
     picked = [entries["informed/social_potential_at_0.1"], entries["informed/social_potential"]]

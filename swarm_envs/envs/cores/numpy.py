@@ -165,8 +165,8 @@ class SwarmNavCore(TaskCore):
     def keep(self, rows: np.ndarray) -> None:
         """Shrink the batch to the swarms ``rows`` (indices, in their new order), each
         going on as it would have in the whole batch, bit for bit: for a caller that
-        needs only some swarms' episodes to go on (evolution strategies' rollouts, once
-        most episodes have ended).
+        needs only some swarms' episodes to go on (evolution strategies' rollouts and
+        batched evaluations, once most episodes have ended).
 
         Raises:
             ValueError: the model does not allow it (:attr:`Dynamics.KEEPS_ROWS
