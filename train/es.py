@@ -228,7 +228,7 @@ class Rollouts:
         come from ``numpy.random.default_rng(SeedSequence(entropy))``: a tuple, so that
         no generation meets the episodes of an integer seed (an evaluation's)."""
         from swarm_envs.envs.backends import make_core
-        from swarm_envs.envs.cores.numpy import keeps_rows
+        from swarm_envs.envs.cores.numpy import keeps_rows, shrink_due
 
         core, P, M = self.core, self.candidates, self.episodes
         if thetas.shape[0] != P:
@@ -241,14 +241,14 @@ class Rollouts:
         total = np.zeros(B)
         done = np.zeros(B, bool)
         agent_steps = 0
-        # A row-wise actor's rollouts shrink the core to the live swarms once at most a
-        # quarter of its rows are live (a stalled episode would keep every swarm
-        # stepping to max_steps): the same returns, bit for bit (SwarmNavCore.keep).
+        # A row-wise actor's rollouts shrink the core to the live swarms (shrink_due; a
+        # stalled episode would keep every swarm stepping to max_steps): the same
+        # returns, bit for bit (SwarmNavCore.keep).
         keeper = core if self.actor.rowwise and keeps_rows(core) else None
         rows = np.arange(B)  # the swarm of each row of the core
         for _ in range(self.cfg.max_steps):
             live = ~done[rows]
-            if keeper is not None and 4 * live.sum() <= len(rows):
+            if keeper is not None and shrink_due(int(live.sum()), len(rows)):
                 keeper.keep(np.flatnonzero(live))
                 rows, live = rows[live], live[live]
             # With a row-wise actor, the swarms whose episodes ended step on with zero

@@ -19,7 +19,7 @@ import numpy as np
 from agents.base import swarm_config_of
 from swarm_envs.config import SwarmConfig
 from swarm_envs.envs.backends import make_core
-from swarm_envs.envs.cores.numpy import keeps_rows
+from swarm_envs.envs.cores.numpy import keeps_rows, shrink_due
 from swarm_envs.envs.perturbed import PerturbedCore
 from swarm_envs.envs.task.agent_status import ACTIVE
 from train.evaluate.policies import SpaceMismatchError, config_for_policy, policy_mode
@@ -152,8 +152,8 @@ def run_episodes(
 
     from tqdm.auto import tqdm
 
-    # Once at most a quarter of the episodes are live, a core that can (the numpy core,
-    # on a model that steps each swarm on its own state alone) shrinks to their swarms:
+    # Once few episodes are live (shrink_due), a core that can (the numpy core, on a
+    # model that steps each swarm on its own state alone) shrinks to their swarms:
     # one stalled episode would keep every swarm stepping to max_steps. The policy still
     # sees the whole batch, the ended episodes' last inputs held, so that each live
     # episode's actions, and so the results, are those of the whole batch.
@@ -164,7 +164,7 @@ def run_episodes(
     bar = tqdm(total=cfg.max_steps, desc=name, unit="step", disable=not progress, leave=True)
     try:
         for _ in range(cfg.max_steps):
-            if keeper is not None and 4 * (~done).sum() <= len(rows) and done[rows].any():
+            if keeper is not None and shrink_due(int((~done).sum()), len(rows)):
                 if held is None:  # the last step's inputs, of the whole batch
                     held = np.array(inputs)
                 keeper.keep(np.flatnonzero(~done[rows]))

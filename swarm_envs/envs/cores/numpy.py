@@ -47,7 +47,7 @@ from swarm_envs.envs.task.layer import Advance, HostRecords, TaskCore, TaskLayer
 from swarm_envs.physics import PairGeometry, pair_geometry
 from swarm_envs.physics.social_potential import present_geometry
 
-__all__ = ["SwarmNavCore", "keeps_rows"]
+__all__ = ["SwarmNavCore", "keeps_rows", "shrink_due"]
 
 
 def keeps_rows(core: object) -> TypeGuard[SwarmNavCore]:
@@ -56,6 +56,19 @@ def keeps_rows(core: object) -> TypeGuard[SwarmNavCore]:
     whose model steps each swarm on its own state alone (:attr:`Dynamics.KEEPS_ROWS
     <swarm_envs.envs.dynamics.Dynamics.KEEPS_ROWS>`)."""
     return type(core) is SwarmNavCore and bool(core.dynamics.KEEPS_ROWS)
+
+
+def shrink_due(live: int, rows: int) -> bool:
+    """Whether a caller stepping ``rows`` swarms of which ``live`` still matter should
+    shrink the core to them with :meth:`SwarmNavCore.keep`: once at most a quarter are
+    live. Each shrink copies the state once; waiting for a quarter keeps the copies few
+    (at most about a third of the batch's rows in all) while a stalled episode no longer
+    keeps every swarm stepping.
+
+    >>> shrink_due(64, 256), shrink_due(65, 256), shrink_due(0, 256)
+    (True, False, False)
+    """
+    return 0 < live and 4 * live <= rows
 
 
 class SwarmNavCore(TaskCore):
