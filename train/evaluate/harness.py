@@ -29,6 +29,7 @@ __all__ = [
     "check_policies",
     "controller_names",
     "evaluate_policies",
+    "measure_row",
 ]
 
 
@@ -92,6 +93,47 @@ def check_policies(policies: Mapping[str, Any], cfg: SwarmConfig) -> None:
                 TrainedEnvWarning,
                 stacklevel=3,
             )
+
+
+def measure_row(
+    policies: Mapping[str, Any],
+    cfg: SwarmConfig,
+    episodes: int,
+    seed: int,
+    *,
+    label: str,
+    deterministic: bool = True,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """One row of a sweep (size transfer, robustness): every policy on the same
+    ``episodes`` episodes of ``cfg`` seeded with ``seed``, measured
+    (:func:`~train.evaluate.measures.summarize`).
+
+    Returns ``{"backend", "best_baseline", "policies": {name: measures}}``: the backends
+    the episodes ran on (each policy runs with the observation layout it was trained on,
+    which may need another; joined with ", " where they differ), the
+    :func:`best_baseline` among the controllers, and each policy's measures. Each
+    progress bar is named ``"<policy> <label>"``.
+    """
+    measures, backends = {}, []
+    for name, policy in policies.items():
+        batch = run_episodes(
+            policy,
+            cfg,
+            episodes,
+            seed,
+            name=f"{name} {label}",
+            deterministic=deterministic,
+            progress=progress,
+            record_episode=False,
+        )
+        backends.append(batch.backend)
+        measures[name] = summarize(batch)
+    return {
+        "backend": ", ".join(dict.fromkeys(backends)),
+        "best_baseline": best_baseline(measures, controller_names(policies)),
+        "policies": measures,
+    }
 
 
 def evaluate_policies(

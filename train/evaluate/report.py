@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -22,11 +22,14 @@ from train.evaluate.measures import METRIC_DOCS, json_safe
 
 __all__ = [
     "MISSING",
+    "SWEEP_COLUMNS",
+    "SWEEP_CSV_KEYS",
     "TABLE_COLUMNS",
     "bound_line",
     "csv_cell",
     "format_cell",
     "format_table",
+    "sweep_summary",
     "write_json",
     "write_outputs",
 ]
@@ -44,6 +47,36 @@ TABLE_COLUMNS = (
     ("final_polarization", "final polarization", "{:.2f}"),
     ("unstable_episodes", "unstable", "{:d}"),
     ("mean_substeps", "substeps / step", "{:.1f}"),
+)
+
+#: Columns of a sweep's table (size transfer, robustness) after the row's own cells:
+#: (key, header, format). A sweep may add its own measures to these.
+SWEEP_COLUMNS = (
+    ("success_rate", "success", "{:.0%}"),
+    ("mean_return", "return (mean ± std)", "{:.2f}"),
+    ("mean_time_to_goal", "time to goal (s)", "{:.1f}"),
+    ("collisions_per_episode", "collisions / ep.", "{:.1f}"),
+    ("unstable_episodes", "unstable", "{:d}"),
+    ("mean_substeps", "substeps / step", "{:.2f}"),
+)
+
+#: Measures of a sweep's CSV after the row's own cells (a sweep may add its own).
+SWEEP_CSV_KEYS = (
+    "success_rate",
+    "success_ci95_low",
+    "success_ci95_high",
+    "mean_return",
+    "std_return",
+    "mean_time_to_goal",
+    "std_time_to_goal",
+    "collisions_per_episode",
+    "std_collisions",
+    "unstable_episodes",
+    "mean_substeps",
+    "mean_episode_length",
+    "control_effort",
+    "final_centroid_distance",
+    "final_expanse",
 )
 
 #: The spread shown after a mean in the tables, as ``mean ± std``.
@@ -149,6 +182,38 @@ def measure_legend(columns: Any) -> list[str]:
     spec)`` triples) and of its spreads, with its documentation."""
     shown = {k for k, _, _ in columns} | set(STD_OF.values())
     return [f"- `{k}`: {doc}" for k, doc in METRIC_DOCS.items() if k in shown]
+
+
+def sweep_summary(
+    results: Mapping[str, Any],
+    *,
+    title: str,
+    setting: str,
+    table: str,
+    columns: Any,
+    notes: Sequence[str] = (),
+) -> str:
+    """A sweep's ``summary.md``: the heading ``<title>: <env>``, the ``setting`` (a
+    sentence without its full stop; the config's path is added where the results
+    record one), each of ``notes`` as a paragraph, the ``table`` and the legend of its
+    ``columns`` (:func:`measure_legend`)."""
+    path = results.get("config_path")
+    lines = [
+        f"# {title}: {results['env']}",
+        "",
+        setting + (f", config `{path}`" if path else "") + ".",
+        "",
+    ]
+    for note in notes:
+        lines += [note, ""]
+    lines += [
+        table,
+        "",
+        "Measures (means over episodes; — where undefined):",
+        "",
+        *measure_legend(columns),
+    ]
+    return "\n".join(lines) + "\n"
 
 
 def write_sweep_outputs(

@@ -49,10 +49,16 @@ from agents.base import swarm_config_of
 from swarm_envs import ENV_ID
 from swarm_envs.config import SwarmConfig, as_dict
 from swarm_envs.perturbations import Perturbations
-from train.evaluate.episodes import run_episodes
-from train.evaluate.harness import best_baseline, check_policies, controller_names
-from train.evaluate.measures import METRIC_DOCS, summarize
-from train.evaluate.report import csv_cell, format_cell, measure_legend, write_sweep_outputs
+from train.evaluate.harness import check_policies, measure_row
+from train.evaluate.measures import METRIC_DOCS
+from train.evaluate.report import (
+    SWEEP_COLUMNS,
+    SWEEP_CSV_KEYS,
+    csv_cell,
+    format_cell,
+    sweep_summary,
+    write_sweep_outputs,
+)
 
 __all__ = [
     "ROBUSTNESS_COLUMNS",
@@ -73,36 +79,21 @@ SWEPT = ("failed_fraction", "obs_noise", "action_noise", "neighbor_dropout")
 #: What a robustness evaluation writes (``--overwrite`` removes these).
 ROBUSTNESS_FILES = ("results.json", "summary.md", "robustness.csv", "robustness.png")
 
-#: Columns of the robustness table after policy, perturbation, value and backend.
+#: Columns of the robustness table after policy, perturbation, value and backend: a
+#: sweep's (:data:`~train.evaluate.report.SWEEP_COLUMNS`) with the fraction of the
+#: swarm's members arrived after the collisions.
 ROBUSTNESS_COLUMNS = (
-    ("success_rate", "success", "{:.0%}"),
-    ("mean_return", "return (mean ± std)", "{:.2f}"),
-    ("mean_time_to_goal", "time to goal (s)", "{:.1f}"),
-    ("collisions_per_episode", "collisions / ep.", "{:.1f}"),
+    *SWEEP_COLUMNS[:4],
     ("final_fraction_arrived", "arrived", "{:.0%}"),
-    ("unstable_episodes", "unstable", "{:d}"),
-    ("mean_substeps", "substeps / step", "{:.2f}"),
+    *SWEEP_COLUMNS[4:],
 )
 
 #: Measures of ``robustness.csv`` after the row's policy, option, value, perturbations,
-#: backend and episodes.
+#: backend and episodes: a sweep's, with the fraction arrived after the collisions.
 ROBUSTNESS_CSV_KEYS = (
-    "success_rate",
-    "success_ci95_low",
-    "success_ci95_high",
-    "mean_return",
-    "std_return",
-    "mean_time_to_goal",
-    "std_time_to_goal",
-    "collisions_per_episode",
-    "std_collisions",
+    *SWEEP_CSV_KEYS[:9],
     "final_fraction_arrived",
-    "unstable_episodes",
-    "mean_substeps",
-    "mean_episode_length",
-    "control_effort",
-    "final_centroid_distance",
-    "final_expanse",
+    *SWEEP_CSV_KEYS[9:],
 )
 
 
@@ -251,32 +242,23 @@ def evaluate_robustness(
     cfg = swarm_config_of(cfg)
     rows = robustness_configs(cfg, sweeps, failure_mode=failure_mode, failure_time=failure_time)
     check_policies(policies, cfg)  # warns where a model's env meant something else
-    entries = []
-    for row in rows:
-        measures, backends = {}, []
-        for name, policy in policies.items():
-            batch = run_episodes(
-                policy,
+    entries = [
+        {
+            "option": row.option,
+            "value": row.value,
+            "perturbations": as_dict(row.cfg.perturbations),
+            **measure_row(
+                policies,
                 row.cfg,
                 episodes,
                 seed,
-                name=f"{name} {row.option}={row.value:g}",
+                label=f"{row.option}={row.value:g}",
                 deterministic=deterministic,
                 progress=progress,
-                record_episode=False,
-            )
-            backends.append(batch.backend)  # a policy with status flags may need another
-            measures[name] = summarize(batch)
-        entries.append(
-            {
-                "option": row.option,
-                "value": row.value,
-                "perturbations": as_dict(row.cfg.perturbations),
-                "backend": ", ".join(dict.fromkeys(backends)),
-                "best_baseline": best_baseline(measures, controller_names(policies)),
-                "policies": measures,
-            }
-        )
+            ),
+        }
+        for row in rows
+    ]
     swept: dict[str, list[float]] = {}
     for row in rows:
         swept.setdefault(row.option, []).append(row.value)
@@ -376,25 +358,17 @@ def _summary_markdown(results: Mapping[str, Any]) -> str:
         f"{option} = {', '.join(_value(v) for v in values)}"
         for option, values in results["sweeps"].items()
     )
-    lines = [
-        f"# Robustness: {results['env']}",
-        "",
-        f"Every policy on the same seeded episodes at {swept} (each option alone, the "
-        f"others as below); {results['episodes']} episodes per policy and value, seed "
+    return sweep_summary(
+        results,
+        title="Robustness",
+        setting=f"Every policy on the same seeded episodes at {swept} (each option alone, "
+        f"the others as below); {results['episodes']} episodes per policy and value, seed "
         f"{results['seed']}, N = {cfg['n_agents']}, dt = {cfg['dt']}, max_steps = "
-        f"{cfg['max_steps']}, on_unstable = {results['on_unstable']}"
-        + (f", config `{results['config_path']}`" if results.get("config_path") else "")
-        + ".",
-        "",
-        f"Every row: {_describe_background(results['perturbations'])}.",
-        "",
-        format_robustness_table(results),
-        "",
-        "Measures (means over episodes; — where undefined):",
-        "",
-        *measure_legend(ROBUSTNESS_COLUMNS),
-    ]
-    return "\n".join(lines) + "\n"
+        f"{cfg['max_steps']}, on_unstable = {results['on_unstable']}",
+        notes=[f"Every row: {_describe_background(results['perturbations'])}."],
+        table=format_robustness_table(results),
+        columns=ROBUSTNESS_COLUMNS,
+    )
 
 
 def write_robustness_outputs(

@@ -33,15 +33,19 @@ from swarm_envs import ENV_ID
 from swarm_envs.config import SwarmConfig, as_dict
 from swarm_envs.envs.step_control import check_step_control
 from swarm_envs.envs.task import observation_size
-from train.evaluate.episodes import run_episodes
-from train.evaluate.harness import best_baseline, check_policies, controller_names
-from train.evaluate.measures import METRIC_DOCS, summarize
+from train.evaluate.harness import check_policies, measure_row
+from train.evaluate.measures import METRIC_DOCS
 from train.evaluate.policies import SpaceMismatchError, describe_trained_env, policy_mode
-from train.evaluate.report import csv_cell, format_cell, measure_legend, write_sweep_outputs
+from train.evaluate.report import (
+    SWEEP_COLUMNS,
+    SWEEP_CSV_KEYS,
+    csv_cell,
+    format_cell,
+    sweep_summary,
+    write_sweep_outputs,
+)
 
 __all__ = [
-    "TRANSFER_COLUMNS",
-    "TRANSFER_CSV_KEYS",
     "TRANSFER_FILES",
     "CentralPolicyError",
     "central_size",
@@ -54,35 +58,6 @@ __all__ = [
 
 #: What a size-transfer evaluation writes (``--overwrite`` removes these).
 TRANSFER_FILES = ("results.json", "summary.md", "transfer.csv", "transfer.png")
-
-#: Columns of the size-transfer table after policy, N and backend: (key, header, format).
-TRANSFER_COLUMNS = (
-    ("success_rate", "success", "{:.0%}"),
-    ("mean_return", "return (mean ± std)", "{:.2f}"),
-    ("mean_time_to_goal", "time to goal (s)", "{:.1f}"),
-    ("collisions_per_episode", "collisions / ep.", "{:.1f}"),
-    ("unstable_episodes", "unstable", "{:d}"),
-    ("mean_substeps", "substeps / step", "{:.2f}"),
-)
-
-#: Measures of ``transfer.csv`` after ``policy, n_agents, backend, episodes``.
-TRANSFER_CSV_KEYS = (
-    "success_rate",
-    "success_ci95_low",
-    "success_ci95_high",
-    "mean_return",
-    "std_return",
-    "mean_time_to_goal",
-    "std_time_to_goal",
-    "collisions_per_episode",
-    "std_collisions",
-    "unstable_episodes",
-    "mean_substeps",
-    "mean_episode_length",
-    "control_effort",
-    "final_centroid_distance",
-    "final_expanse",
-)
 
 
 class CentralPolicyError(SpaceMismatchError):
@@ -216,30 +191,21 @@ def evaluate_transfer(
     for name, policy in policies.items():
         check_transferable(name, policy, cfg)
     check_policies(policies, cfg)  # warns where a model's env meant something else
-    sizes = []
-    for c in configs:
-        measures, backend = {}, ""
-        for name, policy in policies.items():
-            batch = run_episodes(
-                policy,
+    sizes = [
+        {
+            "n_agents": c.n_agents,
+            **measure_row(
+                policies,
                 c,
                 episodes,
                 seed,
-                name=f"{name} N={c.n_agents}",
+                label=f"N={c.n_agents}",
                 deterministic=deterministic,
                 progress=progress,
-                record_episode=False,
-            )
-            backend = batch.backend
-            measures[name] = summarize(batch)
-        sizes.append(
-            {
-                "n_agents": c.n_agents,
-                "backend": backend,
-                "best_baseline": best_baseline(measures, controller_names(policies)),
-                "policies": measures,
-            }
-        )
+            ),
+        }
+        for c in configs
+    ]
     results: dict[str, Any] = {
         "env": env_id,
         **dict(extra or {}),
@@ -271,51 +237,44 @@ def _rows(results: Mapping[str, Any]) -> list[tuple[str, Mapping[str, Any], Mapp
 
 def format_transfer_table(results: Mapping[str, Any]) -> str:
     """The size-transfer measures as a markdown table, one row per policy and size
-    (:data:`TRANSFER_COLUMNS`); an undefined measure shows as ``—``, and the last column
+    (:data:`SWEEP_COLUMNS`); an undefined measure shows as ``—``, and the last column
     marks each size's best baseline."""
-    headers = ["policy", "N", "backend", *(h for _, h, _ in TRANSFER_COLUMNS), "best baseline"]
+    headers = ["policy", "N", "backend", *(h for _, h, _ in SWEEP_COLUMNS), "best baseline"]
     lines = [
         "| " + " | ".join(headers) + " |",
-        "|---|---:|---|" + "---:|" * len(TRANSFER_COLUMNS) + ":---:|",
+        "|---|---:|---|" + "---:|" * len(SWEEP_COLUMNS) + ":---:|",
     ]
     for name, size, m in _rows(results):
         cells = [name, str(size["n_agents"]), size["backend"]]
-        cells += [format_cell(m, key, spec) for key, _, spec in TRANSFER_COLUMNS]
+        cells += [format_cell(m, key, spec) for key, _, spec in SWEEP_COLUMNS]
         cells.append("✓" if size.get("best_baseline") == name else "")
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
 def write_transfer_csv(results: Mapping[str, Any], path: Path) -> Path:
-    """``transfer.csv``: one row per policy and size (:data:`TRANSFER_CSV_KEYS`)."""
+    """``transfer.csv``: one row per policy and size (:data:`SWEEP_CSV_KEYS`)."""
     with path.open("w", newline="", encoding="utf-8") as fh:
         writer = csv.writer(fh)
-        writer.writerow(["policy", "n_agents", "backend", "episodes", *TRANSFER_CSV_KEYS])
+        writer.writerow(["policy", "n_agents", "backend", "episodes", *SWEEP_CSV_KEYS])
         for name, size, m in _rows(results):
             row = [name, size["n_agents"], size["backend"], results["episodes"]]
-            writer.writerow(row + [csv_cell(m, k) for k in TRANSFER_CSV_KEYS])
+            writer.writerow(row + [csv_cell(m, k) for k in SWEEP_CSV_KEYS])
     return path
 
 
 def _summary_markdown(results: Mapping[str, Any]) -> str:
     cfg = results["config"]
     sizes = ", ".join(str(n) for n in results["n_agents"])
-    lines = [
-        f"# Size transfer: {results['env']}",
-        "",
-        f"Every policy unchanged at N = {sizes}; {results['episodes']} episodes per policy "
-        f"and size, seed {results['seed']}, dt = {cfg['dt']}, max_steps = "
-        f"{cfg['max_steps']}, on_unstable = {results['on_unstable']}"
-        + (f", config `{results['config_path']}`" if results.get("config_path") else "")
-        + ".",
-        "",
-        format_transfer_table(results),
-        "",
-        "Measures (means over episodes; — where undefined):",
-        "",
-        *measure_legend(TRANSFER_COLUMNS),
-    ]
-    return "\n".join(lines) + "\n"
+    return sweep_summary(
+        results,
+        title="Size transfer",
+        setting=f"Every policy unchanged at N = {sizes}; {results['episodes']} episodes per "
+        f"policy and size, seed {results['seed']}, dt = {cfg['dt']}, max_steps = "
+        f"{cfg['max_steps']}, on_unstable = {results['on_unstable']}",
+        table=format_transfer_table(results),
+        columns=SWEEP_COLUMNS,
+    )
 
 
 def write_transfer_outputs(
