@@ -82,18 +82,20 @@ ROBUSTNESS_FILES = ("results.json", "summary.md", "robustness.csv", "robustness.
 #: Columns of the robustness table after policy, perturbation, value and backend: a
 #: sweep's (:data:`~train.evaluate.report.SWEEP_COLUMNS`) with the fraction of the
 #: swarm's members arrived after the collisions.
+_AFTER_COLLISIONS = 1 + [key for key, _, _ in SWEEP_COLUMNS].index("collisions_per_episode")
 ROBUSTNESS_COLUMNS = (
-    *SWEEP_COLUMNS[:4],
+    *SWEEP_COLUMNS[:_AFTER_COLLISIONS],
     ("final_fraction_arrived", "arrived", "{:.0%}"),
-    *SWEEP_COLUMNS[4:],
+    *SWEEP_COLUMNS[_AFTER_COLLISIONS:],
 )
 
 #: Measures of ``robustness.csv`` after the row's policy, option, value, perturbations,
 #: backend and episodes: a sweep's, with the fraction arrived after the collisions.
+_AFTER_STD_COLLISIONS = 1 + SWEEP_CSV_KEYS.index("std_collisions")
 ROBUSTNESS_CSV_KEYS = (
-    *SWEEP_CSV_KEYS[:9],
+    *SWEEP_CSV_KEYS[:_AFTER_STD_COLLISIONS],
     "final_fraction_arrived",
-    *SWEEP_CSV_KEYS[9:],
+    *SWEEP_CSV_KEYS[_AFTER_STD_COLLISIONS:],
 )
 
 
