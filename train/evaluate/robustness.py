@@ -79,10 +79,12 @@ SWEPT = ("failed_fraction", "obs_noise", "action_noise", "neighbor_dropout")
 #: What a robustness evaluation writes (``--overwrite`` removes these).
 ROBUSTNESS_FILES = ("results.json", "summary.md", "robustness.csv", "robustness.png")
 
+_AFTER_COLLISIONS = 1 + [key for key, _, _ in SWEEP_COLUMNS].index("collisions_per_episode")
+_AFTER_STD_COLLISIONS = 1 + SWEEP_CSV_KEYS.index("std_collisions")
+
 #: Columns of the robustness table after policy, perturbation, value and backend: a
 #: sweep's (:data:`~train.evaluate.report.SWEEP_COLUMNS`) with the fraction of the
 #: swarm's members arrived after the collisions.
-_AFTER_COLLISIONS = 1 + [key for key, _, _ in SWEEP_COLUMNS].index("collisions_per_episode")
 ROBUSTNESS_COLUMNS = (
     *SWEEP_COLUMNS[:_AFTER_COLLISIONS],
     ("final_fraction_arrived", "arrived", "{:.0%}"),
@@ -91,7 +93,6 @@ ROBUSTNESS_COLUMNS = (
 
 #: Measures of ``robustness.csv`` after the row's policy, option, value, perturbations,
 #: backend and episodes: a sweep's, with the fraction arrived after the collisions.
-_AFTER_STD_COLLISIONS = 1 + SWEEP_CSV_KEYS.index("std_collisions")
 ROBUSTNESS_CSV_KEYS = (
     *SWEEP_CSV_KEYS[:_AFTER_STD_COLLISIONS],
     "final_fraction_arrived",
